@@ -1,0 +1,45 @@
+"""The ``swa-imesh`` command line: one sub-command per step of the pipeline.
+
+Every sub-command returns 0 on success; bad input is reported as one sentence on
+stderr with exit status 2 (never a traceback).
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+
+from .mesh._cli import add_commands as add_mesh_commands
+from .segmentation._cli import add_commands as add_segmentation_commands
+
+__all__ = ["main", "build_parser"]
+
+
+def build_parser() -> argparse.ArgumentParser:
+    parser = argparse.ArgumentParser(
+        prog="swa-imesh",
+        description="Image -> SWA segmentation -> IMESH finite-element mesh.",
+    )
+    sub = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
+    add_segmentation_commands(sub)
+    add_mesh_commands(sub)
+    from ._demo import add_command as add_demo_command
+
+    add_demo_command(sub)
+    return parser
+
+
+def main(argv: list[str] | None = None) -> int:
+    """Run the command line; return the exit status."""
+    parser = build_parser()
+    args = parser.parse_args(argv)
+    try:
+        return int(args.func(args) or 0)
+    except (ValueError, TypeError, OSError, KeyError) as exc:
+        msg = exc.args[0] if isinstance(exc, KeyError) and exc.args else exc
+        print(f"swa-imesh {args.command}: error: {msg}", file=sys.stderr)
+        return 2
+
+
+if __name__ == "__main__":  # pragma: no cover
+    sys.exit(main())
