@@ -1,0 +1,1 @@
+"""SWA segmentation (public surface assembled once every module lands)."""

@@ -2,6 +2,211 @@
 
 from __future__ import annotations
 
+import argparse
+import csv
+import io as _io
+from pathlib import Path
+
+from .._cli_util import StepTimer, check_writable, print_json
+
+__all__ = ["add_commands"]
+
 
 def add_commands(subparsers) -> None:
     """Register the segmentation sub-commands on an argparse sub-parser group."""
+    p = subparsers.add_parser(
+        "res", help="tile-moment statistics against scale and the suggested RES",
+        description="Print (and plot) the statistics of tile moments per material against "
+                    "scale, and the suggested representative elementary scale.")
+    p.add_argument("image")
+    p.add_argument("--samples", required=True, help="samples JSON (see README)")
+    p.add_argument("--max-scale", type=int, default=None)
+    p.add_argument("--plot", default=None, help="write the Figure 2.14-style plot (PNG/PDF/SVG)")
+    p.add_argument("--gray", action="store_true", help="convert an RGB picture to grey")
+    p.add_argument("--force", action="store_true", help="replace an existing plot file")
+    p.add_argument("--json", action="store_true", help="print one JSON object")
+    p.set_defaults(func=_run_res)
+
+    p = subparsers.add_parser(
+        "segment", help="classify the image tile by tile into a label image",
+        description="Segment an image with SWA: features of tiles at one scale, classified by "
+                    "a classifier fitted on sample boxes (or a saved model).")
+    p.add_argument("image")
+    src = p.add_mutually_exclusive_group(required=True)
+    src.add_argument("--samples", help="samples JSON to fit a classifier on")
+    src.add_argument("--model", help="a saved model (.npz) to apply")
+    p.add_argument("--scale", type=int, default=None,
+                   help="tile scale j (tiles of 2^j px); default: the suggested RES")
+    p.add_argument("--features", default="F1", help="feature set F1..F7 (default F1)")
+    p.add_argument("--classifier", default="gm", choices=["gm", "md", "lvq"])
+    p.add_argument("--sieve", type=int, default=0,
+                   help="remove components smaller than N tiles")
+    p.add_argument("--model-out", default=None, help="save the fitted model (.npz)")
+    p.add_argument("--signatures", default=None, help="write the material signatures (CSV)")
+    p.add_argument("--tiles", action="store_true",
+                   help="write one label per tile instead of full resolution")
+    p.add_argument("--truth", default=None, help="ground truth to report Dice against")
+    p.add_argument("--gray", action="store_true", help="convert an RGB picture to grey")
+    p.add_argument("-o", "--output", required=True,
+                   help="labels file: .npy, .tif, .nii.gz or .png")
+    p.add_argument("--force", action="store_true", help="replace existing output files")
+    p.add_argument("--json", action="store_true", help="print one JSON object")
+    p.set_defaults(func=_run_segment)
+
+    p = subparsers.add_parser(
+        "samples-from-truth", help="sample boxes from the largest homogeneous blocks of a truth",
+        description="Write a samples JSON whose boxes are the largest homogeneous blocks of "
+                    "each material in a ground-truth label image (its 2^d-tree).")
+    p.add_argument("truth")
+    p.add_argument("--scale", type=int, default=None,
+                   help="prefer blocks holding at least 2^d tiles at this scale")
+    p.add_argument("--per-material", type=int, default=4)
+    p.add_argument("-o", "--output", required=True)
+    p.add_argument("--force", action="store_true")
+    p.add_argument("--json", action="store_true")
+    p.set_defaults(func=_run_samples_from_truth)
+
+    p = subparsers.add_parser(
+        "evaluate", help="Dice, Jaccard and confusion matrix against a truth")
+    p.add_argument("labels")
+    p.add_argument("--truth", required=True)
+    p.add_argument("--json", action="store_true")
+    p.set_defaults(func=_run_evaluate)
+
+
+def _run_res(args: argparse.Namespace) -> int:
+    from ..io import read_image
+    from ._res import plot_res, res_statistics
+    from ._samples import load_samples
+
+    timer = StepTimer()
+    if args.plot:
+        check_writable(args.plot, force=args.force)
+    with timer("read"):
+        image, _ = read_image(args.image, gray=args.gray)
+        samples = load_samples(args.samples)
+    with timer("res"):
+        stats = res_statistics(image, samples, max_scale=args.max_scale)
+    if args.plot:
+        with timer("plot"):
+            fig = plot_res(stats)
+            fig.savefig(args.plot, dpi=120)
+    if args.json:
+        print_json({**stats.to_dict(), "plot": args.plot, "seconds": timer.seconds})
+    else:
+        print(_res_text(stats))
+        if args.plot:
+            print(f"plot written to {args.plot}")
+    return 0
+
+
+def _res_text(stats) -> str:
+    lines = [f"suggested RES: {stats.suggested_scale}  ({stats.reason})"]
+    for i, name in enumerate(stats.names):
+        lines.append(f"{name} (label {stats.materials[i]}), own RES "
+                     f"{stats.material_res.get(stats.materials[i])}:")
+        lines.append("  scale  tiles      mean(mean)   mean(var)   std(mean)")
+        for j in stats.scales:
+            lines.append(f"  {j:5d} {stats.n_tiles[i, j]:6d} {stats.mean[i, j, 0]:12.5g} "
+                         f"{stats.mean[i, j, 1]:11.5g} {stats.std[i, j, 0]:11.5g}")
+    return "\n".join(lines)
+
+
+def _run_segment(args: argparse.Namespace) -> int:
+    from ..io import read_image, write_labels
+    from ._metrics import evaluate
+    from ._model import load_model
+    from ._samples import load_samples
+    from ._segment import segment_steps
+
+    timer = StepTimer()
+    outputs = [args.output] + [p for p in (args.model_out, args.signatures) if p]
+    for p in outputs:            # refuse before any work, so nothing is half written
+        check_writable(p, force=args.force)
+    with timer("read"):
+        image, spacing = read_image(args.image, gray=args.gray)
+        samples = load_samples(args.samples) if args.samples else None
+        model = load_model(args.model) if args.model else None
+        truth = read_image(args.truth)[0] if args.truth else None
+    gen = segment_steps(image, samples, scale=args.scale, feature_set=args.features,
+                        classifier=args.classifier, sieve=args.sieve, model=model,
+                        spacing=spacing)
+    with timer("segment"):
+        while True:
+            try:
+                next(gen)
+            except StopIteration as stop:
+                result = stop.value
+                break
+    with timer("write"):
+        labels = result.tile_labels if args.tiles else result.labels
+        write_labels(args.output, labels, spacing=spacing, force=args.force)
+        if args.model_out:
+            result.model.save(args.model_out, force=args.force)
+        if args.signatures:
+            write_signatures_csv(result.signatures, args.signatures, force=args.force)
+    summary = result.summary()
+    summary["seconds"] = {**summary["seconds"], **timer.seconds}
+    summary["output"] = args.output
+    if truth is not None:
+        ev = evaluate(result.labels, truth)
+        summary["dice"] = ev["dice"]
+        summary["mean_dice"] = ev["mean_dice"]
+    if args.json:
+        print_json(summary)
+    else:
+        print(f"scale {result.scale} (tiles of {1 << result.scale} px), "
+              f"{result.model.feature_set} + {result.model.classifier_name.upper()}: "
+              f"eps_l = {result.eps_l:.2f}% ({summary['eps_l_method']}), "
+              f"eps_m = {result.eps_m:.3f}")
+        for row in result.signatures:
+            print(f"  {row['name']}: {row['tiles']} tiles, mean {row['mean_mean']:.4g} "
+                  f"(+-{row['mean_std']:.3g}), variance {row['variance_mean']:.4g}")
+        if truth is not None:
+            print("  Dice: " + ", ".join(f"{k}: {v:.3f}" for k, v in summary["dice"].items())
+                  + f"  (mean {summary['mean_dice']:.3f})")
+        print(f"labels written to {args.output}")
+    return 0
+
+
+def write_signatures_csv(signatures: list[dict], path, *, force: bool = False) -> Path:
+    """Write the material-signature table (one row per material) as CSV."""
+    p = check_writable(path, force=force)
+    buf = _io.StringIO()
+    writer = csv.DictWriter(buf, fieldnames=list(signatures[0]))
+    writer.writeheader()
+    writer.writerows(signatures)
+    p.write_text(buf.getvalue())
+    return p
+
+
+def _run_samples_from_truth(args: argparse.Namespace) -> int:
+    from ..io import read_image
+    from ._samples import samples_from_truth, save_samples
+
+    check_writable(args.output, force=args.force)
+    truth, _ = read_image(args.truth)
+    samples = samples_from_truth(truth, scale=args.scale, per_material=args.per_material)
+    save_samples(samples, args.output, force=args.force)
+    if args.json:
+        print_json({**samples.to_dict(), "output": args.output})
+    else:
+        print(f"{len(samples.boxes)} boxes for {len(samples.materials)} materials written "
+              f"to {args.output}")
+    return 0
+
+
+def _run_evaluate(args: argparse.Namespace) -> int:
+    from ..io import read_image
+    from ._metrics import evaluate
+
+    labels, _ = read_image(args.labels)
+    truth, _ = read_image(args.truth)
+    ev = evaluate(labels, truth)
+    if args.json:
+        print_json(ev)
+    else:
+        for m in ev["materials"]:
+            print(f"material {m}: Dice {ev['dice'][m]:.4f}  Jaccard {ev['jaccard'][m]:.4f}")
+        print(f"mean Dice {ev['mean_dice']:.4f}, pixel accuracy {ev['accuracy']:.4f}")
+    return 0

@@ -1,0 +1,285 @@
+"""Representative elementary scale (RES): tile-moment statistics against scale (sec. 2.4.1.3).
+
+For every material and scale j, the moments of every tile of 2^j pixels per axis that lies
+wholly inside one of the material's sample boxes (tiles aligned to the box's own corner,
+as the reference computes statistics on each sample) are pooled; the RES table holds their
+mean, standard deviation, minimum and maximum. A material says nothing at a scale where it
+has fewer than 2^d tiles.
+
+Suggested RES (the reference leaves the pick to the user; this is our documented rule,
+after the representative-volume criteria of continuum mechanics: the property stops
+changing with window size and stops varying between windows). For each material, scale j
+is *stable* when, with v(j) the average tile variance and m(j) the average tile mean,
+
+* ``|v(j) - v(j-1)| <= change_tol * v(j)`` and ``|m(j) - m(j-1)| <= change_tol * sqrt(v(j))``
+  (the statistics no longer drift as tiles grow), and
+* ``std over tiles of the tile means <= spread_tol * sqrt(v(j))`` (a tile looks like any
+  other tile of the same material: its mean is pinned down to a fraction of the
+  material's within-tile spread).
+
+A material's RES is the smallest scale from which every larger scale it can measure is
+stable; the suggestion is the largest of the materials' RES, capped at the largest scale
+where every material still has at least two tiles to train on. Skewness and kurtosis are
+drawn but not used by the rule: their tile estimates are too noisy on small tiles to
+decide anything.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from .._validation import as_image
+from ._moments import moment_pyramid
+from ._samples import Samples
+
+__all__ = ["ResStatistics", "res_statistics", "suggest_res", "plot_res", "MOMENT_NAMES",
+           "box_tile_moments"]
+
+MOMENT_NAMES = ("mean", "variance", "skewness", "kurtosis")
+
+
+@dataclass
+class ResStatistics:
+    """Tile-moment statistics per material and scale.
+
+    Attributes
+    ----------
+    scales : (S,) ndarray of int
+        Scales 0..max_scale.
+    materials : list of int
+        Material labels (rows of the arrays below).
+    names : list of str
+        Material names.
+    mean, std, min, max : (K, S, 4) ndarray of float64
+        Statistics over each material's tiles of (mean, variance, skewness, kurtosis);
+        NaN where the material has fewer than 2^d tiles.
+    n_tiles : (K, S) ndarray of int64
+        Full tiles per material and scale.
+    ndim : int
+        Image dimensionality.
+    suggested_scale : int or None
+        The suggested RES (see the module docstring).
+    material_res : dict of int to int or None
+        Each material's own RES.
+    reason : str
+        One sentence on how the suggestion was reached.
+    """
+
+    scales: np.ndarray
+    materials: list[int]
+    names: list[str]
+    mean: np.ndarray
+    std: np.ndarray
+    min: np.ndarray
+    max: np.ndarray
+    n_tiles: np.ndarray
+    ndim: int
+    suggested_scale: int | None = None
+    material_res: dict[int, int | None] = field(default_factory=dict)
+    reason: str = ""
+
+    def to_dict(self) -> dict:
+        """Plain-JSON form (what ``swa-imesh res --json`` prints)."""
+        out = {"scales": self.scales.tolist(), "suggested_scale": self.suggested_scale,
+               "reason": self.reason, "moments": list(MOMENT_NAMES), "materials": []}
+        for i, (m, name) in enumerate(zip(self.materials, self.names)):
+            out["materials"].append({
+                "label": m, "name": name, "res": self.material_res.get(m),
+                "n_tiles": self.n_tiles[i].tolist(),
+                **{stat: np.where(np.isfinite(getattr(self, stat)[i]),
+                                  getattr(self, stat)[i], np.nan).tolist()
+                   for stat in ("mean", "std", "min", "max")},
+            })
+        return out
+
+
+def box_tile_moments(image: np.ndarray, samples: Samples, label: int, max_scale: int
+                     ) -> list[np.ndarray]:
+    """Moments of the full tiles inside a material's boxes, per scale.
+
+    Returns a list over scales 0..max_scale of (n_tiles, 4) arrays, tiles aligned to each
+    box's corner; partial tiles at a box's far edge are dropped.
+    """
+    d = image.ndim
+    per_scale: list[list[np.ndarray]] = [[] for _ in range(max_scale + 1)]
+    for box in samples.boxes_of(label):
+        crop = image[box.slices]
+        top = min(max_scale, int(np.floor(np.log2(max(crop.shape)))))
+        pyramid = moment_pyramid(crop, max_scale=top)
+        for j, (moments, counts) in enumerate(pyramid):
+            full = counts == (1 << (j * d))
+            if full.any():
+                per_scale[j].append(moments[full])
+    return [np.concatenate(p) if p else np.zeros((0, 4)) for p in per_scale]
+
+
+def res_statistics(image, samples: Samples, *, max_scale: int | None = None,
+                   change_tol: float = 0.1, spread_tol: float = 0.5) -> ResStatistics:
+    """Tile-moment statistics against scale for every material, and a suggested RES.
+
+    Parameters
+    ----------
+    image : (M, N[, P, ...]) array_like
+        Grey-level image.
+    samples : Samples
+        Materials and their sample boxes (checked against the image).
+    max_scale : int, optional
+        Largest scale; default the largest at which some material still has 2^d tiles.
+    change_tol, spread_tol : float
+        Tolerances of the RES rule (module docstring).
+
+    Returns
+    -------
+    ResStatistics
+    """
+    img = as_image(image)
+    samples.check(img.shape)
+    d = img.ndim
+    if max_scale is None:
+        biggest = max(max(b.shape) for b in samples.boxes)
+        max_scale = int(np.floor(np.log2(biggest)))
+    if max_scale < 0:
+        raise ValueError(f"max_scale must be >= 0; got {max_scale}.")
+    labels = samples.labels
+    k, s = len(labels), max_scale + 1
+    stats = {name: np.full((k, s, 4), np.nan) for name in ("mean", "std", "min", "max")}
+    n_tiles = np.zeros((k, s), np.int64)
+    for i, label in enumerate(labels):
+        for j, tiles in enumerate(box_tile_moments(img, samples, label, max_scale)):
+            n_tiles[i, j] = tiles.shape[0]
+            if tiles.shape[0] >= (1 << d):
+                stats["mean"][i, j] = tiles.mean(axis=0)
+                stats["std"][i, j] = tiles.std(axis=0)
+                stats["min"][i, j] = tiles.min(axis=0)
+                stats["max"][i, j] = tiles.max(axis=0)
+    # trim scales where no material can say anything
+    useful = np.flatnonzero((n_tiles >= (1 << d)).any(axis=0))
+    last = int(useful.max()) + 1 if useful.size else 1
+    res = ResStatistics(
+        scales=np.arange(last), materials=list(labels),
+        names=[samples.name_of(m) for m in labels],
+        mean=stats["mean"][:, :last], std=stats["std"][:, :last],
+        min=stats["min"][:, :last], max=stats["max"][:, :last],
+        n_tiles=n_tiles[:, :last], ndim=d,
+    )
+    res.suggested_scale, res.material_res, res.reason = suggest_res(
+        res, change_tol=change_tol, spread_tol=spread_tol)
+    return res
+
+
+def suggest_res(stats: ResStatistics, *, change_tol: float = 0.1, spread_tol: float = 0.5
+                ) -> tuple[int | None, dict[int, int | None], str]:
+    """Apply the RES rule of the module docstring to a statistics table.
+
+    Returns
+    -------
+    scale : int or None
+        Suggested RES, or None when no material has enough tiles at any scale above 0.
+    material_res : dict of int to int or None
+        Each material's own RES (None: never stable within its boxes).
+    reason : str
+    """
+    mean_m = stats.mean[..., 0]                       # (K, S) average tile mean
+    var_m = stats.mean[..., 1]                        # (K, S) average tile variance
+    spread = stats.std[..., 0]                        # (K, S) std of tile means
+    sd = np.sqrt(np.maximum(var_m, 0)) + 1e-12
+    with np.errstate(invalid="ignore"):
+        drift_v = np.abs(np.diff(var_m, axis=1)) <= change_tol * (var_m[:, 1:] + 1e-12)
+        drift_m = np.abs(np.diff(mean_m, axis=1)) <= change_tol * sd[:, 1:]
+        tight = spread[:, 1:] <= spread_tol * sd[:, 1:]
+    valid = np.isfinite(var_m[:, 1:])
+    stable = drift_v & drift_m & tight & valid        # (K, S-1) for scales 1..S-1
+    material_res: dict[int, int | None] = {}
+    for i, m in enumerate(stats.materials):
+        js = np.flatnonzero(valid[i])
+        found = None
+        for j in js:                                   # smallest j stable from here on
+            if stable[i, j:][valid[i, j:]].all():
+                found = int(j) + 1
+                break
+        material_res[m] = found
+    trainable = np.flatnonzero((stats.n_tiles >= 2).all(axis=0))
+    if trainable.size == 0:
+        return None, material_res, "no scale leaves every material two tiles to train on."
+    cap = int(trainable.max())
+    picks = [r for r in material_res.values() if r is not None]
+    unstable = [stats.names[i] for i, m in enumerate(stats.materials) if material_res[m] is None]
+    if not picks:
+        return cap, material_res, (
+            f"no material's statistics settle within its sample boxes; using the largest "
+            f"scale every material can train at ({cap}). Draw larger boxes for a firmer RES.")
+    scale = max(picks)
+    reason = (f"smallest scale from which every material's tile mean and variance stop "
+              f"drifting (< {change_tol:g}) and tile means agree (< {spread_tol:g} of the "
+              f"within-tile std): {scale}.")
+    if unstable:
+        reason += f" Not settled within their boxes: {', '.join(unstable)}."
+    if scale > cap:
+        reason += (f" Capped at {cap}: larger tiles leave some material fewer than two "
+                   "training tiles.")
+        scale = cap
+    return int(scale), material_res, reason
+
+
+def plot_res(stats: ResStatistics, *, figure=None, selected_scale: int | None = None,
+             dark: bool = False):
+    """Draw the reference's Figure 2.14 layout: rows are moments, columns materials.
+
+    Each panel shows, against scale, the mean of the moment over the material's tiles
+    (line), a +-1 std band, and the minimum and maximum (dotted). The suggested RES is a
+    dashed vertical line; `selected_scale`, if given, a solid one.
+
+    Parameters
+    ----------
+    stats : ResStatistics
+    figure : matplotlib.figure.Figure, optional
+        Figure to draw into (cleared first); a new one otherwise. No pyplot state is used,
+        so this works inside a Qt canvas as well as on the command line.
+    selected_scale : int, optional
+    dark : bool
+        Light text on a dark background (the napari dark theme).
+
+    Returns
+    -------
+    matplotlib.figure.Figure
+    """
+    from matplotlib.figure import Figure
+
+    k = len(stats.materials)
+    fig = figure if figure is not None else Figure(figsize=(2.6 * max(k, 1) + 1, 8.5))
+    fig.clear()
+    fg, bg = ("#e0e0e0", "#262930") if dark else ("#202020", "white")
+    fig.set_facecolor(bg)
+    axes = fig.subplots(4, max(k, 1), sharex=True, squeeze=False)
+    x = stats.scales
+    for c in range(k):
+        for r, moment in enumerate(MOMENT_NAMES):
+            ax = axes[r, c]
+            ax.set_facecolor(bg)
+            mu, sd = stats.mean[c, :, r], stats.std[c, :, r]
+            ax.fill_between(x, mu - sd, mu + sd, color="#9aa7b8", alpha=0.45, lw=0)
+            ax.plot(x, mu, "-o", color="#1f77b4" if not dark else "#6fb1ff", ms=3, lw=1.5)
+            ax.plot(x, stats.min[c, :, r], ":", color=fg, lw=1)
+            ax.plot(x, stats.max[c, :, r], ":", color=fg, lw=1)
+            if stats.suggested_scale is not None:
+                ax.axvline(stats.suggested_scale, color="#d62728", ls="--", lw=1)
+            if selected_scale is not None:
+                ax.axvline(selected_scale, color="#2ca02c", ls="-", lw=1.2)
+            ax.tick_params(colors=fg, labelsize=7)
+            for spine in ax.spines.values():
+                spine.set_color(fg)
+            if c == 0:
+                ax.set_ylabel(moment, color=fg, fontsize=8)
+            if r == 0:
+                ax.set_title(stats.names[c], color=fg, fontsize=9)
+            if r == 3:
+                ax.set_xlabel("scale j (tile 2^j px)", color=fg, fontsize=8)
+            ax.set_xticks(x)
+    title = "Tile-moment statistics against scale"
+    if stats.suggested_scale is not None:
+        title += f" (suggested RES: {stats.suggested_scale})"
+    fig.suptitle(title, color=fg, fontsize=10)
+    fig.tight_layout()
+    return fig

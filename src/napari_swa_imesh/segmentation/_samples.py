@@ -1,0 +1,243 @@
+"""Sample boxes per material: the JSON file format, checks, and samples from a truth image.
+
+JSON schema (array index order; ``start`` inclusive, ``stop`` exclusive; one entry per
+image axis)::
+
+    {"materials": [{"label": 1, "name": "brick", "color": "#d62728"}, ...],
+     "boxes": [{"label": 1, "start": [r0, c0], "stop": [r1, c1]}, ...]}
+
+``color`` is optional. Extra keys are ignored on reading, so files written by newer
+versions still load.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import tempfile
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from .._cli_util import check_writable
+from .._tree import build_tree
+from .._validation import as_labels
+
+__all__ = ["Material", "SampleBox", "Samples", "load_samples", "save_samples",
+           "samples_from_truth"]
+
+
+@dataclass(frozen=True)
+class Material:
+    """A material (class): its label id in the output, a name, an optional colour."""
+
+    label: int
+    name: str
+    color: str | None = None
+
+
+@dataclass(frozen=True)
+class SampleBox:
+    """An axis-aligned box of pixels known to hold one material (stop exclusive)."""
+
+    label: int
+    start: tuple[int, ...]
+    stop: tuple[int, ...]
+
+    @property
+    def slices(self) -> tuple[slice, ...]:
+        return tuple(slice(a, b) for a, b in zip(self.start, self.stop))
+
+    @property
+    def shape(self) -> tuple[int, ...]:
+        return tuple(b - a for a, b in zip(self.start, self.stop))
+
+
+@dataclass
+class Samples:
+    """Materials and their sample boxes.
+
+    Examples
+    --------
+    >>> s = Samples.from_dict({"materials": [{"label": 1, "name": "a"}],
+    ...                        "boxes": [{"label": 1, "start": [0, 0], "stop": [8, 8]}]})
+    >>> s.boxes[0].shape
+    (8, 8)
+    """
+
+    materials: list[Material] = field(default_factory=list)
+    boxes: list[SampleBox] = field(default_factory=list)
+
+    @property
+    def labels(self) -> list[int]:
+        """Material labels in the order materials are listed."""
+        return [m.label for m in self.materials]
+
+    def name_of(self, label: int) -> str:
+        for m in self.materials:
+            if m.label == label:
+                return m.name
+        return f"material {label}"
+
+    def boxes_of(self, label: int) -> list[SampleBox]:
+        return [b for b in self.boxes if b.label == label]
+
+    @classmethod
+    def from_dict(cls, data: dict) -> "Samples":
+        """Build from the JSON structure, checking it says what the schema says."""
+        if not isinstance(data, dict) or "boxes" not in data:
+            raise ValueError(
+                "samples must be a JSON object with 'materials' and 'boxes' lists; "
+                "see the README for the schema."
+            )
+        materials = []
+        for i, m in enumerate(data.get("materials", [])):
+            try:
+                materials.append(Material(int(m["label"]), str(m.get("name", f"material {m['label']}")),
+                                          m.get("color")))
+            except (KeyError, TypeError, ValueError) as exc:
+                raise ValueError(f"material #{i} needs an integer 'label' (got {m!r}).") from exc
+        boxes = []
+        for i, b in enumerate(data["boxes"]):
+            try:
+                start = tuple(int(v) for v in b["start"])
+                stop = tuple(int(v) for v in b["stop"])
+                label = int(b["label"])
+            except (KeyError, TypeError, ValueError) as exc:
+                raise ValueError(
+                    f"box #{i} needs 'label', 'start' and 'stop' (integer lists); got {b!r}."
+                ) from exc
+            if len(start) != len(stop):
+                raise ValueError(f"box #{i}: start {start} and stop {stop} differ in length.")
+            if any(b1 <= a for a, b1 in zip(start, stop)):
+                raise ValueError(
+                    f"box #{i} is empty: stop {stop} must exceed start {start} on every axis "
+                    "(stop is exclusive)."
+                )
+            boxes.append(SampleBox(label, start, stop))
+        known = {m.label for m in materials}
+        for b in boxes:
+            if b.label not in known:
+                materials.append(Material(b.label, f"material {b.label}"))
+                known.add(b.label)
+        if len({m.label for m in materials}) != len(materials):
+            raise ValueError("samples list the same material label twice; give each label once.")
+        for m in materials:
+            if m.label <= 0:
+                raise ValueError(
+                    f"material label {m.label} is not allowed: 0 is background in napari "
+                    "Labels, so materials are 1, 2, ...; renumber it."
+                )
+        return cls(materials, boxes)
+
+    def to_dict(self) -> dict:
+        mats = []
+        for m in self.materials:
+            entry = {"label": m.label, "name": m.name}
+            if m.color:
+                entry["color"] = m.color
+            mats.append(entry)
+        return {"materials": mats,
+                "boxes": [{"label": b.label, "start": list(b.start), "stop": list(b.stop)}
+                          for b in self.boxes]}
+
+    def check(self, shape: tuple[int, ...]) -> None:
+        """Raise ValueError unless every box lies inside an image of `shape`."""
+        if not self.boxes:
+            raise ValueError("no sample boxes given; draw at least one box per material.")
+        for i, b in enumerate(self.boxes):
+            if len(b.start) != len(shape):
+                raise ValueError(
+                    f"box #{i} (label {b.label}) has {len(b.start)} axes but the image has "
+                    f"{len(shape)} (shape {shape}); give start/stop for every axis."
+                )
+            if any(a < 0 for a in b.start) or any(s > n for s, n in zip(b.stop, shape)):
+                raise ValueError(
+                    f"box #{i} (label {b.label}) from {list(b.start)} to {list(b.stop)} lies "
+                    f"(partly) outside the image of shape {shape}; move or shrink it."
+                )
+        missing = [m.label for m in self.materials if not self.boxes_of(m.label)]
+        if missing:
+            raise ValueError(
+                f"material(s) {missing} have no sample box; draw a box for each or remove them."
+            )
+
+
+def load_samples(path) -> Samples:
+    """Read a samples JSON file (see the module docstring for the schema)."""
+    p = Path(path)
+    if not p.is_file():
+        raise FileNotFoundError(f"no samples file at {p}; check the path.")
+    try:
+        data = json.loads(p.read_text())
+    except json.JSONDecodeError as exc:
+        raise ValueError(f"{p} is not valid JSON: {exc}") from exc
+    return Samples.from_dict(data)
+
+
+def save_samples(samples: Samples, path, *, force: bool = False) -> Path:
+    """Write `samples` as JSON; an existing file is replaced only with ``force``."""
+    p = check_writable(path, force=force)
+    fd, tmp = tempfile.mkstemp(prefix=".swa-imesh-", suffix=".json", dir=p.parent or ".")
+    with os.fdopen(fd, "w") as fh:
+        json.dump(samples.to_dict(), fh, indent=2)
+    os.replace(tmp, p)
+    return p
+
+
+def samples_from_truth(
+    truth, *, scale: int | None = None, per_material: int = 4,
+    names: dict[int, str] | None = None,
+) -> Samples:
+    """Sample boxes from a ground-truth label image: its largest homogeneous blocks.
+
+    The region 2^d-tree of `truth` (the same tree the mesher uses) gives maximal
+    homogeneous blocks; the `per_material` largest of each material become boxes.
+
+    Parameters
+    ----------
+    truth : (M, N[, P]) array_like of int
+        Ground truth; 0 is background and gives no samples.
+    scale : int, optional
+        Tile scale the samples are meant for. Blocks smaller than ``2**(scale+1)`` per
+        axis (fewer than 2^d tiles) are skipped while larger ones exist.
+    per_material : int
+        Number of boxes per material.
+    names : dict of int to str, optional
+        Material names.
+
+    Returns
+    -------
+    Samples
+
+    Examples
+    --------
+    >>> t = np.zeros((8, 8), int); t[:, 4:] = 1; t[:, :4] = 2
+    >>> s = samples_from_truth(t, per_material=1)
+    >>> [(b.label, b.start, b.stop) for b in s.boxes]
+    [(1, (0, 4), (4, 8)), (2, (0, 0), (4, 4))]
+    """
+    lab = as_labels(truth, name="truth", min_ndim=2)
+    if per_material < 1:
+        raise ValueError(f"per_material must be at least 1; got {per_material}.")
+    tree = build_tree(lab)
+    keep = tree.inside & (tree.label > 0)
+    tree = tree.select(keep)
+    materials, boxes = [], []
+    for label in np.unique(tree.label):
+        sel = np.flatnonzero(tree.label == label)
+        lev = tree.level[sel]
+        if scale is not None and (lev >= scale + 1).any():
+            sel, lev = sel[lev >= scale + 1], lev[lev >= scale + 1]
+        # largest first; ties broken by position so the choice is reproducible
+        order = np.lexsort(tuple(tree.origin[sel].T[::-1]) + (-lev.astype(int),))
+        for i in sel[order[:per_material]]:
+            size = 1 << int(tree.level[i])
+            start = tuple(int(v) for v in tree.origin[i])
+            boxes.append(SampleBox(int(label), start, tuple(v + size for v in start)))
+        name = (names or {}).get(int(label), f"material {int(label)}")
+        materials.append(Material(int(label), name))
+    if not materials:
+        raise ValueError("truth has no material labels above 0; nothing to sample.")
+    return Samples(materials, boxes)
