@@ -56,28 +56,13 @@ def read_image(path, *, gray: bool = False) -> tuple[np.ndarray, tuple[float, ..
     if not p.is_file():
         raise FileNotFoundError(f"no image file at {p}; check the path.")
     suffix = image_suffix(p)
+    if suffix not in IMAGE_SUFFIXES:
+        raise ValueError(
+            f"cannot read {p.name}: unknown suffix {suffix!r}; use one of "
+            f"{', '.join(IMAGE_SUFFIXES)}."
+        )
     try:
-        if suffix in (".tif", ".tiff"):
-            image, spacing = _read_tiff(p)
-        elif suffix in (".png", ".jpg", ".jpeg"):
-            import imageio.v3 as iio
-
-            image, spacing = np.asarray(iio.imread(p)), None
-        elif suffix == ".npy":
-            image, spacing = np.load(p, allow_pickle=False), None
-        elif suffix in (".nii", ".nii.gz"):
-            import nibabel as nib
-
-            img = nib.load(str(p))
-            image = np.asarray(img.dataobj)
-            spacing = tuple(float(z) for z in img.header.get_zooms()[: image.ndim])
-        else:
-            raise ValueError(
-                f"cannot read {p.name}: unknown suffix {suffix!r}; use one of "
-                f"{', '.join(IMAGE_SUFFIXES)}."
-            )
-    except (ValueError, FileNotFoundError):
-        raise
+        image, spacing = _read_by_suffix(p, suffix)
     except Exception as exc:  # a corrupt file surfaces as many reader-specific errors
         raise ValueError(f"cannot read {p} as a {suffix} image: {exc}") from exc
     if gray and image.ndim == 3 and image.shape[-1] in (3, 4):
@@ -88,6 +73,22 @@ def read_image(path, *, gray: bool = False) -> tuple[np.ndarray, tuple[float, ..
     spacing = normalize_spacing(spacing, image.ndim) if spacing and len(spacing) in (1, image.ndim) \
         else normalize_spacing(None, image.ndim)
     return image, spacing
+
+
+def _read_by_suffix(p: Path, suffix: str):
+    if suffix in (".tif", ".tiff"):
+        return _read_tiff(p)
+    if suffix in (".png", ".jpg", ".jpeg"):
+        import imageio.v3 as iio
+
+        return np.asarray(iio.imread(p)), None
+    if suffix == ".npy":
+        return np.load(p, allow_pickle=False), None
+    import nibabel as nib
+
+    img = nib.load(str(p))
+    image = np.asarray(img.dataobj)
+    return image, tuple(float(z) for z in img.header.get_zooms()[: image.ndim])
 
 
 def _read_tiff(p: Path):
