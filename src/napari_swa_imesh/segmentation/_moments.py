@@ -1,0 +1,345 @@
+"""Tile moments (mean, variance, skewness, kurtosis) for all scales at once.
+
+Reference eqs. 2.17-2.20. A tile at scale ``j`` is a block of ``2**j`` pixels per
+axis starting at index 0; the tile grid has ``ceil(N_a / 2**j)`` tiles along axis
+``a`` and the last tile along an axis may be partial.
+
+Numerical scheme
+----------------
+The pyramid is built bottom-up (the Haar-pyramid tie: a tile at scale ``j`` is
+the union of its ``2**d`` children at scale ``j - 1``). Each level keeps, per tile,
+the count ``n``, a centre ``m`` (the mean up to rounding) and the power sums
+about it ``M_p = sum (x - m)**p`` for p = 1..4; a parent merges its children
+with the exact binomial shift (Chan et al. 1979, Pebay 2008), with
+``delta = m_child - m_parent``::
+
+    M1 = sum_c M1_c + n_c delta
+    M2 = sum_c M2_c + 2 delta M1_c + n_c delta**2
+    M3 = sum_c M3_c + 3 delta M2_c + 3 delta**2 M1_c + n_c delta**3
+    M4 = sum_c M4_c + 4 delta M3_c + 6 delta**2 M2_c + 4 delta**3 M1_c + n_c delta**4
+
+``M1`` is zero in exact arithmetic; carrying it cancels the rounding error of
+the centres (the corrected two-pass algorithm), which otherwise shows at the
+1e-9 level for data with an offset 1e7 times its spread.
+
+Raw power sums of x..x**4 are *not* used: for data with a large offset (uint16
+CT, 1e4 + noise) they cancel catastrophically. Scale 1 is computed two-pass from
+the pixels (block mean, then powers of the deviations). Padding (odd sides are
+padded by one zero-count tile per level) and masked-out pixels have count 0 and
+so never enter a statistic. Cost is O(N) for all scales together.
+
+Conventions
+-----------
+- Population moments (``ddof=0``); kurtosis is Pearson's ``m4 / m2**2`` (3 for a
+  normal distribution), not the excess kurtosis.
+- A tile whose standard deviation is numerically zero (``std <= 1e-13 * |mean|``,
+  which includes ``std == 0``) gets skewness 0 and kurtosis 3, the values of a
+  normal distribution: a constant tile gives no evidence of shape.
+- A tile with no valid pixel gets NaN for all four moments.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Iterator
+
+import numpy as np
+
+from napari_swa_imesh._validation import as_image
+
+__all__ = ["MOMENT_NAMES", "moment_pyramid", "tile_moments"]
+
+MOMENT_NAMES = ("mean", "variance", "skewness", "kurtosis")
+
+# A tile's std below this fraction of |mean| is rounding noise of the mean itself
+# (a few ulps per level), not spread in the data.
+_ZERO_STD_RTOL = 1e-13
+
+
+# ---------------------------------------------------------------- door checks
+def _validate_scale(scale, shape: tuple[int, ...], name: str = "scale") -> int:
+    """Return `scale` as int after checking 0 <= scale <= floor(log2(max side))."""
+    top = int(max(shape)).bit_length() - 1
+    if isinstance(scale, (bool, np.bool_)) or not isinstance(scale, (int, np.integer)):
+        raise ValueError(
+            f"{name} must be an int in 0..{top} for an image of shape {shape}; "
+            f"got {scale!r} of type {type(scale).__name__}."
+        )
+    if not 0 <= scale <= top:
+        raise ValueError(
+            f"{name} must be an int in 0..{top} (floor(log2) of the largest side, "
+            f"{max(shape)}) for an image of shape {shape}; got {scale}. Tiles are "
+            f"2**{name} pixels per axis."
+        )
+    return int(scale)
+
+
+def _validate_mask(mask, shape: tuple[int, ...]) -> np.ndarray | None:
+    """Return `mask` as a new bool array of `shape` (True = valid), or None."""
+    if mask is None:
+        return None
+    arr = np.asarray(mask)
+    if arr.dtype.kind not in "biu":
+        raise TypeError(
+            f"mask must be a boolean (or 0/1 integer) array; got dtype {arr.dtype}. "
+            "Use e.g. `image > threshold` to build one."
+        )
+    if arr.shape != tuple(shape):
+        raise ValueError(
+            f"mask must have the image's shape {tuple(shape)}; got {arr.shape}. "
+            "Build the mask on the same grid as the image."
+        )
+    return arr != 0
+
+
+# ------------------------------------------------------------ block reductions
+def _pad_to_even(arr: np.ndarray, fill=0) -> np.ndarray:
+    """Pad every odd side by one element of `fill` at the end (no copy if all even)."""
+    pad = [(0, side % 2) for side in arr.shape]
+    if not any(after for _, after in pad):
+        return arr
+    return np.pad(arr, pad, mode="constant", constant_values=fill)
+
+
+def _pair_sum(arr: np.ndarray, dtype=None) -> np.ndarray:
+    """Sum 2 x ... x 2 blocks of an array with even sides.
+
+    Folding the last axis first is about 3x faster than ``reshape(...).sum(axes)``
+    on a C-ordered volume.
+    """
+    out = arr
+    for axis in range(arr.ndim - 1, -1, -1):
+        lead = (slice(None),) * axis
+        out = np.add(out[lead + (slice(0, None, 2),)], out[lead + (slice(1, None, 2),)], dtype=dtype)
+    return out
+
+
+def _interleaved(arr: np.ndarray, block: int) -> np.ndarray:
+    """View of shape (t_0, block, t_1, block, ...) of an array with sides multiple of `block`."""
+    shape: list[int] = []
+    for side in arr.shape:
+        shape += [side // block, block]
+    return arr.reshape(shape)
+
+
+def _spread(coarse: np.ndarray) -> np.ndarray:
+    """View of shape (t_0, 1, t_1, 1, ...) that broadcasts against `_interleaved`."""
+    shape: list[int] = []
+    for side in coarse.shape:
+        shape += [side, 1]
+    return coarse.reshape(shape)
+
+
+def _tile_counts(shape: tuple[int, ...], scale: int, valid: np.ndarray | None) -> np.ndarray:
+    """Valid pixels per tile at `scale`, shape ceil(shape / 2**scale), int64."""
+    block = 2**scale
+    if valid is None:
+        # Outer product of per-axis counts: only the last tile per axis is partial.
+        counts = np.ones((), dtype=np.int64)
+        for side in shape:
+            per_axis = np.minimum(block, side - block * np.arange(-(-side // block)))
+            counts = np.multiply.outer(counts, per_axis.astype(np.int64))
+        return counts
+    pad = [(0, (-side) % block) for side in shape]
+    padded = np.pad(valid, pad, mode="constant", constant_values=False)
+    axes = tuple(range(1, 2 * len(shape), 2))
+    return _interleaved(padded, block).sum(axis=axes, dtype=np.int64)
+
+
+def _tile_means(padded: np.ndarray, counts: np.ndarray, scale: int,
+                valid_padded: np.ndarray | None = None) -> np.ndarray:
+    """Mean over the valid pixels of each tile; `padded` has sides multiple of 2**scale.
+
+    Tiles without a valid pixel get 0 (callers decide what that means).
+    """
+    axes = tuple(range(1, 2 * padded.ndim, 2))
+    data = padded if valid_padded is None else np.where(valid_padded, padded, 0.0)
+    sums = _interleaved(data, 2**scale).sum(axis=axes)
+    return sums / np.maximum(counts, 1)
+
+
+# ------------------------------------------------------------------ the levels
+def _pixel_moments(x: np.ndarray, valid: np.ndarray | None) -> tuple[np.ndarray, np.ndarray]:
+    """Scale-0 entry: every pixel is its own tile."""
+    moments = np.empty(x.shape + (4,), dtype=np.float64)
+    moments[..., 0] = x
+    moments[..., 1] = 0.0
+    moments[..., 2] = 0.0
+    moments[..., 3] = 3.0
+    if valid is None:
+        return moments, np.ones(x.shape, dtype=np.int64)
+    moments[~valid] = np.nan
+    return moments, valid.astype(np.int64)
+
+
+def _iter_moment_levels(
+    x: np.ndarray, valid: np.ndarray | None, max_scale: int
+) -> Iterator[tuple[np.ndarray, ...]]:
+    """Yield ``(centre, M1, M2, M3, M4, n)`` per tile for scales 1..max_scale.
+
+    `x` is float64 and is overwritten (pass a copy you own). Empty tiles have
+    centre 0 and zero power sums, so they drop out of every merge.
+    """
+    if max_scale < 1:
+        return
+    # Scale 1, two-pass from the pixels.
+    needs_pad = any(side % 2 for side in x.shape)
+    if needs_pad:
+        if valid is None:
+            valid = np.ones(x.shape, dtype=bool)
+        x = _pad_to_even(x, 0.0)
+        valid = _pad_to_even(valid, False)
+    if valid is None:
+        n = np.full(tuple(side // 2 for side in x.shape), 2**x.ndim, dtype=np.int64)
+    else:
+        x *= valid
+        n = _pair_sum(valid.view(np.uint8), dtype=np.int64)
+    mean = _pair_sum(x)
+    mean /= np.maximum(n, 1)
+    _interleaved(x, 2)[...] -= _spread(mean)  # x now holds deviations from the tile mean
+    if valid is not None:
+        x *= valid
+    m1 = _pair_sum(x)  # zero but for the rounding of `mean`; carried to cancel it
+    power = x * x
+    m2 = _pair_sum(power)
+    power *= x
+    m3 = _pair_sum(power)
+    power *= x
+    m4 = _pair_sum(power)
+    del power, x, valid
+    yield mean, m1, m2, m3, m4, n
+
+    for _ in range(2, max_scale + 1):
+        # Children, padded with empty tiles (n = 0) to even sides.
+        mean_c, m1_c, m2_c, m3_c, m4_c, n_c = (
+            _pad_to_even(a) for a in (mean, m1, m2, m3, m4, n))
+        weight_c = n_c.astype(np.float64)
+        n = _pair_sum(n_c)
+        mean = _pair_sum(weight_c * mean_c + m1_c)
+        mean /= np.maximum(n, 1)
+        # delta = child centre - parent centre, shape of the children grid
+        delta = (_interleaved(mean_c, 2) - _spread(mean)).reshape(mean_c.shape)
+        n_delta = weight_c * delta
+        m4 = _pair_sum(m4_c + delta * (4.0 * m3_c + delta * (
+            6.0 * m2_c + delta * (4.0 * m1_c + n_delta))))
+        m3 = _pair_sum(m3_c + delta * (3.0 * m2_c + delta * (3.0 * m1_c + n_delta)))
+        m2 = _pair_sum(m2_c + delta * (2.0 * m1_c + n_delta))
+        m1 = _pair_sum(m1_c + n_delta)
+        yield mean, m1, m2, m3, m4, n
+
+
+def _finalize(mean: np.ndarray, m1: np.ndarray, m2: np.ndarray, m3: np.ndarray,
+              m4: np.ndarray, n: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Turn a level's sums into the (..., 4) moments array and the counts."""
+    safe_n = np.maximum(n, 1)
+    # Power sums are about `mean`; shift them by the tiny residual c = M1 / n to the
+    # true mean (corrected two-pass: Chan, Golub and LeVeque 1983).
+    c = m1 / safe_n
+    s2, s3, s4 = m2 / safe_n, m3 / safe_n, m4 / safe_n
+    var = np.maximum(s2 - c * c, 0.0)
+    mu3 = s3 - c * (3.0 * s2 - 2.0 * c * c)
+    mu4 = s4 - c * (4.0 * s3 - c * (6.0 * s2 - 3.0 * c * c))
+    mean = mean + c
+    flat = np.sqrt(var) <= _ZERO_STD_RTOL * np.abs(mean)
+    safe_var = np.where(flat, 1.0, var)
+    moments = np.empty(mean.shape + (4,), dtype=np.float64)
+    moments[..., 0] = mean
+    moments[..., 1] = var
+    moments[..., 2] = np.where(flat, 0.0, mu3 / safe_var**1.5)
+    moments[..., 3] = np.where(flat, 3.0, mu4 / safe_var**2)
+    moments[n == 0] = np.nan
+    return moments, n
+
+
+# ---------------------------------------------------------------- public layer
+def moment_pyramid(
+    image, *, max_scale: int, mask=None
+) -> list[tuple[np.ndarray, np.ndarray]]:
+    """Tile moments at every scale 0..max_scale, in O(N) total.
+
+    Parameters
+    ----------
+    image : (N_0, ..., N_{d-1}) array_like of real numbers
+        Grey-level image, 2-D or more, any real dtype (computed in float64). Sides
+        need not be powers of two. Not modified.
+    max_scale : int
+        Largest scale, in ``0 .. floor(log2(max(image.shape)))``.
+    mask : (N_0, ..., N_{d-1}) array_like of bool, optional
+        True where a pixel counts. Default: every pixel.
+
+    Returns
+    -------
+    list of (moments, counts)
+        Entry ``j`` holds, on the tile grid ``t_a = ceil(N_a / 2**j)``:
+
+        moments : (t_0, ..., t_{d-1}, 4) ndarray of float64
+            Population mean, variance, skewness and (Pearson, not excess)
+            kurtosis of the valid pixels of each tile; skewness 0 and kurtosis 3
+            for tiles with numerically zero variance, NaN for tiles with no
+            valid pixel.
+        counts : (t_0, ..., t_{d-1}) ndarray of int64
+            Number of valid pixels per tile (``2**(j*d)`` for a full tile).
+
+    Examples
+    --------
+    >>> image = np.array([[0, 0, 1], [0, 4, 1]], dtype=np.uint8)
+    >>> moments, counts = moment_pyramid(image, max_scale=1)[1]
+    >>> counts
+    array([[4, 2]])
+    >>> moments[0, :, :2]  # (mean, variance) of [0, 0, 0, 4] and of [1, 1]
+    array([[1., 3.],
+           [1., 0.]])
+    >>> moments[0, 1, 2:]  # constant tile: skewness 0, kurtosis 3 by convention
+    array([0., 3.])
+    """
+    x = as_image(image)
+    valid = _validate_mask(mask, x.shape)
+    max_scale = _validate_scale(max_scale, x.shape, name="max_scale")
+    pyramid = [_pixel_moments(x, valid)]
+    for level in _iter_moment_levels(x, valid, max_scale):
+        pyramid.append(_finalize(*level))
+    return pyramid
+
+
+def _tile_moments_worker(x: np.ndarray, valid: np.ndarray | None,
+                         scale: int) -> tuple[np.ndarray, np.ndarray]:
+    """`tile_moments` on checked input; overwrites `x`."""
+    if scale == 0:
+        return _pixel_moments(x, valid)
+    level = None
+    for level in _iter_moment_levels(x, valid, scale):
+        pass
+    return _finalize(*level)
+
+
+def tile_moments(image, scale: int, *, mask=None) -> tuple[np.ndarray, np.ndarray]:
+    """Tile moments at one scale (entry `scale` of :func:`moment_pyramid`).
+
+    Only the requested scale is kept in memory; the coarser-than-pixel levels
+    below it are still built bottom-up (O(N)).
+
+    Parameters
+    ----------
+    image : (N_0, ..., N_{d-1}) array_like of real numbers
+        Grey-level image, 2-D or more.
+    scale : int
+        Tiles of ``2**scale`` pixels per axis, ``0 .. floor(log2(max side))``.
+    mask : (N_0, ..., N_{d-1}) array_like of bool, optional
+        True where a pixel counts.
+
+    Returns
+    -------
+    moments : (t_0, ..., t_{d-1}, 4) ndarray of float64
+        Mean, variance, skewness, kurtosis (see :func:`moment_pyramid`).
+    counts : (t_0, ..., t_{d-1}) ndarray of int64
+        Valid pixels per tile.
+
+    Examples
+    --------
+    >>> moments, counts = tile_moments(np.arange(16.0).reshape(4, 4), 2)
+    >>> moments[0, 0, :2].tolist(), counts.tolist()  # mean, variance of 0..15
+    ([7.5, 21.25], [[16]])
+    """
+    x = as_image(image)
+    valid = _validate_mask(mask, x.shape)
+    scale = _validate_scale(scale, x.shape)
+    return _tile_moments_worker(x, valid, scale)
