@@ -42,7 +42,7 @@ def grid_mesh(labels, spacing=None, names=None) -> Mesh:
     rng = np.random.default_rng(7)
     cell_data = {
         "quality": rng.uniform(0.7, 1.2, len(cells)),
-        "level": rng.integers(0, 4, len(cells)),
+        "level": rng.integers(0, 4, len(cells)).astype(np.int8),  # as the mesher stores it
     }
     return Mesh(points, cells, material, cell_data, spacing=tuple(spacing),
                 shape=labels.shape, material_names=dict(names or {}))

@@ -1,7 +1,207 @@
-"""Sub-commands of ``swa-imesh`` for meshing: mesh, bounds."""
+"""Sub-commands of ``swa-imesh`` for meshing: mesh, bounds.
+
+``swa-imesh mesh LABELS -o MESH`` meshes a label image and writes the format the suffix
+names; ``swa-imesh bounds --dim d`` prints the quality of the template simplices.
+Exit status: 0 on success, 2 for bad input (one line on stderr, from ``cli.main``), 1
+when the mesh was written but one of its checks failed (a bug to report, not bad input).
+"""
 
 from __future__ import annotations
+
+import argparse
+import sys
+from pathlib import Path
+
+from .._cli_util import StepTimer, print_json
+from ._export import MESH_SUFFIXES
+
+__all__ = ["add_commands", "parse_material_names"]
 
 
 def add_commands(subparsers) -> None:
     """Register the meshing sub-commands on an argparse sub-parser group."""
+    p = subparsers.add_parser(
+        "mesh", help="mesh a label image into triangles (2-D) or tetrahedra (3-D)",
+        description="Mesh a 2-D or 3-D label image on a balanced 2^d-tree (IMESH); every "
+                    "element carries one material. The output suffix picks the format: "
+                    f"{', '.join(MESH_SUFFIXES)}.")
+    p.add_argument("labels", metavar="LABELS",
+                   help="label image (.tif, .npy, .nii/.nii.gz, .png); 0 is background")
+    p.add_argument("-o", "--output", required=True, metavar="MESH",
+                   help="mesh file to write; an existing file is only replaced with --force")
+    p.add_argument("--method", choices=("template", "delaunay"), default="template",
+                   help="template (look-up tables, conforming; default) or delaunay "
+                        "(the reference's Qhull step, for comparison)")
+    p.add_argument("--exclude", type=int, nargs="+", action="extend", default=[], metavar="L",
+                   help="labels not to mesh, e.g. --exclude 0 for the background")
+    p.add_argument("--spacing", type=float, nargs="+", default=None, metavar="S",
+                   help="voxel size per axis in array order (one value = isotropic); "
+                        "default: from the file, else 1")
+    p.add_argument("--material-names", nargs="+", action="extend", default=[],
+                   metavar="ID=NAME", help="names for materials, e.g. 1=bone 2=soft "
+                                           "(Gmsh physical groups, Abaqus element sets)")
+    p.add_argument("--force", action="store_true", help="replace an existing output file")
+    p.add_argument("--json", action="store_true", help="print one JSON object on stdout")
+    p.set_defaults(func=_run_mesh)
+
+    p = subparsers.add_parser(
+        "bounds", help="print the quality of the template simplices",
+        description="Print the distinct template simplices of a dimension with their "
+                    "radius-to-edge ratio and angles: the quality the mesher guarantees.")
+    p.add_argument("--dim", type=int, required=True, metavar="D", help="dimension (2 or 3)")
+    p.add_argument("--json", action="store_true", help="print one JSON object on stdout")
+    p.set_defaults(func=_run_bounds)
+
+
+def parse_material_names(items) -> dict[int, str]:
+    """Parse ``["1=bone", "2=soft tissue"]`` into ``{1: "bone", 2: "soft tissue"}``.
+
+    Examples
+    --------
+    >>> parse_material_names(["1=bone", " 2 = soft "])
+    {1: 'bone', 2: 'soft'}
+    """
+    names: dict[int, str] = {}
+    for item in items or ():
+        key, sep, name = str(item).partition("=")
+        try:
+            material = int(key)
+        except ValueError:
+            material = -1
+        if not sep or material < 0 or not name.strip():
+            raise ValueError(
+                f"--material-names expects ID=NAME pairs with a non-negative integer ID, "
+                f"such as 1=bone; got {item!r}."
+            )
+        name = name.strip()
+        twin = next((m for m, n in names.items() if n == name and m != material), None)
+        if twin is not None:
+            raise ValueError(
+                f"materials {twin} and {material} share the name {name!r}; give each "
+                "material its own name."
+            )
+        names[material] = name
+    return names
+
+
+def _run_mesh(args: argparse.Namespace) -> int:
+    import numpy as np
+
+    from .._validation import as_labels, normalize_spacing
+    from ..io import read_image
+    from ._export import mesh_output_paths, write_mesh
+
+    timer = StepTimer()
+    # fail before the (possibly long) meshing on a bad suffix or an existing file
+    mesh_output_paths(args.output, force=args.force)
+    names = parse_material_names(args.material_names)
+    with timer("read"):
+        image, file_spacing = read_image(args.labels)
+    labels = as_labels(image, name=f"labels in {Path(args.labels).name}", min_ndim=2, max_ndim=3)
+    spacing = normalize_spacing(args.spacing if args.spacing else file_spacing, labels.ndim)
+
+    from ._checks import check_mesh
+    from ._imesh import mesh_labels
+
+    with timer("mesh"):
+        mesh = mesh_labels(labels, method=args.method, exclude=tuple(args.exclude),
+                           spacing=spacing, material_names=names)
+    with timer("check"):
+        checks = check_mesh(mesh, labels, exclude=tuple(args.exclude))
+    checks = {k: (bool(v) if isinstance(v, (bool, np.bool_)) else v) for k, v in checks.items()}
+    with timer("write"):
+        written = write_mesh(mesh, args.output, force=args.force)
+
+    report = _mesh_report(args, mesh, checks, written, timer.seconds)
+    if args.json:
+        print_json(report)
+    else:
+        print(_mesh_text(report))
+    if not checks.get("all_passed", False):
+        failed = [k for k, v in checks.items() if v is False]
+        print(f"swa-imesh mesh: warning: the mesh was written but failed the checks "
+              f"{failed}; please report this with the input.", file=sys.stderr)
+        return 1
+    return 0
+
+
+def _mesh_report(args, mesh, checks, written, seconds) -> dict:
+    """The ``--json`` object: counts, quality, checks and seconds per step."""
+    import numpy as np
+
+    info = mesh.info
+    materials, counts = np.unique(mesh.material, return_counts=True)
+    report = {
+        "command": "mesh",
+        "input": str(args.labels),
+        "output": [str(p) for p in written],
+        "method": args.method,
+        "dim": mesh.ndim,
+        "shape": list(mesh.shape),
+        "spacing": list(mesh.spacing),
+        "exclude": sorted(set(args.exclude)),
+        "leaves_before_balance": info.get("n_leaves_tree"),
+        "leaves_after_balance": info.get("n_leaves_balanced"),
+        "leaves_meshed": info.get("n_leaves_meshed"),
+        "vertices": int(len(mesh.points)),
+        "elements": mesh.n_cells,
+        "elements_per_material": {int(m): int(c) for m, c in zip(materials, counts)},
+        "material_names": {int(m): mesh.material_names.get(int(m), f"material_{int(m)}")
+                           for m in materials},
+        "worst_ratio": float(np.nanmax(mesh.quality)),
+    }
+    cd = mesh.cell_data
+    if mesh.ndim == 2 and "min_angle" in cd:
+        report["min_angle"] = float(np.nanmin(cd["min_angle"]))
+        if "max_angle" in cd:
+            report["max_angle"] = float(np.nanmax(cd["max_angle"]))
+        elif "angle_range" in info:
+            report["max_angle"] = float(info["angle_range"][1])
+    if mesh.ndim == 3 and "min_dihedral" in cd:
+        report["min_dihedral"] = float(np.nanmin(cd["min_dihedral"]))
+        report["max_dihedral"] = float(np.nanmax(cd["max_dihedral"]))
+    report["checks"] = checks
+    report["seconds"] = {
+        "read": seconds.get("read", 0.0),
+        "mesh": seconds.get("mesh", 0.0),
+        "mesh_steps": dict(info.get("seconds", {})),
+        "check": seconds.get("check", 0.0),
+        "write": seconds.get("write", 0.0),
+    }
+    return report
+
+
+def _mesh_text(r: dict) -> str:
+    kind = "triangles" if r["dim"] == 2 else "tetrahedra"
+    shape = "x".join(str(s) for s in r["shape"])
+    spacing = " x ".join(f"{s:g}" for s in r["spacing"])
+    lines = [
+        f"meshed {r['input']} ({shape}, spacing {spacing}) with {r['method']}: "
+        f"{r['vertices']} vertices, {r['elements']} {kind}, "
+        f"{len(r['elements_per_material'])} material(s)",
+        f"leaves: {r['leaves_before_balance']} in the tree, "
+        f"{r['leaves_after_balance']} after balancing",
+    ]
+    quality = f"worst radius-to-edge ratio {r['worst_ratio']:.4f}"
+    if "min_angle" in r:
+        quality += f", angles {r['min_angle']:.2f} to {r.get('max_angle', float('nan')):.2f} deg"
+    if "min_dihedral" in r:
+        quality += f", dihedral angles {r['min_dihedral']:.2f} to {r['max_dihedral']:.2f} deg"
+    lines.append(quality)
+    flags = [f"{k} {'ok' if v else 'FAILED'}" for k, v in r["checks"].items()
+             if isinstance(v, bool) and k != "all_passed"]
+    lines.append("checks: " + ", ".join(flags))
+    total = sum(v for k, v in r["seconds"].items() if k != "mesh_steps")
+    lines.append(f"wrote {', '.join(r['output'])} ({total:.2f} s)")
+    return "\n".join(lines)
+
+
+def _run_bounds(args: argparse.Namespace) -> int:
+    from ._bounds import format_quality_table, quality_table
+
+    rows = quality_table(args.dim)
+    if args.json:
+        print_json({"command": "bounds", "dim": args.dim, "simplices": rows})
+    else:
+        print(format_quality_table(rows))
+    return 0

@@ -33,7 +33,7 @@ from .._cli_util import check_writable
 from ._triangle_tetgen import read_node_ele, write_node_ele
 from ._types import Mesh
 
-__all__ = ["to_meshio", "write_mesh", "read_mesh", "MESH_SUFFIXES"]
+__all__ = ["to_meshio", "write_mesh", "read_mesh", "mesh_output_paths", "MESH_SUFFIXES"]
 
 #: Suffix -> short description, in the order shown to users.
 MESH_SUFFIXES = {
@@ -156,7 +156,8 @@ def to_meshio(mesh: Mesh):
         ``points`` (N, d) float64 as (col, row[, plane]); one cell block of type
         ``triangle`` or ``tetra`` with positive signed volume in those coordinates;
         ``cell_data`` ``material`` (int64), ``quality`` and every other per-cell array of
-        the mesh, each as a one-element list (one block).
+        the mesh (integers as int64, the rest as float64), each as a one-element list
+        (one block).
 
     Examples
     --------
@@ -174,9 +175,9 @@ def to_meshio(mesh: Mesh):
     cell_data = {"material": [np.asarray(mesh.material, dtype=np.int64)]}
     for key, values in mesh.cell_data.items():
         values = np.asarray(values)
-        if values.dtype == bool:
-            values = values.astype(np.uint8)
-        cell_data[key] = [values]
+        # every writer takes int64/float64; some (XDMF as XML) reject int8 or bool
+        kind = values.dtype.kind
+        cell_data[key] = [values.astype(np.int64 if kind in "biu" else np.float64)]
     return meshio.Mesh(points, [(_CELL_TYPE[mesh.ndim], cells)], cell_data=cell_data)
 
 
@@ -278,6 +279,30 @@ def _targets(path: Path) -> list[Path]:
     return [path]
 
 
+def mesh_output_paths(path, *, force: bool = False) -> list[Path]:
+    """The files `write_mesh` would write for `path`, after checking it may write them.
+
+    Lets a caller fail fast (before meshing) on a bad suffix or an existing file.
+
+    Raises
+    ------
+    ValueError
+        Unknown suffix (the message lists the supported ones).
+    FileExistsError
+        A target exists and `force` is false.
+    FileNotFoundError
+        The target folder does not exist.
+    """
+    targets = _targets(Path(path))
+    for target in targets:
+        check_writable(target, force=force)
+        if not target.parent.is_dir():
+            raise FileNotFoundError(
+                f"folder {target.parent} does not exist; create it or choose another output path."
+            )
+    return targets
+
+
 def write_mesh(mesh: Mesh, path, *, force: bool = False) -> list[Path]:
     """Write `mesh` in the format named by the suffix of `path`.
 
@@ -310,13 +335,7 @@ def write_mesh(mesh: Mesh, path, *, force: bool = False) -> list[Path]:
     into place, so a failed write never leaves a half file where the user's was.
     """
     _check_mesh_arg(mesh)
-    targets = _targets(Path(path))
-    for target in targets:
-        check_writable(target, force=force)
-        if not target.parent.is_dir():
-            raise FileNotFoundError(
-                f"folder {target.parent} does not exist; create it or choose another output path."
-            )
+    targets = mesh_output_paths(path, force=force)
     suffix = targets[0].suffix.lower()
     temps: list[str] = []
     try:

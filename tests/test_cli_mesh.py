@@ -1,0 +1,224 @@
+"""``swa-imesh mesh`` and ``swa-imesh bounds`` end to end, and their refusals of bad input."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+
+from napari_swa_imesh.cli import main
+from napari_swa_imesh.io import write_labels
+from napari_swa_imesh.mesh._export import read_mesh
+
+
+def three_materials_2d() -> np.ndarray:
+    labels = np.zeros((12, 10), dtype=np.uint8)
+    labels[2:9, 3:8] = 1
+    labels[5:7, 1:4] = 2
+    return labels
+
+
+def blob_3d() -> np.ndarray:
+    rng = np.random.default_rng(3)
+    labels = np.ones((6, 5, 7), dtype=np.uint8)
+    labels[1:5, 1:4, 2:6] = 2
+    labels[rng.random(labels.shape) < 0.05] = 0
+    return labels
+
+
+def run(capsys, *argv) -> tuple[int, str, str]:
+    code = main([str(a) for a in argv])
+    captured = capsys.readouterr()
+    return code, captured.out, captured.err
+
+
+def one_json(out: str) -> dict:
+    lines = out.strip().splitlines()
+    assert len(lines) == 1, out
+    return json.loads(lines[0])
+
+
+def test_mesh_2d_json_end_to_end(tmp_path, capsys):
+    labels = three_materials_2d()
+    np.save(tmp_path / "labels.npy", labels)
+    out = tmp_path / "mesh.vtu"
+    code, stdout, stderr = run(capsys, "mesh", tmp_path / "labels.npy", "-o", out, "--json")
+    assert code == 0, stderr
+    report = one_json(stdout)
+    for key in ("leaves_before_balance", "leaves_after_balance", "vertices", "elements",
+                "worst_ratio", "min_angle", "max_angle", "checks", "seconds"):
+        assert key in report, key
+    assert report["checks"]["all_passed"] is True
+    assert report["leaves_after_balance"] >= report["leaves_before_balance"]
+    assert set(report["seconds"]) >= {"read", "mesh", "check", "write"}
+    assert report["output"] == [str(out)]
+    mesh = read_mesh(out)
+    assert mesh.n_cells == report["elements"]
+    assert len(mesh.points) == report["vertices"]
+    assert sorted(set(mesh.material.tolist())) == [0, 1, 2]
+    # the mesh covers the image box and its quality is what the report says
+    np.testing.assert_allclose(mesh.points.max(axis=0), labels.shape)
+    assert mesh.quality.max() == pytest.approx(report["worst_ratio"])
+
+
+def test_mesh_3d_gmsh_with_names_exclude_and_spacing(tmp_path, capsys):
+    labels = blob_3d()
+    np.save(tmp_path / "vol.npy", labels)
+    out = tmp_path / "vol.msh"
+    code, stdout, stderr = run(
+        capsys, "mesh", tmp_path / "vol.npy", "-o", out, "--exclude", "0",
+        "--spacing", "2", "1", "0.5", "--material-names", "1=matrix", "2=inclusion", "--json")
+    assert code == 0, stderr
+    report = one_json(stdout)
+    assert {"min_dihedral", "max_dihedral"} <= set(report)
+    assert report["checks"]["all_passed"] is True
+    assert report["spacing"] == [2.0, 1.0, 0.5]
+    text = out.read_text()
+    assert '3 1 "matrix"' in text and '3 2 "inclusion"' in text
+    mesh = read_mesh(out)
+    assert 0 not in set(mesh.material.tolist())
+    np.testing.assert_allclose(mesh.points.max(axis=0), np.array(labels.shape) * [2, 1, 0.5])
+    # volume per material equals the voxel volume of that label
+    corners = mesh.points[mesh.cells]
+    volumes = np.abs(np.linalg.det(corners[:, 1:] - corners[:, :1])) / 6
+    for material in (1, 2):
+        expected = np.count_nonzero(labels == material) * 2 * 1 * 0.5
+        assert volumes[mesh.material == material].sum() == pytest.approx(expected)
+
+
+@pytest.mark.parametrize("suffix", [".inp", ".node", ".xdmf"])
+def test_mesh_writes_the_format_the_suffix_names(tmp_path, capsys, suffix):
+    np.save(tmp_path / "labels.npy", three_materials_2d())
+    code, _, stderr = run(capsys, "mesh", tmp_path / "labels.npy", "-o", tmp_path / f"m{suffix}")
+    assert code == 0, stderr
+    assert read_mesh(tmp_path / f"m{suffix}").n_cells > 0
+
+
+def test_mesh_human_summary(tmp_path, capsys):
+    np.save(tmp_path / "labels.npy", three_materials_2d())
+    code, stdout, _ = run(capsys, "mesh", tmp_path / "labels.npy", "-o", tmp_path / "m.vtk")
+    assert code == 0
+    assert "vertices" in stdout and "triangles" in stdout and "checks:" in stdout
+    assert "FAILED" not in stdout
+
+
+def test_spacing_comes_from_the_file_unless_overridden(tmp_path, capsys):
+    write_labels(tmp_path / "labels.tif", three_materials_2d(), spacing=(0.5, 0.25))
+    code, stdout, _ = run(capsys, "mesh", tmp_path / "labels.tif", "-o", tmp_path / "a.vtu",
+                          "--json")
+    assert code == 0
+    assert one_json(stdout)["spacing"] == pytest.approx([0.5, 0.25])
+    code, stdout, _ = run(capsys, "mesh", tmp_path / "labels.tif", "-o", tmp_path / "b.vtu",
+                          "--spacing", "3", "--json")
+    assert code == 0
+    assert one_json(stdout)["spacing"] == [3.0, 3.0]
+
+
+def test_delaunay_method_runs(tmp_path, capsys):
+    np.save(tmp_path / "labels.npy", three_materials_2d())
+    code, stdout, stderr = run(capsys, "mesh", tmp_path / "labels.npy", "-o", tmp_path / "d.vtu",
+                               "--method", "delaunay", "--json")
+    assert code in (0, 1), stderr  # 1 would mean written but a check failed
+    assert one_json(stdout)["method"] == "delaunay"
+
+
+def test_existing_output_needs_force(tmp_path, capsys):
+    np.save(tmp_path / "labels.npy", three_materials_2d())
+    out = tmp_path / "mesh.vtu"
+    out.write_text("precious")
+    code, stdout, stderr = run(capsys, "mesh", tmp_path / "labels.npy", "-o", out)
+    assert code == 2
+    assert stderr.startswith("swa-imesh mesh: error:") and "already exists" in stderr
+    assert "--force" in stderr
+    assert out.read_text() == "precious"
+    code, _, _ = run(capsys, "mesh", tmp_path / "labels.npy", "-o", out, "--force")
+    assert code == 0
+    assert read_mesh(out).n_cells > 0
+
+
+def bad_input(tmp_path, kind):
+    path = tmp_path / "labels.npy"
+    if kind == "missing":
+        return tmp_path / "nope.npy"
+    arrays = {
+        "fraction": np.array([[0.0, 1.5], [1.0, 2.0]]),
+        "one_d": np.array([0, 1, 1, 2]),
+        "five_d": np.ones((2, 2, 2, 2, 2), dtype=np.uint8),
+        "negative": np.array([[0, -1], [1, 2]]),
+    }
+    np.save(path, arrays[kind])
+    return path
+
+
+@pytest.mark.parametrize(
+    ("kind", "message"),
+    [
+        ("missing", "no image file at .*nope.npy"),
+        ("fraction", "non-integer values"),
+        ("one_d", "must be 2-D to 3-D; got 1-D"),
+        ("five_d", "must be 2-D to 3-D; got 5-D"),
+        ("negative", "negative values"),
+    ],
+)
+def test_bad_labels_exit_2_with_one_clear_line(tmp_path, capsys, kind, message):
+    path = bad_input(tmp_path, kind)
+    code, stdout, stderr = run(capsys, "mesh", path, "-o", tmp_path / "m.vtu", "--json")
+    assert code == 2
+    assert stdout == ""
+    assert len(stderr.strip().splitlines()) == 1
+    assert stderr.startswith("swa-imesh mesh: error: ")
+    import re
+
+    assert re.search(message, stderr), stderr
+    assert not (tmp_path / "m.vtu").exists()
+
+
+def test_all_excluded_image_is_refused(tmp_path, capsys):
+    np.save(tmp_path / "zeros.npy", np.zeros((4, 4), dtype=np.uint8))
+    code, _, stderr = run(capsys, "mesh", tmp_path / "zeros.npy", "-o", tmp_path / "m.vtu",
+                          "--exclude", "0")
+    assert code == 2
+    assert "excluded" in stderr and "nothing is left to mesh" in stderr
+    assert not (tmp_path / "m.vtu").exists()
+
+
+@pytest.mark.parametrize(
+    ("extra", "message"),
+    [
+        (["--spacing", "1", "2", "3"], "spacing must be one number or 2 numbers"),
+        (["--spacing", "0"], "positive and finite"),
+        (["--material-names", "bone"], "ID=NAME"),
+        (["--material-names", "1=bone", "2=bone"], "share the name 'bone'"),
+    ],
+)
+def test_bad_options_exit_2(tmp_path, capsys, extra, message):
+    np.save(tmp_path / "labels.npy", three_materials_2d())
+    code, _, stderr = run(capsys, "mesh", tmp_path / "labels.npy", "-o", tmp_path / "m.msh",
+                          *extra)
+    assert code == 2
+    assert message in stderr
+    assert not (tmp_path / "m.msh").exists()
+
+
+def test_unknown_output_suffix_fails_before_reading(tmp_path, capsys):
+    code, _, stderr = run(capsys, "mesh", tmp_path / "missing.npy", "-o", tmp_path / "m.stl")
+    assert code == 2
+    assert "unknown suffix '.stl'" in stderr and ".vtu" in stderr
+
+
+@pytest.mark.parametrize("dim", [2, 3])
+def test_bounds_prints_the_quality_table(capsys, dim):
+    code, stdout, _ = run(capsys, "bounds", "--dim", dim)
+    assert code == 0
+    assert stdout.strip()
+    code, stdout, _ = run(capsys, "bounds", "--dim", dim, "--json")
+    assert code == 0
+    report = one_json(stdout)
+    assert report["dim"] == dim and len(report["simplices"]) >= 1
+
+
+def test_bounds_rejects_an_unsupported_dimension(capsys):
+    code, _, stderr = run(capsys, "bounds", "--dim", "1")
+    assert code == 2
+    assert stderr.startswith("swa-imesh bounds: error:")
