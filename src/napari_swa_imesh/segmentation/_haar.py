@@ -54,18 +54,23 @@ def _haar_one_level(approx: np.ndarray) -> np.ndarray:
     Returns shape ``(2**d,) + coarse_shape``, bands in the documented order.
     """
     ndim = approx.ndim
-    bands = approx[np.newaxis]  # (B=1, *shape)
-    for axis in range(1, ndim + 1):
-        even = bands[(slice(None),) * axis + (slice(0, None, 2),)]
-        odd = bands[(slice(None),) * axis + (slice(1, None, 2),)]
-        low = even + odd
-        low *= _INV_SQRT2
-        high = even - odd
-        high *= _INV_SQRT2
-        # (B, ...) -> (B, 2, ...) -> (2B, ...): the new bit is the least significant,
-        # so axis 0 ends up as the most significant bit of the band index.
-        bands = np.stack([low, high], axis=1).reshape((-1,) + low.shape[1:])
-    return bands
+    coarse = tuple(side // 2 for side in approx.shape)
+    # (c_0, 2, c_1, 2, ...) -> (2, ..., 2, c_0, c_1, ...): one strided copy, after
+    # which every butterfly below works on contiguous halves.
+    split = approx.reshape([n for side in coarse for n in (side, 2)])
+    order = tuple(range(1, 2 * ndim, 2)) + tuple(range(0, 2 * ndim, 2))
+    bands = np.empty((2,) * ndim + coarse, dtype=np.float64)
+    bands[...] = split.transpose(order)
+    scratch = np.empty((2,) * (ndim - 1) + coarse, dtype=np.float64)
+    for axis in range(ndim):
+        lead = (slice(None),) * axis
+        even, odd = bands[lead + (0,)], bands[lead + (1,)]
+        np.subtract(even, odd, out=scratch)
+        even += odd
+        odd[...] = scratch
+    # the d factors 1/sqrt(2) applied at once
+    bands *= 2.0 ** (-ndim / 2)
+    return bands.reshape((2**ndim,) + coarse)
 
 
 def _iter_haar_levels(image: np.ndarray, levels: int) -> Iterator[tuple[np.ndarray, np.ndarray]]:
