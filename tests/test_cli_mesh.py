@@ -2,7 +2,9 @@
 
 from __future__ import annotations
 
+import importlib.util
 import json
+import re
 
 import numpy as np
 import pytest
@@ -87,7 +89,11 @@ def test_mesh_3d_gmsh_with_names_exclude_and_spacing(tmp_path, capsys):
         assert volumes[mesh.material == material].sum() == pytest.approx(expected)
 
 
-@pytest.mark.parametrize("suffix", [".inp", ".node", ".xdmf"])
+@pytest.mark.parametrize("suffix", [
+    ".inp", ".node",
+    pytest.param(".xdmf", marks=pytest.mark.skipif(
+        importlib.util.find_spec("h5py") is None, reason="meshio's XDMF needs h5py")),
+])
 def test_mesh_writes_the_format_the_suffix_names(tmp_path, capsys, suffix):
     np.save(tmp_path / "labels.npy", three_materials_2d())
     code, _, stderr = run(capsys, "mesh", tmp_path / "labels.npy", "-o", tmp_path / f"m{suffix}")
@@ -168,8 +174,6 @@ def test_bad_labels_exit_2_with_one_clear_line(tmp_path, capsys, kind, message):
     assert stdout == ""
     assert len(stderr.strip().splitlines()) == 1
     assert stderr.startswith("swa-imesh mesh: error: ")
-    import re
-
     assert re.search(message, stderr), stderr
     assert not (tmp_path / "m.vtu").exists()
 
