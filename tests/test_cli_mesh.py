@@ -215,11 +215,16 @@ def test_unknown_output_suffix_fails_before_reading(tmp_path, capsys):
 def test_bounds_prints_the_quality_table(capsys, dim):
     code, stdout, _ = run(capsys, "bounds", "--dim", dim)
     assert code == 0
-    assert stdout.strip()
-    code, stdout, _ = run(capsys, "bounds", "--dim", dim, "--json")
+    assert "radius-to-edge" in stdout and "bound" in stdout
+
+
+def test_bounds_json(capsys):
+    code, stdout, _ = run(capsys, "bounds", "--dim", 2, "--json")
     assert code == 0
     report = one_json(stdout)
-    assert report["dim"] == dim and len(report["simplices"]) >= 1
+    assert report["dim"] == 2 and len(report["simplices"]) >= 1
+    worst = max(row["radius_edge_ratio"] for row in report["simplices"])
+    assert worst <= np.sqrt(5) / 2 + 1e-12  # within the reference's 2-D claim
 
 
 def test_bounds_rejects_an_unsupported_dimension(capsys):
