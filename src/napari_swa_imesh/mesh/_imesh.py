@@ -32,7 +32,7 @@ from ._balance import balance_tree
 from ._quality import dihedral_angles, radius_edge_ratio, signed_volumes, triangle_angles
 from ._types import Mesh
 
-__all__ = ["mesh_labels", "mesh_tree"]
+__all__ = ["cut_leaves", "mesh_labels", "mesh_tree"]
 
 METHODS = ("template", "delaunay")
 
@@ -252,12 +252,57 @@ def _template_mesh(bal: RegionTree, meshed: np.ndarray):
     seconds["vertices"] = time.perf_counter() - t
 
     t = time.perf_counter()
-    keys, leaf_of, template_of = [], [], []
+    keys, which, template_of = cut_leaves(okey, size, hanging, strides)
+    leaf_of = leaves[which]
+    del which
+    seconds["simplices"] = time.perf_counter() - t
+
+    # keep only the lattice points that elements use, numbered in lattice order
+    t = time.perf_counter()
+    used = np.zeros(math.prod(shape), dtype=bool)
+    used[keys.ravel()] = True
+    new_id = np.cumsum(used, dtype=np.int64) - 1
+    cells = new_id[keys].astype(np.intp, copy=False)
+    del new_id, keys
+    points = np.stack(np.unravel_index(np.flatnonzero(used), shape), axis=1).astype(np.float64)
+    seconds["numbering"] = time.perf_counter() - t
+    seconds["_n_kuhn"] = int(kuhn.sum())
+    return points, cells, leaf_of, template_of, seconds
+
+
+def cut_leaves(okey: np.ndarray, size: np.ndarray, hanging: np.ndarray, strides: np.ndarray):
+    """Cut leaves by the look-up tables; the dictionary step, shared with the quality table.
+
+    Parameters
+    ----------
+    okey : (L,) ndarray of int64
+        Lattice key (``coords @ strides``) of each leaf's lowest corner.
+    size : (L,) ndarray of int64
+        Leaf side in lattice units; leaves with a site present must have an even side.
+    hanging : (L, n_sites) ndarray of bool
+        Which of ``SITES[d]`` are vertices, per leaf.
+    strides : (d,) ndarray of int64
+        Strides of the lattice; keys are linear, so a template's key is
+        ``okey + scale * (local @ strides)``.
+
+    Returns
+    -------
+    keys : (M, d+1) ndarray of int64
+        Lattice key of every element vertex, positively oriented.
+    which : (M,) ndarray of intp
+        Index (into the L leaves) of the leaf each element cuts.
+    template_id : (M,) ndarray of int16
+        Index into ``TEMPLATES[d]``.
+    """
+    d = len(strides)
+    half = size >> 1
+    kuhn = ~hanging.any(axis=1)
+    keys, which, template_of = [], [], []
     # Kuhn leaves: (n, d!, d+1) keys
     kuhn_keys = luts.KUHN[d].astype(np.int64) @ strides  # (d!, d+1)
     nk = np.flatnonzero(kuhn)
     keys.append((okey[nk, None, None] + size[nk, None, None] * kuhn_keys[None]).reshape(-1, d + 1))
-    leaf_of.append(np.repeat(leaves[nk], len(kuhn_keys)))
+    which.append(np.repeat(nk, len(kuhn_keys)))
     template_of.append(np.tile(np.arange(len(kuhn_keys), dtype=np.int16), len(nk)))
     # other leaves: every face by its own case, coned to the leaf centre
     other = np.flatnonzero(~kuhn)
@@ -278,25 +323,10 @@ def _template_mesh(bal: RegionTree, meshed: np.ndarray):
             lut_keys = lut.astype(np.int64) @ strides  # (t, d+1)
             keys.append((okey[sel, None, None] + half[sel, None, None] * lut_keys[None])
                         .reshape(-1, d + 1))
-            leaf_of.append(np.repeat(leaves[sel], len(lut)))
+            which.append(np.repeat(sel, len(lut)))
             first = luts.FACE_TEMPLATE_ID[d][f][case]
             template_of.append(np.tile(np.arange(first, first + len(lut), dtype=np.int16), len(sel)))
-    keys = np.concatenate(keys)
-    leaf_of = np.concatenate(leaf_of)
-    template_of = np.concatenate(template_of)
-    seconds["simplices"] = time.perf_counter() - t
-
-    # keep only the lattice points that elements use, numbered in lattice order
-    t = time.perf_counter()
-    used = np.zeros(math.prod(shape), dtype=bool)
-    used[keys.ravel()] = True
-    new_id = np.cumsum(used, dtype=np.int64) - 1
-    cells = new_id[keys].astype(np.intp, copy=False)
-    del new_id, keys
-    points = np.stack(np.unravel_index(np.flatnonzero(used), shape), axis=1).astype(np.float64)
-    seconds["numbering"] = time.perf_counter() - t
-    seconds["_n_kuhn"] = len(nk)
-    return points, cells, leaf_of, template_of, seconds
+    return np.concatenate(keys), np.concatenate(which), np.concatenate(template_of)
 
 
 def _template_quality(d: int, spacing: tuple[float, ...]) -> dict[str, np.ndarray]:

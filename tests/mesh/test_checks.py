@@ -1,0 +1,110 @@
+"""The mesh checks detect broken meshes: each check must be able to fail."""
+
+import dataclasses
+
+import numpy as np
+import pytest
+
+from napari_swa_imesh.mesh._checks import check_mesh, rasterize_materials
+from napari_swa_imesh.mesh._imesh import mesh_labels
+
+from imesh_cases import blobs
+
+LABELS = {2: blobs((12, 10), 3, seed=1, sigma=1.5), 3: blobs((6, 7, 8), 3, seed=2, sigma=1.0)}
+
+
+def _broken(mesh, **changes):
+    return dataclasses.replace(mesh, **changes)
+
+
+@pytest.fixture(params=[2, 3])
+def good(request):
+    lab = LABELS[request.param]
+    return mesh_labels(lab, spacing=0.5), lab
+
+
+def test_good_mesh_passes(good):
+    mesh, lab = good
+    checks = check_mesh(mesh, lab)
+    assert checks["all_passed"]
+    assert checks["n_boundary_facets_off_box"] == 0 and checks["volume_error"] == pytest.approx(0)
+
+
+def test_dropped_element_fails(good):
+    mesh, lab = good
+    k = mesh.n_cells // 2
+    keep = np.arange(mesh.n_cells) != k
+    broken = _broken(mesh, cells=mesh.cells[keep], material=mesh.material[keep])
+    checks = check_mesh(broken, lab)
+    assert not checks["conforming"] and checks["n_unmatched_facets"] > 0
+    assert not checks["volume_sum"] and checks["volume_error"] < 0
+    assert not checks["all_passed"]
+
+
+def test_flipped_element_fails(good):
+    mesh, lab = good
+    cells = mesh.cells.copy()
+    cells[3, [0, 1]] = cells[3, [1, 0]]
+    checks = check_mesh(_broken(mesh, cells=cells), lab)
+    assert not checks["positive_volume"] and checks["min_volume"] < 0
+    assert not checks["volume_sum"] and not checks["all_passed"]
+
+
+def test_overlapping_elements_fail():
+    from napari_swa_imesh.mesh._types import Mesh
+
+    points = np.array([[0.0, 0], [1, 0], [0, 1], [1, 1]])
+    good = Mesh(points, np.array([[0, 1, 3], [0, 3, 2]]), np.array([1, 1]), spacing=(1.0, 1.0), shape=(1, 1))
+    assert check_mesh(good, np.ones((1, 1), int))["all_passed"]
+    # both triangles on the same side of their shared edge (0, 1)
+    bad = dataclasses.replace(good, cells=np.array([[0, 1, 3], [0, 1, 2]]))
+    checks = check_mesh(bad, np.ones((1, 1), int))
+    assert checks["n_misoriented_facets"] == 1 and not checks["conforming"]
+    assert checks["positive_volume"] and checks["volume_sum"]
+
+
+def test_duplicated_element_fails(good):
+    mesh, lab = good
+    broken = _broken(mesh, cells=np.concatenate([mesh.cells, mesh.cells[:1]]),
+                     material=np.concatenate([mesh.material, mesh.material[:1]]))
+    checks = check_mesh(broken, lab)
+    assert not checks["conforming"] and not checks["volume_sum"]
+
+
+def test_wrong_material_fails(good):
+    mesh, lab = good
+    material = mesh.material.copy()
+    material[0] = material[0] + 1
+    checks = check_mesh(_broken(mesh, material=material), lab)
+    assert not checks["labels_recovered"] and checks["n_pixels_wrong"] > 0
+    assert checks["conforming"] and checks["volume_sum"]
+
+
+def test_element_across_leaves_fails(good):
+    mesh, lab = good
+    # merge two pixels' worth of mesh: move the vertex of a corner element outward
+    points = mesh.points.copy()
+    corner = np.argmin(points.sum(axis=1))
+    points[corner] -= 0.25  # outside the image box: outside every leaf
+    checks = check_mesh(_broken(mesh, points=points), lab)
+    assert not checks["inside_one_leaf"]
+    assert not checks["all_passed"]
+
+
+def test_exclusion_must_be_declared():
+    lab = LABELS[2]
+    mesh = mesh_labels(lab, exclude=(0,))
+    assert check_mesh(mesh, lab, exclude=(0,))["all_passed"]
+    checks = check_mesh(mesh, lab)
+    assert not checks["labels_recovered"] and not checks["conforming"] and not checks["volume_sum"]
+
+
+def test_rasterize_round_trip_3d():
+    lab = LABELS[3]
+    np.testing.assert_array_equal(rasterize_materials(mesh_labels(lab, spacing=(1, 2, 3))), lab)
+
+
+def test_dimension_mismatch():
+    mesh = mesh_labels(LABELS[2])
+    with pytest.raises(ValueError, match="needs a 3-D mesh"):
+        check_mesh(mesh, LABELS[3])

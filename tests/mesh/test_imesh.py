@@ -1,0 +1,120 @@
+"""Property tests of mesh_labels over many seeded label images, and its errors."""
+
+import math
+
+import numpy as np
+import pytest
+
+from napari_swa_imesh.mesh._checks import check_mesh, rasterize_materials
+from napari_swa_imesh.mesh._imesh import mesh_labels
+from napari_swa_imesh.mesh._quality import dihedral_angles, radius_edge_ratio, triangle_angles
+
+from imesh_cases import blobs, cases, noise
+
+BOUND = {2: 1 / math.sqrt(2), 3: math.sqrt(5) / 2}
+CASES = [(d, name, lab) for d in (2, 3) for name, lab in cases(d)]
+
+
+@pytest.mark.parametrize("d,name,lab", CASES, ids=[f"{d}d-{n}" for d, n, _ in CASES])
+@pytest.mark.parametrize("exclude", [(), (0,)])
+def test_template_mesh_passes_every_check(d, name, lab, exclude):
+    if set(np.unique(lab).tolist()) <= set(exclude):
+        pytest.skip("everything excluded")
+    before = lab.copy()
+    mesh = mesh_labels(lab, exclude=exclude)
+    np.testing.assert_array_equal(lab, before)
+    checks = check_mesh(mesh, lab, exclude=exclude)
+    assert checks["all_passed"], checks
+    assert mesh.points.dtype == np.float64 and mesh.cells.shape[1] == d + 1
+    assert mesh.info["worst_ratio"] <= BOUND[d] + 1e-12
+    assert not np.isin(mesh.material, exclude).any()
+    # per-element quality from the template table equals direct computation
+    np.testing.assert_allclose(mesh.quality, radius_edge_ratio(mesh.points, mesh.cells), rtol=1e-9)
+    if d == 2:
+        lo, hi = triangle_angles(mesh.points, mesh.cells)
+        np.testing.assert_allclose(mesh.cell_data["min_angle"], lo, rtol=1e-9)
+        assert lo.min() >= 45 - 1e-9 and hi.max() <= 90 + 1e-9
+    else:
+        lo, hi = dihedral_angles(mesh.points, mesh.cells)
+        np.testing.assert_allclose(mesh.cell_data["min_dihedral"], lo, rtol=1e-9)
+        np.testing.assert_allclose(mesh.cell_data["max_dihedral"], hi, rtol=1e-9)
+        assert lo.min() >= 35.26 and hi.max() <= 125.27
+    # level and leaf per element are consistent with element size
+    assert mesh.cell_data["level"].shape == mesh.cell_data["leaf"].shape == (mesh.n_cells,)
+
+
+@pytest.mark.parametrize("spacing", [0.5, (2.0, 0.25)])
+def test_spacing_places_points_in_physical_units(spacing):
+    lab = blobs((20, 24), 3, seed=4)
+    plain = mesh_labels(lab)
+    scaled = mesh_labels(lab, spacing=spacing)
+    np.testing.assert_allclose(scaled.points, plain.points * np.broadcast_to(spacing, (2,)))
+    np.testing.assert_array_equal(scaled.cells, plain.cells)
+    assert scaled.points.max(axis=0) == pytest.approx(np.array(lab.shape) * np.broadcast_to(spacing, (2,)))
+    assert check_mesh(scaled, lab)["all_passed"]
+    np.testing.assert_allclose(scaled.quality, radius_edge_ratio(scaled.points, scaled.cells), rtol=1e-9)
+
+
+def test_coarse_inside_fine_at_boundaries():
+    lab = np.zeros((64, 64), np.int64)
+    lab[20:41, 10:50] = 1
+    mesh = mesh_labels(lab)
+    assert mesh.n_cells < 0.15 * 2 * lab.size  # vs two triangles per pixel
+    level = mesh.cell_data["level"]
+    assert level.max() >= 3 and level.min() == 0
+    np.testing.assert_array_equal(rasterize_materials(mesh), lab)
+
+
+def test_info_counts():
+    lab = noise((16, 16, 16), 3, seed=1, p=0.02)
+    mesh = mesh_labels(lab, material_names={1: "bone"})
+    info = mesh.info
+    assert info["n_elements"] == mesh.n_cells and info["n_vertices"] == len(mesh.points)
+    assert info["n_leaves_tree"] <= info["n_leaves_face_balanced"] <= info["n_leaves_balanced"]
+    assert info["balance"] == "faces+edges"
+    assert info["worst_ratio"] == pytest.approx(mesh.quality.max())
+    assert {"tree", "balance", "vertices", "simplices", "quality"} <= set(info["seconds"])
+    assert mesh.material_names == {1: "bone"}
+    assert len(np.unique(mesh.cells, axis=0)) == mesh.n_cells
+
+
+def test_delaunay_2d_matches_the_reference():
+    lab = blobs((32, 32), 3, seed=2)
+    mesh = mesh_labels(lab, method="delaunay")
+    assert mesh.info["n_zero_volume"] == 0
+    assert mesh.info["worst_ratio"] <= math.sqrt(5) / 2 + 1e-9
+    assert check_mesh(mesh, lab)["conforming"]
+
+
+def test_delaunay_3d_is_reported_honestly():
+    lab = noise((16, 16, 16), 3, seed=3, p=0.05)
+    mesh = mesh_labels(lab, method="delaunay")
+    info = mesh.info
+    assert info["n_zero_volume"] > 0  # co-spherical cube corners: Qhull's flat slivers
+    assert info["conforming"] is False
+    assert info["checks"]["conforming"] is False
+    assert check_mesh(mesh, lab)["positive_volume"]  # dropped, not kept
+
+
+@pytest.mark.parametrize("labels,kwargs,error,match", [
+    (np.array([[0.5, 1.0], [1.0, 2.0]]), {}, ValueError, "non-integer"),
+    (np.zeros((0, 4)), {}, ValueError, "empty"),
+    (np.zeros(8, int), {}, ValueError, "2-D to 3-D; got 1-D"),
+    (np.zeros((2,) * 5, int), {}, ValueError, "2-D to 3-D; got 5-D"),
+    (np.array([[1, -1], [0, 1]]), {}, ValueError, "negative"),
+    (np.array([["a", "b"], ["c", "d"]]), {}, TypeError, "integer array"),
+    (np.zeros((4, 4), int), {"exclude": (0,)}, ValueError, "every pixel is excluded"),
+    (np.ones((4, 4), int), {"method": "qhull"}, ValueError, "method must be one of"),
+    (np.ones((4, 4), int), {"spacing": (1, 2, 3)}, ValueError, "spacing must be one number or 2"),
+    (np.ones((4, 4), int), {"spacing": -1}, ValueError, "positive"),
+    (np.ones((4, 4), int), {"exclude": (0.5,)}, TypeError, "integer material ids"),
+])
+def test_bad_input(labels, kwargs, error, match):
+    with pytest.raises(error, match=match):
+        mesh_labels(labels, **kwargs)
+
+
+def test_whole_valued_floats_and_bools_are_accepted():
+    lab = np.array([[1.0, 2.0], [2.0, 2.0]])
+    assert check_mesh(mesh_labels(lab), lab.astype(int))["all_passed"]
+    assert mesh_labels(np.eye(4, dtype=bool)).n_cells > 0

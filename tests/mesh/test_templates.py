@@ -1,0 +1,115 @@
+"""Look-up tables: conforming by construction, filling every leaf, and the proven bounds."""
+
+import math
+
+import numpy as np
+import pytest
+
+from napari_swa_imesh.mesh import _templates_luts as luts
+from napari_swa_imesh.mesh._bounds import format_quality_table, leaf_configurations, quality_table
+from napari_swa_imesh.mesh._quality import signed_volumes
+
+
+def _facets_on(simplices: np.ndarray, axis: int, side: int) -> set:
+    """Facets (as sorted coordinate tuples) of `simplices` lying on the plane axis = side."""
+    out = set()
+    for s in simplices:
+        on = [tuple(p) for p in s.tolist() if p[axis] == side]
+        if len(on) == s.shape[1]:
+            out.add(tuple(sorted(on)))
+    return out
+
+
+def _valid_cases(d, f):
+    return [c for c in range(1 << len(luts.FACE_SITES[d][f])) if len(luts.FACE_LUT[d][f][c])]
+
+
+@pytest.mark.parametrize("d", [2, 3])
+def test_kuhn_fills_the_cube_positively(d):
+    kuhn = luts.KUHN[d].astype(float)
+    pts = kuhn.reshape(-1, d)
+    vol = signed_volumes(pts, np.arange(len(pts)).reshape(-1, d + 1))
+    assert (vol > 0).all() and vol.sum() == pytest.approx(1.0)
+
+
+@pytest.mark.parametrize("d", [2, 3])
+def test_shared_faces_are_cut_the_same_from_both_sides(d):
+    for f, (axis, side) in enumerate(luts.FACES[d]):
+        if side == 2:
+            continue
+        g = luts.FACES[d].index((axis, 2))
+        shift = np.zeros(d, int)
+        shift[axis] = 2
+        for case in _valid_cases(d, f):
+            # the face's sites, in the same bit order seen from the neighbour below
+            mine = {tuple(luts.SITES[d][s]) for i, s in enumerate(luts.FACE_SITES[d][f]) if case >> i & 1}
+            theirs = 0
+            for i, s in enumerate(luts.FACE_SITES[d][g]):
+                if tuple(luts.SITES[d][s] - shift) in mine:
+                    theirs |= 1 << i
+            a = _facets_on(luts.FACE_LUT[d][f][case], axis, 0)
+            b = _facets_on(luts.FACE_LUT[d][g][theirs] - shift, axis, 0)
+            assert a == b and a, (f, case)
+
+
+@pytest.mark.parametrize("d", [2, 3])
+def test_plain_faces_match_kuhn_and_quadrants_match_children(d):
+    kuhn = luts.KUHN[d] * 2
+    for f, (axis, side) in enumerate(luts.FACES[d]):
+        plain = _facets_on(luts.FACE_LUT[d][f][0], axis, side)
+        assert plain == _facets_on(kuhn, axis, side)
+        full = (1 << len(luts.FACE_SITES[d][f])) - 1
+        # a face whose centre is a vertex is cut like the faces of four Kuhn children
+        children = set()
+        for corner in np.ndindex((2,) * d):
+            child = luts.KUHN[d] + np.array(corner)
+            children |= _facets_on(child, axis, side)
+        if d == 3:
+            assert _facets_on(luts.FACE_LUT[d][f][full], axis, side) == children
+
+
+@pytest.mark.parametrize("d", [2, 3])
+def test_every_face_case_covers_its_face(d):
+    for f, (axis, side) in enumerate(luts.FACES[d]):
+        for case in _valid_cases(d, f):
+            simplices = luts.FACE_LUT[d][f][case].astype(float)
+            pts = simplices.reshape(-1, d)
+            vol = signed_volumes(pts, np.arange(len(pts)).reshape(-1, d + 1))
+            # cone of height 1 over a face of area 2^(d-1): volume 2^(d-1) / d
+            assert (vol > 0).all() and vol.sum() == pytest.approx(2 ** (d - 1) / d)
+
+
+def test_configuration_counts():
+    assert leaf_configurations(2).shape == (16, 4)
+    configs = leaf_configurations(3)
+    assert configs.shape[1] == 18
+    # a face centre only with all four of its edge midpoints
+    assert len(configs) == len({tuple(c) for c in configs.tolist()})
+    rows = quality_table(2)
+    assert rows[0]["n_configurations_up_to_symmetry"] == 6  # the reference's six (Table 3.3)
+
+
+def test_quality_table_2d_bound():
+    rows = quality_table(2)
+    assert max(r["radius_edge_ratio"] for r in rows) == pytest.approx(1 / math.sqrt(2))
+    assert min(r["min_angle"] for r in rows) == pytest.approx(45)
+    assert max(r["max_angle"] for r in rows) == pytest.approx(90)
+    assert "bound: radius-to-edge ratio <= 0.7071" in format_quality_table(rows)
+
+
+def test_quality_table_3d_bound():
+    rows = quality_table(3)
+    worst = max(r["radius_edge_ratio"] for r in rows)
+    assert worst == pytest.approx(math.sqrt(5) / 2)
+    assert worst < math.sqrt(29) / 4
+    assert min(r["min_dihedral"] for r in rows) == pytest.approx(math.degrees(math.atan(1 / math.sqrt(2))))
+    # 90 + arctan(1/sqrt(2)): the fan simplex over a face corner
+    assert max(r["max_dihedral"] for r in rows) == pytest.approx(90 + math.degrees(math.atan(1 / math.sqrt(2))))
+    text = format_quality_table(rows)
+    assert "dihedral angles in [35.264, 125.264] deg" in text
+    assert len(text.splitlines()) == len(rows) + 4
+
+
+def test_bad_dim():
+    with pytest.raises(ValueError, match="dim 2 or 3"):
+        quality_table(4)
