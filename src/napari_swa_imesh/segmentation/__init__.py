@@ -1,1 +1,50 @@
-"""SWA segmentation (public surface assembled once every module lands)."""
+"""SWA segmentation: tile features at the representative elementary scale, classified.
+
+The pipeline of the reference's chapter 2, as functions on arrays:
+
+* features: :func:`moment_pyramid`, :func:`tile_moments`, :func:`tile_entropy`,
+  :func:`tile_correlation_lengths`, :func:`feature_stack` (sets F1..F7);
+* samples: :class:`Samples` (JSON sample boxes), :func:`samples_from_truth`;
+* RES: :func:`res_statistics`, :func:`plot_res`;
+* classification: :class:`SWAModel` (GM, MD, LVQ), :func:`load_model`, :func:`segment`;
+* scores: :func:`dice_scores`, :func:`jaccard_scores`, :func:`confusion_matrix`,
+  :func:`evaluate`.
+"""
+
+from ._classifiers import (
+    CLASSIFIERS,
+    GaussianClassifier,
+    LVQClassifier,
+    MinimumDistanceClassifier,
+    leave_one_out_error,
+)
+from ._correlation import tile_correlation_lengths
+from ._entropy import entropy_feature_names, tile_entropy
+from ._features import FEATURE_SETS, feature_stack, n_features
+from ._haar import haar_analysis, haar_synthesis
+from ._metrics import confusion_matrix, dice_scores, evaluate, jaccard_scores
+from ._model import SWAModel, load_model
+from ._moments import moment_pyramid, tile_moments
+from ._res import MOMENT_NAMES, ResStatistics, plot_res, res_statistics
+from ._samples import Material, SampleBox, Samples, load_samples, samples_from_truth, save_samples
+from ._segment import (
+    SegmentationResult,
+    segment,
+    segment_steps,
+    sieve_labels,
+    tile_placement,
+    upsample_tiles,
+)
+
+__all__ = [
+    "CLASSIFIERS", "FEATURE_SETS", "MOMENT_NAMES",
+    "GaussianClassifier", "LVQClassifier", "MinimumDistanceClassifier", "leave_one_out_error",
+    "Material", "SampleBox", "Samples", "load_samples", "save_samples", "samples_from_truth",
+    "ResStatistics", "res_statistics", "plot_res",
+    "SWAModel", "load_model", "SegmentationResult", "segment", "segment_steps",
+    "sieve_labels", "tile_placement", "upsample_tiles",
+    "confusion_matrix", "dice_scores", "evaluate", "jaccard_scores",
+    "entropy_feature_names", "feature_stack", "haar_analysis", "haar_synthesis",
+    "moment_pyramid", "n_features", "tile_correlation_lengths", "tile_entropy",
+    "tile_moments",
+]
