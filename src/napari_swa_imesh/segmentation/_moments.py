@@ -53,6 +53,8 @@ MOMENT_NAMES = ("mean", "variance", "skewness", "kurtosis")
 # A tile's std below this fraction of |mean| is rounding noise of the mean itself
 # (a few ulps per level), not spread in the data.
 _ZERO_STD_RTOL = 1e-13
+# Pixels per slab of the scale-1 pass (2 MB of float64: stays in cache).
+_SLAB_PIXELS = 2**18
 
 
 # ---------------------------------------------------------------- door checks
@@ -160,10 +162,9 @@ def _tile_means(padded: np.ndarray, counts: np.ndarray, scale: int,
 # ------------------------------------------------------------------ the levels
 def _pixel_moments(x: np.ndarray, valid: np.ndarray | None) -> tuple[np.ndarray, np.ndarray]:
     """Scale-0 entry: every pixel is its own tile."""
-    moments = np.empty(x.shape + (4,), dtype=np.float64)
+    # zeros + two column writes: assigning a (0, 0, 3) row pattern is ~5x slower
+    moments = np.zeros(x.shape + (4,), dtype=np.float64)
     moments[..., 0] = x
-    moments[..., 1] = 0.0
-    moments[..., 2] = 0.0
     moments[..., 3] = 3.0
     if valid is None:
         return moments, np.ones(x.shape, dtype=np.int64)
@@ -171,23 +172,11 @@ def _pixel_moments(x: np.ndarray, valid: np.ndarray | None) -> tuple[np.ndarray,
     return moments, valid.astype(np.int64)
 
 
-def _iter_moment_levels(
-    x: np.ndarray, valid: np.ndarray | None, max_scale: int
-) -> Iterator[tuple[np.ndarray, ...]]:
-    """Yield ``(centre, M1, M2, M3, M4, n)`` per tile for scales 1..max_scale.
+def _first_level_slab(x: np.ndarray, valid: np.ndarray | None) -> tuple[np.ndarray, ...]:
+    """Scale-1 ``(centre, M1..M4, n)`` of a slab, two-pass from the pixels.
 
-    `x` is float64 and is overwritten (pass a copy you own). Empty tiles have
-    centre 0 and zero power sums, so they drop out of every merge.
+    `x` is a float64 copy the function may overwrite; sides are even.
     """
-    if max_scale < 1:
-        return
-    # Scale 1, two-pass from the pixels.
-    needs_pad = any(side % 2 for side in x.shape)
-    if needs_pad:
-        if valid is None:
-            valid = np.ones(x.shape, dtype=bool)
-        x = _pad_to_even(x, 0.0)
-        valid = _pad_to_even(valid, False)
     if valid is None:
         n = np.full(tuple(side // 2 for side in x.shape), 2**x.ndim, dtype=np.int64)
     else:
@@ -205,7 +194,46 @@ def _iter_moment_levels(
     m3 = _pair_sum(power)
     power *= x
     m4 = _pair_sum(power)
-    del power, x, valid
+    return mean, m1, m2, m3, m4, n
+
+
+def _first_level(x: np.ndarray, valid: np.ndarray | None) -> tuple[np.ndarray, ...]:
+    """Scale-1 sums of the whole image, slab by slab along axis 0.
+
+    Slabs of about `_SLAB_PIXELS` keep every temporary in cache, avoid
+    image-sized buffers, and leave `x` untouched. Odd sides are padded per slab
+    with zero-count pixels.
+    """
+    coarse = tuple(-(-side // 2) for side in x.shape)
+    out = tuple(np.empty(coarse) for _ in range(5)) + (np.empty(coarse, dtype=np.int64),)
+    row_pixels = int(np.prod(x.shape[1:]))
+    rows = max(2, _SLAB_PIXELS // row_pixels // 2 * 2)  # even, so slabs align with tiles
+    for first in range(0, x.shape[0], rows):
+        slab = x[first:first + rows]
+        slab_valid = None if valid is None else valid[first:first + rows]
+        if any(side % 2 for side in slab.shape):
+            if slab_valid is None:
+                slab_valid = np.ones(slab.shape, dtype=bool)
+            slab, slab_valid = _pad_to_even(slab, 0.0), _pad_to_even(slab_valid, False)
+        else:
+            slab = slab.copy()
+        target = slice(first // 2, first // 2 + slab.shape[0] // 2)
+        for array, part in zip(out, _first_level_slab(slab, slab_valid)):
+            array[target] = part
+    return out
+
+
+def _iter_moment_levels(
+    x: np.ndarray, valid: np.ndarray | None, max_scale: int
+) -> Iterator[tuple[np.ndarray, ...]]:
+    """Yield ``(centre, M1, M2, M3, M4, n)`` per tile for scales 1..max_scale.
+
+    `x` is float64 and is not modified. Empty tiles have centre 0 and zero
+    power sums, so they drop out of every merge.
+    """
+    if max_scale < 1:
+        return
+    mean, m1, m2, m3, m4, n = _first_level(x, valid)
     yield mean, m1, m2, m3, m4, n
 
     for _ in range(2, max_scale + 1):
@@ -230,22 +258,30 @@ def _iter_moment_levels(
 def _finalize(mean: np.ndarray, m1: np.ndarray, m2: np.ndarray, m3: np.ndarray,
               m4: np.ndarray, n: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Turn a level's sums into the (..., 4) moments array and the counts."""
-    safe_n = np.maximum(n, 1)
+    inv_n = 1.0 / np.maximum(n, 1)
     # Power sums are about `mean`; shift them by the tiny residual c = M1 / n to the
     # true mean (corrected two-pass: Chan, Golub and LeVeque 1983).
-    c = m1 / safe_n
-    s2, s3, s4 = m2 / safe_n, m3 / safe_n, m4 / safe_n
-    var = np.maximum(s2 - c * c, 0.0)
-    mu3 = s3 - c * (3.0 * s2 - 2.0 * c * c)
-    mu4 = s4 - c * (4.0 * s3 - c * (6.0 * s2 - 3.0 * c * c))
-    mean = mean + c
-    flat = np.sqrt(var) <= _ZERO_STD_RTOL * np.abs(mean)
-    safe_var = np.where(flat, 1.0, var)
+    c = m1 * inv_n
+    c2 = c * c
+    s2 = m2 * inv_n
+    s3 = m3 * inv_n
+    var = s2 - c2
+    np.maximum(var, 0.0, out=var)
+    mu3 = s3 - c * (3.0 * s2 - 2.0 * c2)
+    mu4 = m4 * inv_n
+    mu4 -= c * (4.0 * s3 - c * (6.0 * s2 - 3.0 * c2))
     moments = np.empty(mean.shape + (4,), dtype=np.float64)
-    moments[..., 0] = mean
+    np.add(mean, c, out=moments[..., 0])
     moments[..., 1] = var
-    moments[..., 2] = np.where(flat, 0.0, mu3 / safe_var**1.5)
-    moments[..., 3] = np.where(flat, 3.0, mu4 / safe_var**2)
+    flat = np.sqrt(var) <= _ZERO_STD_RTOL * np.abs(moments[..., 0])
+    var[flat] = 1.0
+    std = np.sqrt(var)
+    mu3 /= var * std
+    mu4 /= var * var
+    mu3[flat] = 0.0
+    mu4[flat] = 3.0
+    moments[..., 2] = mu3
+    moments[..., 3] = mu4
     moments[n == 0] = np.nan
     return moments, n
 
@@ -302,7 +338,7 @@ def moment_pyramid(
 
 def _tile_moments_worker(x: np.ndarray, valid: np.ndarray | None,
                          scale: int) -> tuple[np.ndarray, np.ndarray]:
-    """`tile_moments` on checked input; overwrites `x`."""
+    """`tile_moments` on checked input (not modified)."""
     if scale == 0:
         return _pixel_moments(x, valid)
     level = None
