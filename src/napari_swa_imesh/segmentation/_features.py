@@ -134,7 +134,6 @@ def feature_stack(
             "or F1, F2 or F5."
         )
     parts: dict[str, np.ndarray] = {}
-    # H and Z read x; M runs last because its worker overwrites x in place.
     if "H" in groups:
         parts["H"] = _tile_entropy_worker(x, valid, scale)
     if "Z" in groups:
