@@ -19,6 +19,8 @@ from ._moments import _interleaved, _spread, _tile_counts, _tile_means, _validat
 
 __all__ = ["entropy_feature_names", "tile_entropy"]
 
+_SLAB_PIXELS = 2**18  # pixels per slab of tiles (2 MB of float64)
+
 
 def entropy_feature_names(ndim: int, scale: int) -> list[str]:
     """Names of the ``(2**ndim - 1) * scale + 1`` entropy features, in output order.
@@ -76,11 +78,10 @@ def _prepare_padded(x: np.ndarray, valid: np.ndarray | None, scale: int
     return filled, counts == 0
 
 
-def _tile_entropy_worker(x: np.ndarray, valid: np.ndarray | None, scale: int) -> np.ndarray:
-    """`tile_entropy` on checked float64 input (not modified)."""
-    ndim = x.ndim
+def _slab_entropy(padded: np.ndarray, scale: int) -> np.ndarray:
+    """Entropy features of a slab whose sides are multiples of 2**scale."""
+    ndim = padded.ndim
     n_bands = 2**ndim - 1
-    padded, empty = _prepare_padded(x, valid, scale)
     grid = tuple(side // 2**scale for side in padded.shape)
     out = np.empty(grid + (n_bands * scale + 1,), dtype=np.float64)
     approx = padded
@@ -93,6 +94,19 @@ def _tile_entropy_worker(x: np.ndarray, valid: np.ndarray | None, scale: int) ->
         start = 1 + (level - 1) * n_bands
         out[..., start:start + n_bands] = np.moveaxis(per_tile, 0, -1)
     out[..., 0] = _neg_abs_log(approx)
+    return out
+
+
+def _tile_entropy_worker(x: np.ndarray, valid: np.ndarray | None, scale: int) -> np.ndarray:
+    """`tile_entropy` on checked float64 input (not modified)."""
+    padded, empty = _prepare_padded(x, valid, scale)
+    tile = 2**scale
+    grid = tuple(side // tile for side in padded.shape)
+    out = np.empty(grid + ((2**x.ndim - 1) * scale + 1,), dtype=np.float64)
+    # Slabs of whole tiles along axis 0 keep the coefficient buffers cache-sized.
+    rows = max(1, _SLAB_PIXELS // (tile * int(np.prod(padded.shape[1:]))))
+    for first in range(0, grid[0], rows):
+        out[first:first + rows] = _slab_entropy(padded[first * tile:(first + rows) * tile], scale)
     if empty is not None:
         out[empty] = np.nan
     return out
