@@ -28,6 +28,8 @@ def test_template_mesh_passes_every_check(d, name, lab, exclude):
     assert mesh.points.dtype == np.float64 and mesh.cells.shape[1] == d + 1
     assert mesh.info["worst_ratio"] <= BOUND[d] + 1e-12
     assert not np.isin(mesh.material, exclude).any()
+    # every point is used by an element (no orphan vertex for an FE solver)
+    assert np.array_equal(np.unique(mesh.cells), np.arange(len(mesh.points)))
     # per-element quality from the template table equals direct computation
     np.testing.assert_allclose(mesh.quality, radius_edge_ratio(mesh.points, mesh.cells), rtol=1e-9)
     if d == 2:

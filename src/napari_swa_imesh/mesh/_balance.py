@@ -31,7 +31,7 @@ from scipy import ndimage
 
 from .._tree import RegionTree
 
-__all__ = ["balance_tree", "balance_violations"]
+__all__ = ["balance_tree", "balance_violations", "count_balanced_leaves"]
 
 
 def _any_children(grid: np.ndarray) -> np.ndarray:
@@ -131,6 +131,29 @@ def balance_tree(tree: RegionTree, *, connectivity: int = 1) -> RegionTree:
         padded_shape=tree.padded_shape,
         top_level=tree.top_level,
     )
+
+
+def count_balanced_leaves(tree: RegionTree, *, connectivity: int = 1) -> int:
+    """Number of leaves inside the image after balancing, without building them.
+
+    Cheaper than ``len(balance_tree(...))``: only the split grids are computed (no
+    labels), so a mesher can report what a weaker or stronger balance would cost.
+    """
+    d = tree.ndim
+    if not 1 <= connectivity <= d:
+        raise ValueError(f"connectivity must be 1..{d} for a {d}-D tree; got {connectivity}.")
+    top = tree.top_level
+    if top == 0 or len(tree) == 0:
+        return int(np.count_nonzero(tree.inside))
+    split = _split_grids(tree, connectivity)
+    total = int(np.count_nonzero(tree.inside & (tree.level == 0)))
+    for k in range(1, top + 1):
+        is_leaf = ~split[k]
+        if k < top:
+            is_leaf &= _upsample(split[k + 1])
+        # blocks whose lowest corner is in the image (padding sits at the far end)
+        total += int(np.count_nonzero(is_leaf[tuple(slice(0, -(-n >> k)) for n in tree.shape)]))
+    return total
 
 
 def balance_violations(tree: RegionTree, *, connectivity: int = 1) -> int:

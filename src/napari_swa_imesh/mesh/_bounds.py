@@ -140,7 +140,7 @@ def quality_table(dim: int) -> list[dict]:
     configs = leaf_configurations(d)
     strides = np.array([3 ** (d - 1 - a) for a in range(d)], dtype=np.int64)
     n = len(configs)
-    keys, which, template_id = cut_leaves(np.zeros(n, np.int64), np.full(n, 2, np.int64),
+    keys, which, template_id, _ = cut_leaves(np.zeros(n, np.int64), np.full(n, 2, np.int64),
                                           configs, strides)
     # every configuration must be cut into positive simplices filling the leaf exactly
     local = np.stack(np.unravel_index(keys, (3,) * d), axis=-1).astype(float)  # (M, d+1, d)

@@ -156,7 +156,7 @@ def check_mesh(mesh: Mesh, labels, *, exclude=()) -> dict:
         the labels back, excluded pixels uncovered) and ``all_passed``; and the numbers
         behind them (``n_facets_shared_3plus``, ``n_misoriented_facets``,
         ``n_boundary_facets_off_box``, ``n_unmatched_facets``, ``min_volume``,
-        ``volume_error``, ``n_outside_leaf``, ``n_pixels_wrong``).
+        ``volume_error``, ``n_outside_leaf``, ``n_pixels_wrong``, ``n_unused_points``).
 
     Examples
     --------
@@ -177,6 +177,10 @@ def check_mesh(mesh: Mesh, labels, *, exclude=()) -> dict:
     material = np.asarray(mesh.material, dtype=np.int64)
     voxel = float(np.prod(mesh.spacing)) if mesh.spacing else 1.0
     out: dict = {}
+
+    used = np.zeros(len(points), dtype=bool)
+    used[cells.ravel()] = True
+    out["n_unused_points"] = int((~used).sum())
 
     # volumes, in voxels
     vol = signed_volumes(points, cells)

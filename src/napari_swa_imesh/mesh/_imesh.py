@@ -28,7 +28,7 @@ import numpy as np
 from .._tree import RegionTree, build_tree
 from .._validation import as_labels, normalize_spacing
 from . import _templates_luts as luts
-from ._balance import balance_tree
+from ._balance import balance_tree, count_balanced_leaves
 from ._quality import dihedral_angles, radius_edge_ratio, signed_volumes, triangle_angles
 from ._types import Mesh
 
@@ -142,8 +142,7 @@ def mesh_tree(tree: RegionTree, *, method: str = "template", exclude=(), spacing
     }
     if report_face_balance and connectivity > 1:
         t = time.perf_counter()
-        face_bal = balance_tree(tree, connectivity=1)
-        info["n_leaves_face_balanced"] = int(np.count_nonzero(face_bal.inside))
+        info["n_leaves_face_balanced"] = count_balanced_leaves(tree, connectivity=1)
         seconds["face_balance_count"] = time.perf_counter() - t
     else:
         info["n_leaves_face_balanced"] = info["n_leaves_balanced"]
@@ -207,9 +206,12 @@ def mesh_tree(tree: RegionTree, *, method: str = "template", exclude=(), spacing
 
 
 def _lattice(tree: RegionTree):
-    """Shape and strides of the lattice of pixel corners of the padded grid."""
+    """Shape and strides of the lattice of pixel corners of the padded grid.
+
+    Keys are intp: numpy would convert any other index dtype on every gather.
+    """
     shape = tuple(n + 1 for n in tree.padded_shape)
-    strides = np.array([math.prod(shape[a + 1:]) for a in range(len(shape))], dtype=np.int64)
+    strides = np.array([math.prod(shape[a + 1:]) for a in range(len(shape))], dtype=np.intp)
     return shape, strides
 
 
@@ -217,10 +219,10 @@ def _mark_corners(tree: RegionTree, select: np.ndarray, shape, strides) -> np.nd
     """Flat bool lattice: True at every corner of the selected leaves (one pass per level)."""
     d = tree.ndim
     is_vertex = np.zeros(math.prod(shape), dtype=bool)
-    corner_keys = np.array(list(itertools.product((0, 1), repeat=d)), np.int64) @ strides
+    corner_keys = np.array(list(itertools.product((0, 1), repeat=d)), strides.dtype) @ strides
     for lev in np.unique(tree.level[select]):
         sel = select & (tree.level == lev)
-        okey = tree.origin[sel] @ strides
+        okey = tree.origin[sel].astype(strides.dtype) @ strides
         is_vertex[(okey[:, None] + (corner_keys << int(lev))[None]).ravel()] = True
     return is_vertex
 
@@ -239,30 +241,36 @@ def _template_mesh(bal: RegionTree, meshed: np.ndarray):
     # then a face centre that is a vertex always comes with its four edge midpoints
     is_vertex = _mark_corners(bal, bal.inside, shape, strides)
     leaves = np.flatnonzero(meshed)
-    level = bal.level[leaves].astype(np.int64)
-    okey = bal.origin[leaves] @ strides  # (L,) lattice key of each leaf's lowest corner
-    size = np.left_shift(1, level)
+    kd = strides.dtype
+    level = bal.level[leaves].astype(kd)
+    okey = bal.origin[leaves].astype(kd) @ strides  # (L,) lattice key of each leaf's lowest corner
+    size = np.left_shift(kd.type(1), level)
     half = size >> 1
-    site_keys = luts.SITES[d].astype(np.int64) @ strides  # (n_sites,)
+    site_keys = luts.SITES[d].astype(kd) @ strides  # (n_sites,)
     hanging = np.zeros((len(leaves), len(site_keys)), dtype=bool)
-    coarse = level >= 1  # level-0 leaves have no sites: no leaf is smaller
-    hanging[coarse] = is_vertex[okey[coarse, None] + half[coarse, None] * site_keys[None]]
-    del is_vertex
+    coarse = np.flatnonzero(level >= 1)  # level-0 leaves have no sites: no leaf is smaller
+    site_of_coarse = okey[coarse, None] + half[coarse, None] * site_keys[None]  # (Lc, n_sites)
+    hanging[coarse] = is_vertex[site_of_coarse]
     kuhn = ~hanging.any(axis=1)
+    # the points elements use: corners of meshed leaves, the sites they carry, and the
+    # new points of the templates (marked without scattering every element's keys)
+    used = is_vertex if meshed.sum() == bal.inside.sum() else _mark_corners(bal, meshed, shape, strides)
+    used[site_of_coarse[hanging[coarse]]] = True
+    del site_of_coarse
     seconds["vertices"] = time.perf_counter() - t
 
     t = time.perf_counter()
-    keys, which, template_of = cut_leaves(okey, size, hanging, strides)
-    leaf_of = leaves[which]
+    keys, which, template_of, new_points = cut_leaves(okey, size, hanging, strides)
+    leaf_of = leaves[which].astype(np.int32 if len(bal) < 2**31 else np.int64)
     del which
     seconds["simplices"] = time.perf_counter() - t
 
-    # keep only the lattice points that elements use, numbered in lattice order
+    # number the used lattice points in lattice order
     t = time.perf_counter()
-    used = np.zeros(math.prod(shape), dtype=bool)
-    used[keys.ravel()] = True
-    new_id = np.cumsum(used, dtype=np.int64) - 1
-    cells = new_id[keys].astype(np.intp, copy=False)
+    used[new_points] = True
+    new_id = np.cumsum(used, dtype=np.intp)
+    new_id -= 1
+    cells = new_id[keys]
     del new_id, keys
     points = np.stack(np.unravel_index(np.flatnonzero(used), shape), axis=1).astype(np.float64)
     seconds["numbering"] = time.perf_counter() - t
@@ -275,37 +283,37 @@ def cut_leaves(okey: np.ndarray, size: np.ndarray, hanging: np.ndarray, strides:
 
     Parameters
     ----------
-    okey : (L,) ndarray of int64
+    okey : (L,) ndarray of int32 or int64
         Lattice key (``coords @ strides``) of each leaf's lowest corner.
-    size : (L,) ndarray of int64
+    size : (L,) ndarray of the same dtype
         Leaf side in lattice units; leaves with a site present must have an even side.
     hanging : (L, n_sites) ndarray of bool
         Which of ``SITES[d]`` are vertices, per leaf.
-    strides : (d,) ndarray of int64
+    strides : (d,) ndarray of the same dtype
         Strides of the lattice; keys are linear, so a template's key is
         ``okey + scale * (local @ strides)``.
 
     Returns
     -------
-    keys : (M, d+1) ndarray of int64
+    keys : (M, d+1) ndarray of the keys' dtype
         Lattice key of every element vertex, positively oriented.
-    which : (M,) ndarray of intp
+    which : (M,) ndarray of int32 (int64 for 2^31 leaves or more)
         Index (into the L leaves) of the leaf each element cuts.
     template_id : (M,) ndarray of int16
         Index into ``TEMPLATES[d]``.
+    new_points : (K,) ndarray of the keys' dtype
+        Keys of the points the templates add (leaf centres, face centres of fans), with
+        repeats; every other element vertex is a leaf corner or a site present.
     """
     d = len(strides)
+    kd = strides.dtype
+    wd = np.int32 if len(okey) < 2**31 else np.int64
     half = size >> 1
     kuhn = ~hanging.any(axis=1)
-    keys, which, template_of = [], [], []
-    # Kuhn leaves: (n, d!, d+1) keys
-    kuhn_keys = luts.KUHN[d].astype(np.int64) @ strides  # (d!, d+1)
     nk = np.flatnonzero(kuhn)
-    keys.append((okey[nk, None, None] + size[nk, None, None] * kuhn_keys[None]).reshape(-1, d + 1))
-    which.append(np.repeat(nk, len(kuhn_keys)))
-    template_of.append(np.tile(np.arange(len(kuhn_keys), dtype=np.int16), len(nk)))
-    # other leaves: every face by its own case, coned to the leaf centre
     other = np.flatnonzero(~kuhn)
+    # group the other leaves by the case of each face: (face, case, members)
+    groups = []
     for f, fsites in enumerate(luts.FACE_SITES[d]):
         code = np.zeros(len(other), dtype=np.int64)
         for bit, site in enumerate(fsites):
@@ -313,20 +321,48 @@ def cut_leaves(okey: np.ndarray, size: np.ndarray, hanging: np.ndarray, strides:
         order = np.argsort(code, kind="stable")
         bounds = np.searchsorted(code[order], np.arange((1 << len(fsites)) + 1))
         for case in range(1 << len(fsites)):
-            sel = other[order[bounds[case]:bounds[case + 1]]]
-            if sel.size == 0:
-                continue
-            lut = luts.FACE_LUT[d][f][case]
-            if len(lut) == 0:
-                raise RuntimeError(f"leaf configuration outside the look-up table (face {f}, "
-                                   f"case {case}); the tree is not balanced as assumed.")
-            lut_keys = lut.astype(np.int64) @ strides  # (t, d+1)
-            keys.append((okey[sel, None, None] + half[sel, None, None] * lut_keys[None])
-                        .reshape(-1, d + 1))
-            which.append(np.repeat(sel, len(lut)))
-            first = luts.FACE_TEMPLATE_ID[d][f][case]
-            template_of.append(np.tile(np.arange(first, first + len(lut), dtype=np.int16), len(sel)))
-    return np.concatenate(keys), np.concatenate(which), np.concatenate(template_of)
+            if bounds[case + 1] > bounds[case]:
+                if len(luts.FACE_LUT[d][f][case]) == 0:
+                    raise RuntimeError(f"leaf configuration outside the look-up table (face {f}, "
+                                       f"case {case}); the tree is not balanced as assumed.")
+                groups.append((f, case, other[order[bounds[case]:bounds[case + 1]]]))
+    n_kuhn = len(luts.KUHN[d])
+    total = len(nk) * n_kuhn + sum(len(sel) * len(luts.FACE_LUT[d][f][c]) for f, c, sel in groups)
+    # write every block straight into its slice of the outputs (no concatenation copies)
+    keys = np.empty((total, d + 1), dtype=kd)
+    which = np.empty(total, dtype=wd)
+    template_of = np.empty(total, dtype=np.int16)
+    new_points = []
+
+    def emit(start, sel, scale, local_keys, first_template):
+        n, t = len(sel), len(local_keys)
+        block = keys[start:start + n * t].reshape(n, t, d + 1)
+        np.multiply(scale[sel, None, None], local_keys[None], out=block)
+        block += okey[sel, None, None]
+        which[start:start + n * t].reshape(n, t)[:] = sel[:, None]
+        template_of[start:start + n * t].reshape(n, t)[:] = np.arange(first_template, first_template + t)
+        return start + n * t
+
+    # Kuhn leaves: d! simplices in units of the leaf side
+    start = emit(0, nk, size, luts.KUHN[d].astype(kd) @ strides, 0)
+    # other leaves: every face by its own case, coned to the leaf centre (unit: half side)
+    for f, case, sel in groups:
+        lut = luts.FACE_LUT[d][f][case]
+        start = emit(start, sel, half, lut.astype(kd) @ strides, luts.FACE_TEMPLATE_ID[d][f][case])
+        new_local = _new_points(d, f, case)
+        if len(new_local):
+            new_keys = new_local.astype(kd) @ strides
+            new_points.append((okey[sel, None] + half[sel, None] * new_keys[None]).ravel())
+    new_points = np.concatenate(new_points) if new_points else np.zeros(0, kd)
+    return keys, which, template_of, new_points
+
+
+def _new_points(d: int, face: int, case: int) -> np.ndarray:
+    """(k, d) local points of a face case that are neither corners nor sites present."""
+    present = {tuple(luts.SITES[d][s]) for i, s in enumerate(luts.FACE_SITES[d][face]) if case >> i & 1}
+    pts = {tuple(p) for p in luts.FACE_LUT[d][face][case].reshape(-1, d).tolist()}
+    new = [p for p in sorted(pts) if p not in present and any(c == 1 for c in p)]
+    return np.array(new, dtype=np.int64).reshape(-1, d)
 
 
 def _template_quality(d: int, spacing: tuple[float, ...]) -> dict[str, np.ndarray]:
