@@ -109,7 +109,7 @@ image, truth = tissue_phantom((256, 256, 256), spacing=(1, 1, 1), noise=0.03, bi
 samples = samples_from_truth(truth, scale=2, per_material=6)
 t0 = time.perf_counter()
 feats = multiscale_basic_features(image, intensity=True, edges=True, texture=True,
-                                  sigma_min=1, sigma_max=8, num_workers=2)
+                                  sigma_min=1, sigma_max=8, workers=2)
 t1 = time.perf_counter()
 train = np.zeros(image.shape, np.int32)
 for b in samples.boxes:

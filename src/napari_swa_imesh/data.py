@@ -153,6 +153,8 @@ def tissue_phantom(shape=(64, 96, 96), *, noise: float = 0.03, bias: float = 0.0
     mean = np.array([0.0, 0.25, 0.55, 0.80])
     texture = 0.02 * _smooth_field(shape, rng, 0.02)
     clean = mean[truth] + texture
+    # partial-volume effect: a voxel sees a little of its neighbours, as in real scans
+    clean = ndi.gaussian_filter(clean, sigma=0.6 / sp * sp.min())
     if bias:
         field = _smooth_field(shape, rng, 0.5)
         axis_ramp = np.linspace(-1, 1, shape[0]).reshape((-1,) + (1,) * (len(shape) - 1))
