@@ -278,6 +278,21 @@ def test_suffix_table_matches_formats():
     assert set(ALL_FORMATS) | {".ele"} == set(MESH_SUFFIXES)
 
 
+@NEEDS_H5PY
+def test_xdmf_writes_its_h5_twin_and_checks_both(tmp_path):
+    mesh = sample_mesh(3)
+    written = write_mesh(mesh, tmp_path / "m.xdmf")
+    assert [p.name for p in written] == ["m.xdmf", "m.h5"]
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["m.h5", "m.xdmf"]  # no temporaries
+    text = written[0].read_text()
+    assert "m.h5:/" in text and ".swa-imesh-" not in text
+    (tmp_path / "m.h5").write_bytes(b"user")
+    (tmp_path / "m.xdmf").unlink()
+    with pytest.raises(FileExistsError, match="m.h5"):
+        write_mesh(mesh, tmp_path / "m.xdmf")
+    assert not (tmp_path / "m.xdmf").exists()
+
+
 def test_xdmf_without_h5py_is_a_clear_error(tmp_path, monkeypatch):
     monkeypatch.setitem(sys.modules, "h5py", None)  # makes `import h5py` fail
     with pytest.raises(ValueError, match="needs the h5py package.*pip install h5py"):

@@ -12,7 +12,8 @@ What each format holds
 ``.vtk``  legacy VTK 4.2 (readable by any VTK); points padded; every per-cell array.
 ``.msh``  Gmsh 4.1 ASCII; one physical group (and one entity) per material, named
           after it; every per-cell array as ``$ElementData``.
-``.xdmf`` XDMF with the arrays inline (XML), so one self-contained file; every array.
+``.xdmf`` XDMF 3 with its arrays in a ``.h5`` beside it (same stem; needs h5py); every
+          array.
 ``.inp``  Abaqus; one ``*ELSET`` per material named after it (CPS3 triangles in 2-D,
           C3D4 tetrahedra in 3-D); no per-cell arrays (the format has none).
 ``.node`` Triangle (2-D; attributes material, quality) or TetGen (3-D; region
@@ -30,7 +31,7 @@ from pathlib import Path
 import numpy as np
 
 from .._cli_util import check_writable
-from ._triangle_tetgen import read_node_ele, write_node_ele
+from ._triangle_tetgen import format_rows, read_node_ele, write_node_ele
 from ._types import Mesh
 
 __all__ = ["to_meshio", "write_mesh", "read_mesh", "mesh_output_paths", "MESH_SUFFIXES"]
@@ -40,7 +41,7 @@ MESH_SUFFIXES = {
     ".vtu": "VTK XML unstructured grid",
     ".vtk": "legacy VTK",
     ".msh": "Gmsh 4.1 with physical groups",
-    ".xdmf": "XDMF",
+    ".xdmf": "XDMF with its HDF5 .h5 file",
     ".inp": "Abaqus with one element set per material",
     ".node": "Triangle (2-D) / TetGen (3-D) .node + .ele",
     ".ele": "Triangle (2-D) / TetGen (3-D) .node + .ele",
@@ -75,15 +76,16 @@ def _check_mesh_arg(mesh) -> None:
             f"expected a napari_swa_imesh Mesh (from mesh_labels or read_mesh); got "
             f"{type(mesh).__name__}."
         )
-    d = mesh.points.ndim == 2 and mesh.points.shape[1]
+    shape = np.shape(mesh.points)
+    d = shape[1] if len(shape) == 2 else None
     if d not in (2, 3):
         raise ValueError(
             f"can only export triangle (2-D) or tetrahedron (3-D) meshes; points have "
-            f"shape {np.shape(mesh.points)}."
+            f"shape {shape}."
         )
-    if mesh.cells.ndim != 2 or mesh.cells.shape[1] != d + 1:
+    if np.ndim(mesh.cells) != 2 or np.shape(mesh.cells)[1] != d + 1:
         raise ValueError(
-            f"cells of a {d}-D mesh need {d + 1} corners each; got shape {mesh.cells.shape}."
+            f"cells of a {d}-D mesh need {d + 1} corners each; got shape {np.shape(mesh.cells)}."
         )
     if mesh.n_cells == 0:
         raise ValueError("the mesh has no elements; there is nothing to write.")
@@ -175,7 +177,7 @@ def to_meshio(mesh: Mesh):
     cell_data = {"material": [np.asarray(mesh.material, dtype=np.int64)]}
     for key, values in mesh.cell_data.items():
         values = np.asarray(values)
-        # every writer takes int64/float64; some (XDMF as XML) reject int8 or bool
+        # every writer takes int64/float64; some reject int8 or bool (XDMF as XML)
         kind = values.dtype.kind
         cell_data[key] = [values.astype(np.int64 if kind in "biu" else np.float64)]
     return meshio.Mesh(points, [(_CELL_TYPE[mesh.ndim], cells)], cell_data=cell_data)
@@ -256,10 +258,13 @@ def _append_gmsh_element_data(path: str, element_data: dict[str, np.ndarray]) ->
     """
     with open(path, "a") as fh:
         for name, values in element_data.items():
-            values = np.asarray(values, dtype=np.float64)
+            values = np.asarray(values)
             fh.write(f'$ElementData\n1\n"{name}"\n1\n0.0\n3\n0\n1\n{len(values)}\n')
-            rows = np.column_stack([np.arange(1, len(values) + 1), values])
-            np.savetxt(fh, rows, fmt=["%d", "%.17g"])
+            tags = np.arange(1, len(values) + 1)[:, None]
+            if values.dtype.kind in "iu":
+                fh.write(format_rows(np.column_stack([tags, values])))
+            else:
+                fh.write(format_rows(tags, values[:, None]))
             fh.write("$EndElementData\n")
 
 
@@ -276,6 +281,8 @@ def _targets(path: Path) -> list[Path]:
         )
     if suffix in (".node", ".ele"):
         return [path.with_suffix(".node"), path.with_suffix(".ele")]
+    if suffix == ".xdmf":
+        return [path, path.with_suffix(".h5")]
     return [path]
 
 
@@ -339,11 +346,11 @@ def write_mesh(mesh: Mesh, path, *, force: bool = False) -> list[Path]:
     suffix = targets[0].suffix.lower()
     temps: list[str] = []
     try:
-        for target in targets:
-            fd, tmp = tempfile.mkstemp(prefix=".swa-imesh-", suffix=target.suffix, dir=target.parent)
-            os.close(fd)
-            temps.append(tmp)
-        _write_files(mesh, suffix, temps)
+        # one unique stem for all files: writers derive twins (.ele, .h5) from it
+        fd, tmp = tempfile.mkstemp(prefix=".swa-imesh-", suffix=targets[0].suffix, dir=targets[0].parent)
+        os.close(fd)
+        temps = [tmp] + [str(Path(tmp).with_suffix(t.suffix)) for t in targets[1:]]
+        _write_files(mesh, suffix, temps, targets)
         for tmp, target in zip(temps, targets):
             os.replace(tmp, target)
     finally:
@@ -353,18 +360,30 @@ def write_mesh(mesh: Mesh, path, *, force: bool = False) -> list[Path]:
     return targets
 
 
-def _write_files(mesh: Mesh, suffix: str, temps: list[str]) -> None:
+def _write_files(mesh: Mesh, suffix: str, temps: list[str], targets: list[Path]) -> None:
     import meshio
 
     m = to_meshio(mesh)
+    try:
+        _write_format(mesh, m, suffix, temps, targets)
+    except (meshio.WriteError, KeyError) as exc:  # meshio's own failures, as one clear line
+        raise ValueError(f"meshio could not write {targets[0].name}: {exc!r}") from exc
+
+
+def _write_format(mesh: Mesh, m, suffix: str, temps: list[str], targets: list[Path]) -> None:
+    import meshio
+
     if suffix == ".vtu":
         meshio.write(temps[0], _padded(m), file_format="vtu")
     elif suffix == ".vtk":
         meshio.write(temps[0], _padded(m), file_format="vtk42", binary=True)
     elif suffix == ".xdmf":
         _require_h5py("write")
-        # inline XML data keeps one self-contained file, which can be moved into place
-        meshio.write(temps[0], m, file_format="xdmf", data_format="XML")
+        meshio.write(temps[0], m, file_format="xdmf", data_format="HDF")
+        # the .xdmf names its .h5 file; name the one it will have once moved into place
+        xdmf = Path(temps[0])
+        text = xdmf.read_text().replace(f"{Path(temps[1]).name}:/", f"{targets[1].name}:/")
+        xdmf.write_text(text)
     elif suffix == ".msh":
         tagged, element_data = _gmsh_mesh(mesh, m)
         meshio.write(temps[0], tagged, file_format="gmsh", binary=False)
@@ -463,7 +482,10 @@ def _read_meshio(p: Path, suffix: str):
     fmt = {".vtu": "vtu", ".vtk": "vtk", ".xdmf": "xdmf", ".msh": "gmsh", ".inp": "abaqus"}[suffix]
     if fmt == "xdmf":
         _require_h5py("read")
-    m = meshio.read(p, file_format=fmt)
+    try:
+        m = meshio.read(p, file_format=fmt)
+    except (meshio.ReadError, KeyError, IndexError) as exc:
+        raise ValueError(f"cannot read {p} as a {suffix} mesh: {exc!r}") from exc
     keep = [i for i, block in enumerate(m.cells) if block.type in ("triangle", "tetra")]
     if not keep or len({m.cells[i].type for i in keep}) != 1:
         raise ValueError(

@@ -27,12 +27,46 @@ from pathlib import Path
 
 import numpy as np
 
-__all__ = ["write_node_ele", "read_node_ele", "NODE_ELE_ATTRIBUTES"]
+__all__ = ["write_node_ele", "read_node_ele", "format_rows", "NODE_ELE_ATTRIBUTES"]
 
 #: Names of the element attributes written, by dimension.
 NODE_ELE_ATTRIBUTES = {2: ("material", "quality"), 3: ("material",)}
 
 _PROGRAM = {2: "Triangle", 3: "TetGen"}
+_ROWS_PER_BLOCK = 65536
+
+
+def format_rows(ints: np.ndarray, floats: np.ndarray | None = None) -> str:
+    r"""Text lines ``i0 i1 ... f0 f1 ...``: integers as such, floats with 17 digits.
+
+    One ``%`` formatting per block of rows instead of one per row (``np.savetxt``): two
+    to four times faster. ``%.17g`` reads back to the same float64.
+
+    Parameters
+    ----------
+    ints : (M, k) ndarray of int
+        Exact as long as they stay below 2**53 when floats are present (they share one
+        float64 block then).
+    floats : (M, f) ndarray of float, optional
+
+    Examples
+    --------
+    >>> format_rows(np.array([[1, 4]]), np.array([[0.5]]))
+    '1 4 0.5\n'
+    """
+    ints = np.asarray(ints, dtype=np.int64)
+    k = ints.shape[1]
+    if floats is None or np.shape(floats)[1] == 0:
+        table, line = ints, " ".join(["%d"] * k) + "\n"
+    else:
+        floats = np.asarray(floats, dtype=np.float64)
+        table = np.column_stack([ints.astype(np.float64), floats])
+        line = " ".join(["%d"] * k + ["%.17g"] * floats.shape[1]) + "\n"
+    parts = []
+    for start in range(0, len(table), _ROWS_PER_BLOCK):
+        block = table[start : start + _ROWS_PER_BLOCK]
+        parts.append((line * len(block)) % tuple(block.ravel().tolist()))
+    return "".join(parts)
 
 
 def write_node_ele(
@@ -63,7 +97,7 @@ def write_node_ele(
     cells = np.asarray(cells)
     dim = points.shape[1]
     n_points, n_cells = points.shape[0], cells.shape[0]
-    attrs = [np.asarray(material, dtype=np.float64)]
+    attrs = [np.asarray(material, dtype=np.int64)]
     names = ["material"]
     if dim == 2 and quality is not None:
         attrs.append(np.asarray(quality, dtype=np.float64))
@@ -72,22 +106,19 @@ def write_node_ele(
         f"# {_PROGRAM[dim]} file written by napari-swa-imesh; indices start at 1\n"
     )
 
-    # (N, 1+d): index, coordinates; %.17g round-trips float64 exactly
-    node_rows = np.column_stack([np.arange(1, n_points + 1), points])
     with open(node_path, "w") as fh:
         fh.write(header_comment)
         fh.write(f"{n_points} {dim} 0 0\n")
-        np.savetxt(fh, node_rows, fmt=["%d"] + ["%.17g"] * dim)
+        fh.write(format_rows(np.arange(1, n_points + 1)[:, None], points))
 
-    # (M, 1+(d+1)+n_attr): index, corners, attributes
-    ele_rows = np.column_stack([np.arange(1, n_cells + 1), cells + 1] + attrs)
-    int_fmt = ["%d"] * (dim + 2)
-    attr_fmt = ["%d"] + ["%.17g"] * (len(attrs) - 1)
+    # integers (M, 1+(d+1)+1): index, corners, material; floats (M, 0 or 1): quality
+    ele_ints = np.column_stack([np.arange(1, n_cells + 1), cells + 1, attrs[0]])
+    ele_floats = np.column_stack(attrs[1:]) if len(attrs) > 1 else None
     with open(ele_path, "w") as fh:
         fh.write(header_comment)
         fh.write(f"# element attributes: {', '.join(names)}\n")
         fh.write(f"{n_cells} {dim + 1} {len(attrs)}\n")
-        np.savetxt(fh, ele_rows, fmt=int_fmt + attr_fmt)
+        fh.write(format_rows(ele_ints, ele_floats))
 
 
 def _numbers(path: Path) -> tuple[list[str], np.ndarray]:
