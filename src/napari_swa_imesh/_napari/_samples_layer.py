@@ -1,0 +1,254 @@
+"""The samples Shapes layer: rectangles with a material per shape, read as library Samples.
+
+A samples layer is a napari Shapes layer with the image's scale and translate, whose
+features hold, per shape, the material ``label`` and ``name``, the ``depth`` in slices
+(3-D) and the ``flag`` text (see :mod:`._boxes`). Its metadata holds the material table
+(label, name, colour), the name of the image it samples, and the scale chosen from the RES
+plots, so every widget can rebuild the library's :class:`Samples` from the layers alone.
+"""
+
+from __future__ import annotations
+
+from typing import TYPE_CHECKING
+
+import numpy as np
+import pandas as pd
+
+from ..segmentation._samples import Material, Samples
+from ._boxes import BoxReport, box_flags, box_to_rectangle, rectangles_to_boxes
+from ._layers import (EXTENT_KEY, MATERIALS_KEY, SAMPLES_KEY, SCALE_KEY, default_color,
+                      index_to_layer_data)
+
+if TYPE_CHECKING:
+    import napari
+
+__all__ = ["new_samples_layer", "layer_materials", "set_layer_materials", "layer_report",
+           "samples_from_layer", "put_boxes", "restyle", "update_extent_overlay",
+           "is_samples_layer", "is_extent_layer", "image_array", "DEFAULT_DEPTH"]
+
+DEFAULT_DEPTH = 8
+_EDGE_WIDTH_PX = 1.5  # in screen-ish units: edge widths are scaled by the layer scale
+
+
+def is_extent_layer(layer) -> bool:
+    return EXTENT_KEY in layer.metadata
+
+
+def is_samples_layer(layer) -> bool:
+    """Any Shapes layer but the 3-D extent overlay can hold samples."""
+    return type(layer).__name__ == "Shapes" and not is_extent_layer(layer)
+
+
+def image_array(image_layer) -> np.ndarray:
+    """The image layer's pixels as one grey-level array (level 0 of a multiscale image)."""
+    if image_layer.rgb:
+        raise ValueError(
+            f"image layer {image_layer.name!r} is RGB; SWA needs one grey-level channel. "
+            "Split the channels (right-click the layer > Split RGB) and pick one.")
+    data = image_layer.data[0] if image_layer.multiscale else image_layer.data
+    return np.asarray(data)
+
+
+def _empty_features() -> pd.DataFrame:
+    return pd.DataFrame({"label": pd.Series([], dtype=int), "name": pd.Series([], dtype=object),
+                         "depth": pd.Series([], dtype=int), "flag": pd.Series([], dtype=object)})
+
+
+def new_samples_layer(viewer: "napari.viewer.Viewer", image_layer, materials: list[Material],
+                      *, name: str | None = None, depth: int = DEFAULT_DEPTH):
+    """Add an empty samples Shapes layer over `image_layer`, ready to draw rectangles."""
+    layer = viewer.add_shapes(
+        ndim=image_layer.ndim, scale=image_layer.scale, translate=image_layer.translate,
+        name=name or f"{image_layer.name} samples", face_color="transparent",
+        edge_width=_EDGE_WIDTH_PX, features=_empty_features(),
+        text={"string": "{name}{flag}", "color": "white", "size": 9, "anchor": "upper_left"},
+        metadata={SAMPLES_KEY: image_layer.name})
+    set_layer_materials(layer, materials)
+    set_current_material(layer, materials[0] if materials else Material(1, "material 1"),
+                         depth=depth if image_layer.ndim == 3 else 1)
+    return layer
+
+
+def layer_materials(layer) -> list[Material]:
+    """Materials of a samples layer: its table, plus any label used by a shape but unlisted."""
+    table = [Material(int(m["label"]), str(m["name"]), m.get("color"))
+             for m in layer.metadata.get(MATERIALS_KEY, [])]
+    known = {m.label for m in table}
+    if "label" in layer.features and len(layer.features):
+        names = layer.features.get("name")
+        for i, label in enumerate(layer.features["label"].astype(int)):
+            if label not in known:
+                name = str(names.iloc[i]) if names is not None else f"material {label}"
+                table.append(Material(int(label), name, None))
+                known.add(int(label))
+    return table
+
+
+def set_layer_materials(layer, materials: list[Material]) -> None:
+    """Store the material table in the layer and rename/recolour its shapes to match."""
+    layer.metadata[MATERIALS_KEY] = [
+        {"label": m.label, "name": m.name, "color": m.color or default_color(m.label)}
+        for m in materials]
+    if len(layer.data) and "label" in layer.features:
+        names = {m.label: m.name for m in materials}
+        features = layer.features.copy()
+        features["name"] = [names.get(int(v), f"material {int(v)}") for v in features["label"]]
+        layer.features = features
+    _recolor(layer)
+
+
+def set_current_material(layer, material: Material, *, depth: int | None = None) -> None:
+    """Material (and depth) that newly drawn rectangles get."""
+    defaults = {"label": material.label, "name": material.name, "flag": ""}
+    defaults["depth"] = int(depth) if depth is not None else int(
+        layer.feature_defaults["depth"].iloc[0] if "depth" in layer.feature_defaults else 1)
+    layer.feature_defaults = defaults
+    layer.current_edge_color = material.color or default_color(material.label)
+    _recolor(layer)
+
+
+def _colors(layer) -> dict[int, str]:
+    return {int(m["label"]): m.get("color") or default_color(m["label"])
+            for m in layer.metadata.get(MATERIALS_KEY, [])}
+
+
+def _recolor(layer) -> None:
+    """Edge colour of every shape from its material (the only place colours are set)."""
+    if not len(layer.data) or "label" not in layer.features:
+        return
+    colors = _colors(layer)
+    layer.edge_color = [colors.get(int(v), default_color(int(v))) for v in layer.features["label"]]
+
+
+def layer_report(layer, image_layer, *, scale: int | None = None) -> BoxReport:
+    """Boxes (image pixel indices) and flags of every shape of a samples layer."""
+    image = image_array(image_layer)
+    features = layer.features
+    n = len(layer.data)
+    labels = features["label"].astype(int).tolist() if "label" in features else [1] * n
+    depths = features["depth"].astype(int).tolist() if "depth" in features else [1] * n
+    corners = [index_to_layer_data(v, layer, image_layer) for v in layer.data]
+    report = rectangles_to_boxes(corners, labels, depths, image.shape, scale=scale,
+                                 shape_types=list(layer.shape_type))
+    return box_flags(report, image)
+
+
+def _shape_name(layer, i: int) -> str:
+    if "name" in layer.features and i < len(layer.features):
+        return f"box {i + 1} ({layer.features['name'].iloc[i]})"
+    return f"box {i + 1}"
+
+
+def samples_from_layer(layer, image_layer, *, scale: int | None = None
+                       ) -> tuple[Samples, BoxReport]:
+    """Library Samples from a samples layer, refusing shapes that cannot be boxes.
+
+    Raises
+    ------
+    ValueError
+        No shapes, or a shape flagged ``not a box``, ``empty`` or ``outside``; the message
+        says which shape and what to do.
+    """
+    if not len(layer.data):
+        raise ValueError(f"the samples layer {layer.name!r} has no boxes; draw at least one "
+                         "rectangle per material (rectangle tool) or import a samples file.")
+    report = layer_report(layer, image_layer, scale=scale)
+    for i in report.blocking:
+        what = _shape_name(layer, i)
+        if "outside" in report.flags[i]:
+            box = report.boxes[i]
+            raise ValueError(
+                f"{what} from {list(box.start)} to {list(box.stop)} lies partly outside the "
+                f"image of shape {image_array(image_layer).shape}; move it inside the image "
+                "or delete it.")
+        if "empty" in report.flags[i]:
+            raise ValueError(f"{what} is thinner than one pixel; redraw it larger or delete it.")
+        raise ValueError(f"{what} is not an axis-aligned rectangle on one slice; draw sample "
+                         "boxes with the rectangle tool in 2-D view, or delete it.")
+    used = {b.label for b in report.boxes}
+    materials = [m for m in layer_materials(layer) if m.label in used]
+    return Samples(materials, list(report.boxes)), report
+
+
+def put_boxes(layer, image_layer, samples: Samples, *, thickness_axis: int = 0) -> None:
+    """Replace the shapes of a samples layer by rectangles drawing `samples`' boxes."""
+    rects, depths = [], []
+    for box in samples.boxes:
+        corners, depth = box_to_rectangle(box, thickness_axis=thickness_axis)
+        rects.append(index_to_layer_data(corners, image_layer, layer))
+        depths.append(depth)
+    names = {m.label: m.name for m in samples.materials}
+    set_layer_materials(layer, samples.materials)
+    layer.selected_data = set()
+    layer.data = []
+    if not rects:
+        return
+    defaults = layer.feature_defaults
+    features = pd.DataFrame({
+        "label": [b.label for b in samples.boxes],
+        "name": [names.get(b.label, f"material {b.label}") for b in samples.boxes],
+        "depth": depths, "flag": [""] * len(rects)})
+    layer.add_rectangles(rects)
+    layer.features = features
+    layer.feature_defaults = defaults
+    _recolor(layer)
+
+
+def restyle(layer, report: BoxReport) -> None:
+    """Show each shape's flags as its text and colour it by material."""
+    if not len(layer.data):
+        return
+    features = layer.features.copy()
+    features["flag"] = [f"  ! {report.flag_text(i)}" if report.flags[i] else ""
+                        for i in range(len(report.flags))]
+    if "depth" not in features:
+        features["depth"] = 1
+    layer.features = features
+    layer.refresh_text()
+    _recolor(layer)
+
+
+def update_extent_overlay(viewer: "napari.viewer.Viewer", layer, image_layer,
+                          report: BoxReport):
+    """Draw each 3-D box's extent on its neighbouring slices (a read-only Shapes layer).
+
+    napari shows a rectangle only on its own slice; this overlay holds a copy of it on
+    every other slice the box covers, so the box is visible wherever it samples.
+    Returns the overlay layer (None in 2-D).
+    """
+    if layer.ndim != 3:
+        return None
+    rects, colors = [], []
+    color_of = _colors(layer)
+    for box, axis in zip(report.boxes, report.thickness_axis):
+        if box is None or axis is None:
+            continue
+        corners, _ = box_to_rectangle(box, thickness_axis=axis)
+        own = corners[0, axis]
+        planes = np.arange(box.start[axis], box.stop[axis])
+        planes = planes[planes != own]
+        copies = np.repeat(corners[None], len(planes), axis=0)    # (P, 4, 3)
+        copies[:, :, axis] = planes[:, None]
+        rects.extend(index_to_layer_data(c, image_layer, layer) for c in copies)
+        colors.extend([color_of.get(box.label, default_color(box.label))] * len(planes))
+    overlay = next((lay for lay in viewer.layers
+                    if lay.metadata.get(EXTENT_KEY) == layer.name), None)
+    if overlay is None:
+        active = viewer.layers.selection.active
+        overlay = viewer.add_shapes(
+            ndim=3, scale=layer.scale, translate=layer.translate, name=f"{layer.name} extent",
+            face_color="transparent", edge_width=_EDGE_WIDTH_PX / 2, opacity=0.6,
+            metadata={EXTENT_KEY: layer.name})
+        overlay.editable = False
+        if active is not None:
+            viewer.layers.selection.active = active
+    overlay.data = []
+    if rects:
+        overlay.add_rectangles(rects, edge_color=colors)
+    return overlay
+
+
+def chosen_scale(layer) -> int | None:
+    """The scale chosen from the RES plots for these samples, if any."""
+    value = layer.metadata.get(SCALE_KEY)
+    return None if value is None else int(value)
