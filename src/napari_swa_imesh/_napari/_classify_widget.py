@@ -1,0 +1,347 @@
+"""Classify widget: SWA segmentation of an image layer into a Labels layer that overlays it."""
+
+from __future__ import annotations
+
+import math
+from typing import TYPE_CHECKING
+
+import numpy as np
+from qtpy.QtCore import Signal
+from qtpy.QtWidgets import (QComboBox, QFileDialog, QFormLayout, QGroupBox, QHBoxLayout,
+                            QLabel, QPushButton, QSpinBox, QTableWidget, QTableWidgetItem,
+                            QVBoxLayout, QWidget)
+
+from ..segmentation import (CLASSIFIERS, FEATURE_SETS, MOMENT_NAMES, dice_scores, load_model,
+                            segment_steps, tile_placement)
+from . import _samples_layer as sl
+from ._layers import LayerCombo, labels_colormap, layer_spacing, material_palette
+from ._tasks import TaskPanel, notify_error, notify_info, notify_warning
+
+if TYPE_CHECKING:
+    import napari
+
+    from ..segmentation import SegmentationResult, SWAModel
+
+__all__ = ["ClassifyWidget", "SEGMENTATION_KEY", "OUTPUT_FULL", "OUTPUT_TILES"]
+
+SEGMENTATION_KEY = "swa_imesh_segmentation"   # Labels metadata: the run's summary
+OUTPUT_FULL = "full resolution"
+OUTPUT_TILES = "one label per tile"
+_SEGMENT_STEPS = 5   # segment_steps reports done = 0..5
+
+
+class ClassifyWidget(QWidget):
+    """Fit a classifier on the sample boxes (or apply a saved model) and label every tile.
+
+    Signals
+    -------
+    labels_ready(object)
+        A Labels layer was created or updated with a segmentation.
+    """
+
+    labels_ready = Signal(object)
+
+    def __init__(self, napari_viewer: "napari.viewer.Viewer", parent: QWidget | None = None):
+        super().__init__(parent)
+        self.viewer = napari_viewer
+        self.result: SegmentationResult | None = None
+        self.dice: dict[int, float] | None = None
+        self.loaded_model: SWAModel | None = None
+
+        self.image_combo = LayerCombo(self.viewer, ("Image",))
+        self.samples_combo = LayerCombo(self.viewer, ("Shapes",), accept=sl.is_samples_layer)
+        self.feature_combo = QComboBox()
+        self.feature_combo.addItems(list(FEATURE_SETS))
+        self.feature_combo.setToolTip("Table 2.1: F1 moments, F2 entropy, F3 correlation "
+                                      "lengths, F4..F7 their unions.")
+        self.classifier_combo = QComboBox()
+        self.classifier_combo.addItems([c.upper() for c in CLASSIFIERS])
+        self.classifier_combo.setToolTip("GM: Gaussian maximum likelihood; MD: nearest "
+                                         "neighbour; LVQ: learning vector quantisation.")
+        self.scale_spin = QSpinBox()
+        self.scale_spin.setRange(-1, 16)
+        self.scale_spin.setValue(-1)
+        self.scale_spin.setSpecialValueText("suggested RES")
+        self.scale_spin.setToolTip("Tile scale j (tiles of 2^j px per axis); by default the "
+                                   "scale chosen in the RES plots, else the suggested RES.")
+        self.sieve_spin = QSpinBox()
+        self.sieve_spin.setRange(0, 1_000_000)
+        self.sieve_spin.setSpecialValueText("off")
+        self.sieve_spin.setToolTip("Merge connected regions smaller than this many tiles "
+                                   "into their surroundings.")
+        self.output_combo = QComboBox()
+        self.output_combo.addItems([OUTPUT_FULL, OUTPUT_TILES])
+        self.truth_combo = LayerCombo(self.viewer, ("Labels",), none_text="(none)")
+        self.truth_combo.setToolTip("A ground truth to report Dice against (optional).")
+        self.classify_button = QPushButton("Classify")
+        self.classify_button.clicked.connect(self.classify)
+
+        self.save_model_button = QPushButton("Save model...")
+        self.save_model_button.setEnabled(False)
+        self.save_model_button.clicked.connect(self._on_save_model_clicked)
+        self.load_model_button = QPushButton("Load model...")
+        self.load_model_button.clicked.connect(self._on_load_model_clicked)
+        self.apply_model_button = QPushButton("Apply loaded model to image")
+        self.apply_model_button.setEnabled(False)
+        self.apply_model_button.clicked.connect(self.apply_model)
+        self.model_label = QLabel("no model loaded")
+        self.model_label.setWordWrap(True)
+
+        self.scores = QLabel("")
+        self.scores.setWordWrap(True)
+        self.signature_table = QTableWidget(0, 0)
+        self.signature_table.setEditTriggers(QTableWidget.NoEditTriggers)
+        self.export_button = QPushButton("Export signatures CSV...")
+        self.export_button.setEnabled(False)
+        self.export_button.clicked.connect(self._on_export_clicked)
+        self.tasks = TaskPanel()
+
+        form = QFormLayout()
+        form.addRow("image", self.image_combo)
+        form.addRow("samples", self.samples_combo)
+        form.addRow("feature set", self.feature_combo)
+        form.addRow("classifier", self.classifier_combo)
+        form.addRow("scale j", self.scale_spin)
+        form.addRow("sieve (tiles)", self.sieve_spin)
+        form.addRow("output", self.output_combo)
+        form.addRow("truth (Dice)", self.truth_combo)
+        model_box = QGroupBox("Model")
+        model_layout = QVBoxLayout(model_box)
+        row = QHBoxLayout()
+        row.addWidget(self.save_model_button)
+        row.addWidget(self.load_model_button)
+        model_layout.addLayout(row)
+        model_layout.addWidget(self.model_label)
+        model_layout.addWidget(self.apply_model_button)
+        layout = QVBoxLayout(self)
+        layout.addLayout(form)
+        layout.addWidget(self.classify_button)
+        layout.addWidget(self.tasks)
+        layout.addWidget(self.scores)
+        layout.addWidget(QLabel("Material signatures (moments of the tiles of each material)"))
+        layout.addWidget(self.signature_table, 1)
+        layout.addWidget(self.export_button)
+        layout.addWidget(model_box)
+        self.samples_combo.currentTextChanged.connect(self._on_samples_layer_selected)
+        self._on_samples_layer_selected()
+
+    # -- settings --------------------------------------------------------------------------
+    def _on_samples_layer_selected(self, *_) -> None:
+        layer = self.samples_combo.layer()
+        if layer is None:
+            return
+        image_name = layer.metadata.get(sl.SAMPLES_KEY)
+        if image_name and image_name in self.viewer.layers:
+            self.image_combo.select(self.viewer.layers[image_name])
+        chosen = sl.chosen_scale(layer)
+        if chosen is not None:
+            self.scale_spin.setValue(chosen)
+
+    def set_scale(self, scale: int) -> None:
+        """Classify at `scale` (the workflow calls this when a RES is chosen)."""
+        self.scale_spin.setValue(int(scale))
+
+    def select_layers(self, image=None, samples=None) -> None:
+        if samples is not None:
+            self.samples_combo.select(samples)
+        if image is not None:
+            self.image_combo.select(image)
+
+    def _truth(self, image_shape):
+        truth = self.truth_combo.layer()
+        if truth is None:
+            return None
+        if tuple(truth.data.shape) != tuple(image_shape):
+            notify_warning(f"the truth {truth.name!r} has shape {truth.data.shape}, the image "
+                           f"{tuple(image_shape)}; Dice is skipped. Pick the image's truth.")
+            return None
+        return np.asarray(truth.data)
+
+    # -- runs ------------------------------------------------------------------------------
+    def classify(self):
+        """Fit on the samples and classify the image, in a worker."""
+        image, layer = self.image_combo.layer(), self.samples_combo.layer()
+        if image is None:
+            notify_error("no image layer to classify: open an image (or File > Open Sample) "
+                         "and pick it in the classify widget.")
+            return None
+        if layer is None:
+            notify_error("no samples layer: draw sample boxes per material in the samples "
+                         "widget (or import a samples file) before classifying.")
+            return None
+        scale = self.scale_spin.value()
+        scale = None if scale < 0 else scale
+        try:
+            data = sl.image_array(image)
+            samples, report = sl.samples_from_layer(layer, image, scale=scale)
+        except ValueError as exc:
+            notify_error(f"cannot classify: {exc}")
+            return None
+        small = [i for i, f in enumerate(report.flags) if any(x.startswith("too small")
+                                                               for x in f)]
+        if small:
+            notify_warning(
+                f"{len(small)} sample box(es) ({', '.join(str(i + 1) for i in small)}) are "
+                f"smaller than one tile at scale {scale} and give no training tile; enlarge "
+                "them or choose a smaller scale.")
+        truth = self._truth(data.shape)
+        options = dict(scale=scale, feature_set=self.feature_combo.currentText(),
+                       classifier=self.classifier_combo.currentText().lower(),
+                       sieve=self.sieve_spin.value(), spacing=layer_spacing(image))
+
+        def steps():
+            result = yield from segment_steps(data, samples, **options)
+            dice = None if truth is None else dice_scores(result.labels, truth)
+            return result, dice
+
+        return self.tasks.run(steps, title="SWA classification", total=_SEGMENT_STEPS,
+                              on_result=lambda out: self._show_result(image, *out))
+
+    def apply_model(self):
+        """Apply the loaded model to the selected image, in a worker."""
+        image = self.image_combo.layer()
+        if self.loaded_model is None:
+            notify_error("no model loaded: press 'Load model...' and pick a .npz model file.")
+            return None
+        if image is None:
+            notify_error("no image layer to apply the model to: open one and pick it.")
+            return None
+        try:
+            data = sl.image_array(image)
+        except ValueError as exc:
+            notify_error(f"cannot apply the model: {exc}")
+            return None
+        model, sieve, truth = self.loaded_model, self.sieve_spin.value(), self._truth(data.shape)
+        if model.spacing and not np.allclose(model.spacing, layer_spacing(image)):
+            notify_warning(f"the model was trained on voxels of {list(model.spacing)}, the "
+                           f"image has {list(layer_spacing(image))}; tiles will cover other "
+                           "physical sizes, so check the result.")
+
+        def steps():
+            result = yield from segment_steps(data, model=model, sieve=sieve)
+            dice = None if truth is None else dice_scores(result.labels, truth)
+            return result, dice
+
+        return self.tasks.run(steps, title="Applying the model", total=_SEGMENT_STEPS,
+                              on_result=lambda out: self._show_result(image, *out))
+
+    # -- results (main thread) ---------------------------------------------------------------
+    def _show_result(self, image, result: "SegmentationResult", dice) -> None:
+        self.result, self.dice = result, dice
+        materials = result.model.materials
+        names = {m.label: m.name for m in materials}
+        colors = material_palette(names, {m.label: m.color for m in materials})
+        spacing = layer_spacing(image)
+        if self.output_combo.currentText() == OUTPUT_TILES:
+            data = result.tile_labels
+            layer_scale, offset = tile_placement(result.scale, spacing, image.ndim)
+            translate = tuple(t + o for t, o in zip(image.translate, offset))
+        else:
+            data, layer_scale, translate = result.labels, spacing, tuple(image.translate)
+        name = f"{image.name} SWA labels"
+        metadata = {SEGMENTATION_KEY: result.summary(), "material_names": names,
+                    "swa_imesh_source": image.name}
+        if name in self.viewer.layers and \
+                type(self.viewer.layers[name]).__name__ == "Labels":
+            labels = self.viewer.layers[name]
+            labels.data = data
+            labels.scale, labels.translate = layer_scale, translate
+            labels.metadata.update(metadata)
+            labels.colormap = labels_colormap(colors)
+        else:
+            labels = self.viewer.add_labels(data, name=name, scale=layer_scale,
+                                            translate=translate, opacity=0.5,
+                                            colormap=labels_colormap(colors), metadata=metadata)
+        self._show_scores(result, dice, names)
+        self._show_signatures(result.signatures)
+        self.save_model_button.setEnabled(True)
+        self.export_button.setEnabled(True)
+        self.labels_ready.emit(labels)
+
+    def _show_scores(self, result, dice, names) -> None:
+        eps_l, eps_m = result.eps_l, result.eps_m
+        how = result.model.scores.get("eps_l_method", "")
+        parts = [f"scale {result.scale} (tiles of {1 << result.scale} px), "
+                 f"{result.model.feature_set}, {result.model.classifier_name.upper()}"]
+        if eps_l is not None:
+            parts.append(f"eps_l = {eps_l:.2f} % ({how}), eps_m = {eps_m:.3f}")
+        regularized = result.model.scores.get("regularized")
+        if regularized:
+            parts.append(f"covariance regularised for material(s) {regularized}")
+        if dice:
+            parts.append("Dice: " + ", ".join(
+                f"{names.get(k, k)} {v:.3f}" for k, v in dice.items() if not math.isnan(v)))
+        parts.append(f"{result.seconds.get('total', float('nan')):.2f} s")
+        self.scores.setText("; ".join(parts))
+
+    def _show_signatures(self, signatures: list[dict]) -> None:
+        columns = ["name", "tiles"] + [f"{m}_{s}" for m in MOMENT_NAMES for s in ("mean", "std")]
+        self.signature_table.clear()
+        self.signature_table.setColumnCount(len(columns))
+        self.signature_table.setRowCount(len(signatures))
+        self.signature_table.setHorizontalHeaderLabels(
+            [c.replace("_", " ") for c in columns])
+        for row, signature in enumerate(signatures):
+            for column, key in enumerate(columns):
+                value = signature.get(key, "")
+                text = f"{value:.4g}" if isinstance(value, float) else str(value)
+                self.signature_table.setItem(row, column, QTableWidgetItem(text))
+        self.signature_table.resizeColumnsToContents()
+
+    # -- files -----------------------------------------------------------------------------
+    def export_signatures(self, path) -> None:
+        """Write the material signatures of the last run as CSV."""
+        from ..segmentation._cli import write_signatures_csv
+
+        if self.result is None:
+            notify_error("classify first: the signatures come from a classification.")
+            return
+        try:
+            write_signatures_csv(self.result.signatures, path, force=True)
+        except (ValueError, OSError) as exc:
+            notify_error(f"could not write the signatures: {exc}")
+            return
+        notify_info(f"material signatures written to {path}")
+
+    def save_model(self, path) -> None:
+        """Save the model of the last run (.npz, no pickles)."""
+        if self.result is None:
+            notify_error("classify first: there is no fitted model to save yet.")
+            return
+        try:
+            self.result.model.save(path, force=True)
+        except (ValueError, OSError) as exc:
+            notify_error(f"could not save the model: {exc}")
+            return
+        notify_info(f"model saved to {path}")
+
+    def load_model(self, path) -> None:
+        """Load a saved model; 'Apply loaded model' then classifies the selected image."""
+        try:
+            model = load_model(path)
+        except (ValueError, OSError) as exc:
+            notify_error(f"could not load the model: {exc}")
+            return
+        self.loaded_model = model
+        self.apply_model_button.setEnabled(True)
+        names = ", ".join(m.name for m in model.materials)
+        self.model_label.setText(
+            f"loaded: {model.ndim}-D, scale {model.scale}, {model.feature_set}, "
+            f"{model.classifier_name.upper()}, materials {names}")
+
+    def _on_export_clicked(self) -> None:
+        path, _ = QFileDialog.getSaveFileName(self, "Export signatures", "signatures.csv",
+                                              "CSV (*.csv)")
+        if path:
+            self.export_signatures(path)
+
+    def _on_save_model_clicked(self) -> None:
+        path, _ = QFileDialog.getSaveFileName(self, "Save model", "model.npz",
+                                              "SWA model (*.npz)")
+        if path:
+            self.save_model(path if path.endswith(".npz") else path + ".npz")
+
+    def _on_load_model_clicked(self) -> None:
+        path, _ = QFileDialog.getOpenFileName(self, "Load model", "", "SWA model (*.npz)")
+        if path:
+            self.load_model(path)

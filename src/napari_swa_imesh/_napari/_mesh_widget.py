@@ -1,0 +1,300 @@
+"""Mesh widget: IMESH a Labels layer into a Surface coloured per element, with its quality."""
+
+from __future__ import annotations
+
+from typing import TYPE_CHECKING
+
+import numpy as np
+from qtpy.QtCore import Qt, Signal
+from qtpy.QtWidgets import (QCheckBox, QComboBox, QFileDialog, QFormLayout, QLabel,
+                            QListWidget, QListWidgetItem, QPushButton, QVBoxLayout, QWidget)
+
+from ..mesh._checks import check_mesh
+from ..mesh._export import MESH_SUFFIXES, write_mesh
+from ..mesh._imesh import mesh_labels
+from ..mesh._quality import QUALITY_METRICS
+from ._layers import MESH_KEY, LayerCombo, default_color, layer_spacing, mesh_translate
+from ._surface import mesh_surface
+from ._tasks import TaskPanel, notify_error, notify_info
+
+if TYPE_CHECKING:
+    import napari
+
+    from ..mesh._types import Mesh
+
+__all__ = ["MeshWidget", "COLOR_BY_QUALITY", "COLOR_BY_MATERIAL", "CHECKS_KEY",
+           "SURFACE_VALUES_KEY"]
+
+COLOR_BY_QUALITY = "quality (radius-to-edge)"
+COLOR_BY_MATERIAL = "material"
+CHECKS_KEY = "swa_imesh_checks"
+SURFACE_VALUES_KEY = "swa_imesh_surface_values"
+METHODS = ("template", "delaunay")
+_ELEMENT = {2: "triangles", 3: "tetrahedra"}
+
+
+def quality_metric(ndim: int):
+    """The radius-to-edge descriptor of the library for `ndim`-D elements."""
+    return next(m for m in QUALITY_METRICS if m.name == "quality" and m.dim == ndim)
+
+
+class MeshWidget(QWidget):
+    """Mesh a Labels layer; show the mesh, its quality histogram and checks; export it.
+
+    Signals
+    -------
+    mesh_ready(object)
+        A mesh Surface layer was created or updated.
+    """
+
+    mesh_ready = Signal(object)
+
+    def __init__(self, napari_viewer: "napari.viewer.Viewer", parent: QWidget | None = None):
+        from matplotlib.backends.backend_qtagg import FigureCanvasQTAgg
+        from matplotlib.figure import Figure
+
+        super().__init__(parent)
+        self.viewer = napari_viewer
+        self.mesh: Mesh | None = None
+        self.checks: dict | None = None
+        self.surface_layer = None
+
+        self.labels_combo = LayerCombo(self.viewer, ("Labels",))
+        self.labels_combo.currentTextChanged.connect(self._refresh_materials)
+        self.method_combo = QComboBox()
+        self.method_combo.addItems(list(METHODS))
+        self.method_combo.setToolTip("template: look-up-table mesher, conforming with a "
+                                     "quality bound; delaunay: the reference's Qhull step, "
+                                     "for comparison (not conforming in 3-D).")
+        self.exclude_list = QListWidget()
+        self.exclude_list.setMaximumHeight(110)
+        self.exclude_list.setToolTip("Checked materials are not meshed; their faces become "
+                                     "the mesh boundary.")
+        self.checks_box = QCheckBox("check the mesh (conforming, volumes, labels recovered)")
+        self.checks_box.setChecked(True)
+        self.color_combo = QComboBox()
+        self.color_combo.addItems([COLOR_BY_QUALITY, COLOR_BY_MATERIAL])
+        self.color_combo.currentTextChanged.connect(lambda *_: self.apply_colors())
+        self.edges_box = QCheckBox("show element edges")
+        self.edges_box.setChecked(True)
+        self.edges_box.toggled.connect(lambda *_: self.apply_colors())
+        self.mesh_button = QPushButton("Mesh")
+        self.mesh_button.clicked.connect(self.run_mesh)
+        self.export_button = QPushButton("Export mesh...")
+        self.export_button.setEnabled(False)
+        self.export_button.setToolTip("Write the mesh (" + ", ".join(
+            s for s in MESH_SUFFIXES if s != ".ele") + ").")
+        self.export_button.clicked.connect(self._on_export_clicked)
+        self.summary = QLabel("")
+        self.summary.setWordWrap(True)
+        self.summary.setTextInteractionFlags(Qt.TextSelectableByMouse)
+        self.figure = Figure(figsize=(4, 2.4))
+        self.canvas = FigureCanvasQTAgg(self.figure)
+        self.canvas.setMinimumHeight(200)
+        self.tasks = TaskPanel()
+
+        form = QFormLayout()
+        form.addRow("labels", self.labels_combo)
+        form.addRow("method", self.method_combo)
+        form.addRow("exclude", self.exclude_list)
+        form.addRow(self.checks_box)
+        form.addRow("colour by", self.color_combo)
+        form.addRow(self.edges_box)
+        layout = QVBoxLayout(self)
+        layout.addLayout(form)
+        layout.addWidget(self.mesh_button)
+        layout.addWidget(self.tasks)
+        layout.addWidget(self.summary)
+        layout.addWidget(self.canvas, 1)
+        layout.addWidget(self.export_button)
+        self._refresh_materials()
+
+    # -- inputs ----------------------------------------------------------------------------
+    def select_labels(self, layer) -> None:
+        """Mesh this Labels layer next (the workflow passes the classification)."""
+        self.labels_combo.select(layer)
+        self._refresh_materials()
+
+    def _refresh_materials(self, *_) -> None:
+        layer = self.labels_combo.layer()
+        self.exclude_list.clear()
+        if layer is None:
+            return
+        names = {int(k): str(v) for k, v in layer.metadata.get("material_names", {}).items()}
+        for label in np.unique(np.asarray(layer.data)).tolist():
+            text = f"{label}  {names.get(label, 'background' if label == 0 else '')}".rstrip()
+            item = QListWidgetItem(text)
+            item.setData(Qt.UserRole, int(label))
+            item.setFlags(item.flags() | Qt.ItemIsUserCheckable)
+            item.setCheckState(Qt.Checked if label == 0 else Qt.Unchecked)
+            self.exclude_list.addItem(item)
+
+    def excluded(self) -> list[int]:
+        """Labels checked for exclusion."""
+        return [self.exclude_list.item(i).data(Qt.UserRole)
+                for i in range(self.exclude_list.count())
+                if self.exclude_list.item(i).checkState() == Qt.Checked]
+
+    def set_excluded(self, labels) -> None:
+        wanted = {int(v) for v in labels}
+        for i in range(self.exclude_list.count()):
+            item = self.exclude_list.item(i)
+            item.setCheckState(Qt.Checked if item.data(Qt.UserRole) in wanted else Qt.Unchecked)
+
+    # -- run -------------------------------------------------------------------------------
+    def run_mesh(self):
+        """Mesh the selected Labels layer in a worker; show it when done."""
+        layer = self.labels_combo.layer()
+        if layer is None:
+            notify_error("no Labels layer to mesh: classify an image first (classify widget) "
+                         "or open a label image, and pick it in the mesh widget.")
+            return None
+        if layer.ndim not in (2, 3):
+            notify_error(f"Labels layer {layer.name!r} is {layer.ndim}-D; IMESH meshes 2-D "
+                         "and 3-D label images, so pick one of those.")
+            return None
+        data = np.asarray(layer.data)
+        spacing, exclude = layer_spacing(layer), self.excluded()
+        method, run_checks = self.method_combo.currentText(), self.checks_box.isChecked()
+        names = {int(k): str(v) for k, v in layer.metadata.get("material_names", {}).items()}
+
+        def steps():
+            yield 0, 3, f"{method} mesh of the balanced 2^d-tree"
+            mesh = mesh_labels(data, method=method, exclude=exclude, spacing=spacing,
+                               material_names=names)
+            checks = None
+            if run_checks:
+                yield 1, 3, "checking the mesh (conforming, volumes, labels recovered)"
+                checks = check_mesh(mesh, data, exclude=exclude)
+            yield 2, 3, "faces to draw"
+            surface = mesh_surface(mesh)
+            yield 3, 3, "done"
+            return mesh, checks, surface
+
+        return self.tasks.run(steps, title="IMESH meshing", total=3,
+                              on_result=lambda out: self._show_mesh(layer, *out))
+
+    # -- results (main thread) ---------------------------------------------------------------
+    def _show_mesh(self, labels, mesh: "Mesh", checks, surface: dict) -> None:
+        self.mesh, self.checks = mesh, checks
+        data = (surface["vertices"], surface["triangles"], surface["quality"])
+        values = {"quality": surface["quality"], "material": surface["material"]}
+        metadata = {MESH_KEY: mesh, CHECKS_KEY: checks, SURFACE_VALUES_KEY: values}
+        name = f"{labels.name} mesh"
+        translate = mesh_translate(labels)
+        existing = self.viewer.layers[name] if name in self.viewer.layers else None
+        if existing is not None and type(existing).__name__ == "Surface" and \
+                existing.ndim == mesh.ndim:
+            existing.vertex_colors = None
+            existing.data = data
+            existing.translate = translate
+            existing.metadata.update(metadata)
+            layer = existing
+        else:
+            layer = self.viewer.add_surface(data, name=name, translate=translate,
+                                            metadata=metadata, shading="none")
+        self.surface_layer = layer
+        self.apply_colors()
+        self._show_summary(mesh, checks, surface["n_faces"])
+        self._draw_histogram(mesh)
+        self.export_button.setEnabled(True)
+        self.mesh_ready.emit(layer)
+
+    def apply_colors(self) -> None:
+        """Colour the mesh Surface by element quality or by material."""
+        layer = self.surface_layer
+        if layer is None or SURFACE_VALUES_KEY not in layer.metadata:
+            return
+        values = layer.metadata[SURFACE_VALUES_KEY]
+        mesh = layer.metadata[MESH_KEY]
+        layer.wireframe.visible = self.edges_box.isChecked()
+        layer.wireframe.color = "black"
+        if self.color_combo.currentText() == COLOR_BY_MATERIAL:
+            from napari.utils.colormaps.standardize_color import transform_color
+
+            materials = np.unique(values["material"])
+            table = np.stack([transform_color(default_color(m))[0] for m in materials])
+            layer.vertex_colors = table[np.searchsorted(materials, values["material"])]
+        else:
+            metric = quality_metric(mesh.ndim)
+            worst = float(np.max(values["quality"])) if len(values["quality"]) else 1.0
+            layer.vertex_colors = None
+            layer.vertex_values = values["quality"]
+            layer.colormap = "turbo"
+            layer.contrast_limits = [metric.optimal_range[0],
+                                     max(metric.optimal_range[1], worst) + 1e-9]
+
+    def _show_summary(self, mesh: "Mesh", checks, n_faces: int) -> None:
+        info = mesh.info
+        element = _ELEMENT[mesh.ndim]
+        materials, counts = np.unique(mesh.material, return_counts=True)
+        per_material = ", ".join(
+            f"{mesh.material_names.get(int(m), int(m))}: {c}" for m, c in zip(materials, counts))
+        lo, hi = info.get("angle_range", (float("nan"), float("nan")))
+        angle = "angles" if mesh.ndim == 2 else "dihedral angles"
+        lines = [f"{len(mesh.points)} vertices, {mesh.n_cells} {element} ({per_material})",
+                 f"worst radius-to-edge ratio {float(mesh.quality.max()):.3f}; "
+                 f"{angle} {lo:.1f} to {hi:.1f} deg"]
+        if checks is None:
+            lines.append("checks not run")
+        elif checks.get("all_passed"):
+            lines.append("checks: all passed (conforming, positive volumes, every element in "
+                         "one leaf, labels recovered)")
+        else:
+            failed = [k for k, v in checks.items() if v is False]
+            lines.append(f"checks FAILED: {', '.join(failed)}")
+        if mesh.ndim == 3:
+            lines.append(f"shown: {n_faces} boundary and interface faces (3-D view: "
+                         "View > Toggle Ndisplay)")
+        self.summary.setText("\n".join(lines))
+
+    def _draw_histogram(self, mesh: "Mesh") -> None:
+        from ._layers import theme_colors
+
+        dark, background, text = theme_colors(self.viewer)
+        metric = quality_metric(mesh.ndim)
+        fig = self.figure
+        fig.clear()
+        fig.set_facecolor(background)
+        ax = fig.add_subplot(1, 1, 1)
+        ax.set_facecolor(background)
+        q = mesh.quality[np.isfinite(mesh.quality)]
+        lo, hi = metric.optimal_range
+        ax.axvspan(lo, hi, color="#2ca02c", alpha=0.18, lw=0, label="IMESH bound range")
+        # the range always spans the bound, so a mesh of one element shape still bins
+        span = (min(lo, float(q.min(initial=lo))), max(hi, float(q.max(initial=hi))))
+        ax.hist(q, bins=40, range=span, color="#6fb1ff" if dark else "#1f77b4")
+        ax.set_yscale("log")
+        ax.set_xlabel("radius-to-edge ratio (circumradius / shortest edge)", color=text,
+                      fontsize=8)
+        ax.set_ylabel("elements", color=text, fontsize=8)
+        ax.tick_params(colors=text, labelsize=7)
+        for spine in ax.spines.values():
+            spine.set_color(text)
+        ax.legend(fontsize=7, frameon=False, labelcolor=text)
+        fig.tight_layout()
+        self.canvas.draw_idle()
+
+    # -- export ----------------------------------------------------------------------------
+    def export_mesh(self, path):
+        """Write the current mesh in the format `path`'s suffix names, in a worker."""
+        if self.mesh is None:
+            notify_error("mesh a Labels layer first; there is no mesh to export yet.")
+            return None
+        mesh = self.mesh
+
+        def steps():
+            yield 0, 1, f"writing {path}"
+            written = write_mesh(mesh, path, force=True)
+            yield 1, 1, "done"
+            return written
+
+        return self.tasks.run(steps, title="Mesh export", total=1, on_result=lambda written:
+                              notify_info("mesh written to " + ", ".join(map(str, written))))
+
+    def _on_export_clicked(self) -> None:
+        filters = ";;".join(f"{text} (*{suffix})" for suffix, text in MESH_SUFFIXES.items()
+                            if suffix != ".ele")
+        path, _ = QFileDialog.getSaveFileName(self, "Export mesh", "mesh.vtu", filters)
+        if path:
+            self.export_mesh(path)

@@ -1,0 +1,61 @@
+"""The main widget (Layers > Segment): Samples | RES | Classify | Mesh tabs kept in step."""
+
+from __future__ import annotations
+
+from typing import TYPE_CHECKING
+
+from qtpy.QtWidgets import QScrollArea, QTabWidget, QVBoxLayout, QWidget
+
+from ._classify_widget import ClassifyWidget
+from ._mesh_widget import MeshWidget
+from ._res_widget import ResWidget
+from ._samples_widget import SamplesWidget
+
+if TYPE_CHECKING:
+    import napari
+
+__all__ = ["WorkflowWidget"]
+
+
+def _scrolled(widget: QWidget) -> QScrollArea:
+    area = QScrollArea()
+    area.setWidget(widget)
+    area.setWidgetResizable(True)
+    return area
+
+
+class WorkflowWidget(QWidget):
+    """The segmentation-and-meshing workflow in four tabs.
+
+    The tabs are the plugin's four widgets; this one only passes choices along: the
+    samples layer to the RES and classify tabs, the chosen scale to the samples checks and
+    the classifier, the classification to the mesher.
+    """
+
+    def __init__(self, napari_viewer: "napari.viewer.Viewer", parent: QWidget | None = None):
+        super().__init__(parent)
+        self.viewer = napari_viewer
+        self.samples = SamplesWidget(napari_viewer)
+        self.res = ResWidget(napari_viewer)
+        self.classify = ClassifyWidget(napari_viewer)
+        self.mesh = MeshWidget(napari_viewer)
+        self.tabs = QTabWidget()
+        for widget, title in ((self.samples, "Samples"), (self.res, "RES"),
+                              (self.classify, "Classify"), (self.mesh, "Mesh")):
+            self.tabs.addTab(_scrolled(widget), title)
+        layout = QVBoxLayout(self)
+        layout.setContentsMargins(0, 0, 0, 0)
+        layout.addWidget(self.tabs)
+
+        self.samples.samples_layer_changed.connect(self._on_samples_layer)
+        self.res.scale_chosen.connect(self.classify.set_scale)
+        self.res.scale_chosen.connect(self.samples.set_scale)
+        self.classify.labels_ready.connect(self.mesh.select_labels)
+        self._on_samples_layer(self.samples.samples_layer())
+
+    def _on_samples_layer(self, layer) -> None:
+        if layer is None:
+            return
+        image = self.samples.image_layer()
+        self.res.select_layers(image=image, samples=layer)
+        self.classify.select_layers(image=image, samples=layer)
