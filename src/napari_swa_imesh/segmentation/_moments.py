@@ -255,9 +255,9 @@ def _iter_moment_levels(
         yield mean, m1, m2, m3, m4, n
 
 
-def _finalize(mean: np.ndarray, m1: np.ndarray, m2: np.ndarray, m3: np.ndarray,
-              m4: np.ndarray, n: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Turn a level's sums into the (..., 4) moments array and the counts."""
+def _finalize_into(moments: np.ndarray, mean: np.ndarray, m1: np.ndarray, m2: np.ndarray,
+                   m3: np.ndarray, m4: np.ndarray, n: np.ndarray) -> None:
+    """Write the (..., 4) moments of one slab of tiles into `moments`."""
     inv_n = 1.0 / np.maximum(n, 1)
     # Power sums are about `mean`; shift them by the tiny residual c = M1 / n to the
     # true mean (corrected two-pass: Chan, Golub and LeVeque 1983).
@@ -270,7 +270,6 @@ def _finalize(mean: np.ndarray, m1: np.ndarray, m2: np.ndarray, m3: np.ndarray,
     mu3 = s3 - c * (3.0 * s2 - 2.0 * c2)
     mu4 = m4 * inv_n
     mu4 -= c * (4.0 * s3 - c * (6.0 * s2 - 3.0 * c2))
-    moments = np.empty(mean.shape + (4,), dtype=np.float64)
     np.add(mean, c, out=moments[..., 0])
     moments[..., 1] = var
     flat = np.sqrt(var) <= _ZERO_STD_RTOL * np.abs(moments[..., 0])
@@ -283,6 +282,17 @@ def _finalize(mean: np.ndarray, m1: np.ndarray, m2: np.ndarray, m3: np.ndarray,
     moments[..., 2] = mu3
     moments[..., 3] = mu4
     moments[n == 0] = np.nan
+
+
+def _finalize(mean: np.ndarray, m1: np.ndarray, m2: np.ndarray, m3: np.ndarray,
+              m4: np.ndarray, n: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Turn a level's sums into the (..., 4) moments array and the counts."""
+    moments = np.empty(mean.shape + (4,), dtype=np.float64)
+    # slabs of tiles: the dozen temporaries stay cache-sized
+    rows = max(1, _SLAB_PIXELS // 4 // max(1, int(np.prod(mean.shape[1:]))))
+    for first in range(0, mean.shape[0], rows):
+        part = slice(first, first + rows)
+        _finalize_into(moments[part], mean[part], m1[part], m2[part], m3[part], m4[part], n[part])
     return moments, n
 
 
