@@ -52,7 +52,7 @@ _MAX_RATE = 20.0  # exp(-20) ~ 2e-9: faster decay is indistinguishable from none
 _NEWTON_STEPS = 6
 _GRID_POINTS = 32  # neighbouring start rates differ by < 25 %
 # Work on slabs of tiles of about this many pixels to bound the FFT buffers.
-_CHUNK_PIXELS = 2**21
+_CHUNK_PIXELS = 2**18
 
 
 def _lag_sums(data: np.ndarray, tile: int, axis: int, max_lag: int) -> np.ndarray:
