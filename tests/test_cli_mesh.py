@@ -129,6 +129,19 @@ def test_delaunay_method_runs(tmp_path, capsys):
     assert one_json(stdout)["method"] == "delaunay"
 
 
+def test_failed_checks_exit_1_but_the_mesh_is_written(tmp_path, capsys):
+    # Qhull on the corners of a random volume: degenerate and non-conforming (SPEC 2)
+    np.save(tmp_path / "vol.npy", np.random.default_rng(0).integers(1, 4, (8, 8, 8)))
+    out = tmp_path / "d.vtu"
+    code, stdout, stderr = run(capsys, "mesh", tmp_path / "vol.npy", "-o", out,
+                               "--method", "delaunay", "--json")
+    assert code == 1
+    report = one_json(stdout)
+    assert report["checks"]["all_passed"] is False and report["checks"]["conforming"] is False
+    assert "warning" in stderr and "conforming" in stderr and "--method template" in stderr
+    assert out.is_file()
+
+
 def test_existing_output_needs_force(tmp_path, capsys):
     np.save(tmp_path / "labels.npy", three_materials_2d())
     out = tmp_path / "mesh.vtu"

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import importlib.util
 import itertools
+import shutil
 import sys
 import meshio
 import numpy as np
@@ -353,3 +354,31 @@ def test_mesher_output_passes_every_check_after_a_round_trip(tmp_path, shape, sp
         back = dataclasses.replace(back, spacing=mesh.spacing, shape=mesh.shape)
         checks = check_mesh(back, labels, exclude=(0,))
         assert checks["all_passed"], (suffix, checks)
+
+
+@pytest.mark.skipif(shutil.which("ccx") is None, reason="CalculiX (ccx) is not installed")
+def test_calculix_solves_on_the_abaqus_file(tmp_path):
+    """A static gravity load on sections given by our element sets: runs, sags downward."""
+    import subprocess
+
+    mesh = grid_mesh(np.array([[[1, 2], [2, 1]], [[1, 1], [2, 2]]]), names=NAMES)
+    write_mesh(mesh, tmp_path / "mesh.inp")
+    bottom = np.flatnonzero(mesh.points[:, 0] == 0) + 1  # plane 0 = z 0, 1-based nodes
+    sets = ",".join(map(str, bottom))
+    deck = "\n".join([
+        "*INCLUDE, INPUT=mesh.inp",
+        "*MATERIAL, NAME=STIFF", "*ELASTIC", "1000., 0.3", "*DENSITY", "1e-3",
+        "*SOLID SECTION, ELSET=bone, MATERIAL=STIFF",
+        "*SOLID SECTION, ELSET=soft_tissue, MATERIAL=STIFF",
+        f"*NSET, NSET=FIX\n{sets}", f"*NSET, NSET=ALL, GENERATE\n1, {len(mesh.points)}, 1",
+        "*STEP", "*STATIC", "*BOUNDARY", "FIX, 1, 3, 0.",
+        "*DLOAD", "bone, GRAV, 9.81, 0., 0., -1.", "soft_tissue, GRAV, 9.81, 0., 0., -1.",
+        "*NODE PRINT, NSET=ALL", "U", "*END STEP", ""])
+    (tmp_path / "run.inp").write_text(deck)
+    result = subprocess.run(["ccx", "run"], cwd=tmp_path, capture_output=True, text=True,
+                            timeout=60)
+    assert "ERROR" not in result.stdout and "Job finished" in result.stdout
+    rows = [ln.split() for ln in (tmp_path / "run.dat").read_text().splitlines()
+            if ln.split() and ln.split()[0].isdigit()]
+    uz = np.array([float(r[3]) for r in rows])
+    assert len(uz) == len(mesh.points) and uz.max() <= 0 and uz.min() < 0

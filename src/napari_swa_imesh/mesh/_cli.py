@@ -118,9 +118,12 @@ def _run_mesh(args: argparse.Namespace) -> int:
     else:
         print(_mesh_text(report))
     if not checks.get("all_passed", False):
-        failed = [k for k, v in checks.items() if v is False]
+        failed = ", ".join(k for k, v in checks.items() if v is False and k != "all_passed")
+        advice = ("the delaunay method is kept for comparison and is known to fail them; "
+                  "use --method template for a mesh to compute on"
+                  if args.method == "delaunay" else "please report this with the input")
         print(f"swa-imesh mesh: warning: the mesh was written but failed the checks "
-              f"{failed}; please report this with the input.", file=sys.stderr)
+              f"({failed}); {advice}.", file=sys.stderr)
         return 1
     return 0
 

@@ -413,12 +413,13 @@ def _write_abaqus(mesh: Mesh, m, tmp: str) -> None:
     set_names = _abaqus_set_names(_material_names(mesh, materials))
     cell_sets = {set_names[int(mat)]: [np.flatnonzero(material == mat)] for mat in materials}
     out = meshio.Mesh(m.points, m.cells, cell_sets=cell_sets)
-    meshio.write(tmp, out, file_format="abaqus")
+    # 13 significant digits keep every number within 20 characters, the field width
+    # CalculiX (the common free reader of .inp) takes; longer fields are rejected there
+    meshio.write(tmp, out, file_format="abaqus", float_fmt=".12e")
     # meshio names triangles R3D3 (a rigid surface); a 2-D solid wants a continuum
     # element, and the material ids ride along as comments so read_mesh recovers them.
     text = Path(tmp).read_text()
-    if mesh.ndim == 2:
-        text = re.sub(r"(?im)^\*ELEMENT, TYPE=\w+$", "*ELEMENT, TYPE=CPS3", text)
+    text = re.sub(r"(?im)^\*ELEMENT, TYPE=\w+$", f"*ELEMENT, TYPE={_ABAQUS_TYPE[mesh.ndim]}", text)
     notes = "".join(f"{_NAME_NOTE} {mat} {name}\n" for mat, name in set_names.items())
     Path(tmp).write_text(notes + text)
 
