@@ -134,7 +134,7 @@ def quality_table(dim: int) -> list[dict]:
     --------
     >>> rows = quality_table(2)
     >>> len(rows), round(max(r["radius_edge_ratio"] for r in rows), 4)
-    (2, 0.7071)
+    (3, 0.7071)
     """
     d = _check_dim(dim)
     configs = leaf_configurations(d)

@@ -14,7 +14,7 @@ import numpy as np
 
 from .._tree import build_tree
 from .._validation import as_labels
-from ._quality import signed_volumes
+from ._quality import _det, signed_volumes
 from ._types import Mesh
 
 __all__ = ["check_mesh", "rasterize_materials"]
@@ -48,10 +48,10 @@ def _rasterize(points: np.ndarray, cells: np.ndarray, material: np.ndarray, shap
     hi = np.minimum(hi, np.array(shape) - 1)
     extent = hi - lo + 1  # (M, d) pixel centres per axis in the bounding box
     edges = p[:, 1:] - p[:, :1]  # (M, d, d), rows are edge vectors
-    det = np.linalg.det(edges)
+    det = _det(edges)
     ok = (extent > 0).all(axis=1) & (np.abs(det) > _TOL)
     inv = np.zeros_like(edges)
-    inv[ok] = np.linalg.inv(edges[ok])
+    inv[ok] = _inv(edges[ok])
     # bucket by the bounding box side rounded up to a power of two
     side = np.left_shift(1, np.ceil(np.log2(np.maximum(extent.max(axis=1), 1))).astype(np.int64))
     for b in np.unique(side[ok]):
@@ -101,6 +101,44 @@ def rasterize_materials(mesh: Mesh, *, fill: int = -1) -> np.ndarray:
     return out.reshape(mesh.shape)
 
 
+def _inv(m: np.ndarray) -> np.ndarray:
+    """(n, d, d) inverses by the adjugate (d = 2, 3); callers skip singular matrices."""
+    det = _det(m)[:, None, None]
+    if m.shape[-1] == 2:
+        adj = np.stack([np.stack([m[:, 1, 1], -m[:, 0, 1]], -1),
+                        np.stack([-m[:, 1, 0], m[:, 0, 0]], -1)], 1)
+        return adj / det
+    # rows of the inverse's transpose are cross products of the columns... of m's rows
+    a, b, c = m[:, 0], m[:, 1], m[:, 2]
+    return np.stack([np.cross(b, c), np.cross(c, a), np.cross(a, b)], axis=2) / det
+
+
+def _group_rows(rows: np.ndarray):
+    """Group equal rows of an (F, k) int array: (inverse (F,), counts (U,)).
+
+    Packs each row into one int64 when the ids fit, else sorts lexicographically; both
+    are far faster than ``np.unique(axis=0)``.
+    """
+    n = int(rows.max()) + 1 if rows.size else 1
+    k = rows.shape[1]
+    if n ** k < 2**63:
+        key = np.zeros(len(rows), np.int64)
+        for j in range(k):
+            key = key * n + rows[:, j]
+        order = np.argsort(key, kind="stable")
+        sorted_key = key[order]
+        new = np.r_[True, sorted_key[1:] != sorted_key[:-1]]
+    else:
+        order = np.lexsort(rows.T[::-1])
+        sorted_rows = rows[order]
+        new = np.r_[True, (sorted_rows[1:] != sorted_rows[:-1]).any(axis=1)]
+    group_sorted = np.cumsum(new) - 1
+    inverse = np.empty(len(rows), np.int64)
+    inverse[order] = group_sorted
+    counts = np.bincount(group_sorted)
+    return inverse, counts
+
+
 def _facets(cells: np.ndarray):
     """All facets of all cells: sorted vertex ids (F, d) and the opposite vertex (F,)."""
     n_vert = cells.shape[1]
@@ -112,9 +150,12 @@ def _facets(cells: np.ndarray):
 def _side(points, facets, opposite) -> np.ndarray:
     """Sign of the opposite vertex relative to the facet with its vertices in sorted order."""
     base = points[facets[:, 0]]
-    vectors = np.concatenate([points[facets[:, 1:]] - base[:, None, :],
-                              (points[opposite] - base)[:, None, :]], axis=1)
-    return np.sign(np.linalg.det(vectors))
+    a = points[facets[:, 1]] - base
+    c = points[opposite] - base
+    if points.shape[1] == 2:
+        return np.sign(a[:, 0] * c[:, 1] - a[:, 1] * c[:, 0])
+    b = points[facets[:, 2]] - base
+    return np.sign(np.einsum("fi,fi->f", a, np.cross(b, c)))
 
 
 def _outward_normal(points, facets, opposite) -> np.ndarray:
@@ -192,13 +233,12 @@ def check_mesh(mesh: Mesh, labels, *, exclude=()) -> dict:
 
     # facets: shared by at most two cells, from opposite sides; the rest on the boundary
     facets, opposite = _facets(cells)
-    uniq, inverse, counts = np.unique(facets, axis=0, return_inverse=True, return_counts=True)
-    inverse = inverse.ravel()
+    inverse, counts = _group_rows(facets)
     per_occurrence = counts[inverse]
     out["n_facets_shared_3plus"] = int((counts >= 3).sum())
     twice = per_occurrence == 2
     side_sum = np.bincount(inverse[twice], weights=_side(points, facets[twice], opposite[twice]),
-                           minlength=len(uniq))
+                           minlength=len(counts))
     out["n_misoriented_facets"] = int(((counts == 2) & (side_sum != 0)).sum())
     once = per_occurrence == 1
     fpts = points[facets[once]]  # (B, d, d)
