@@ -191,6 +191,17 @@ def test_bad_labels_exit_2_with_one_clear_line(tmp_path, capsys, kind, message):
     assert not (tmp_path / "m.vtu").exists()
 
 
+def test_colour_picture_is_not_taken_for_a_volume(tmp_path, capsys):
+    import imageio.v3 as iio
+
+    rgb = np.zeros((8, 9, 3), dtype=np.uint8)
+    rgb[2:5, 3:7] = (255, 0, 0)
+    iio.imwrite(tmp_path / "photo.png", rgb)
+    code, _, stderr = run(capsys, "mesh", tmp_path / "photo.png", "-o", tmp_path / "m.vtu")
+    assert code == 2
+    assert "colour picture" in stderr and "(8, 9, 3)" in stderr
+
+
 def test_all_excluded_image_is_refused(tmp_path, capsys):
     np.save(tmp_path / "zeros.npy", np.zeros((4, 4), dtype=np.uint8))
     code, _, stderr = run(capsys, "mesh", tmp_path / "zeros.npy", "-o", tmp_path / "m.vtu",

@@ -24,7 +24,8 @@ def add_commands(subparsers) -> None:
         "mesh", help="mesh a label image into triangles (2-D) or tetrahedra (3-D)",
         description="Mesh a 2-D or 3-D label image on a balanced 2^d-tree (IMESH); every "
                     "element carries one material. The output suffix picks the format: "
-                    f"{', '.join(MESH_SUFFIXES)}.")
+                    f"{', '.join(MESH_SUFFIXES)} (.node/.ele write both files: Triangle in "
+                    "2-D, TetGen in 3-D; .xdmf writes its .h5 beside it).")
     p.add_argument("labels", metavar="LABELS",
                    help="label image (.tif, .npy, .nii/.nii.gz, .png); 0 is background")
     p.add_argument("-o", "--output", required=True, metavar="MESH",
@@ -88,7 +89,7 @@ def _run_mesh(args: argparse.Namespace) -> int:
     import numpy as np
 
     from .._validation import as_labels, normalize_spacing
-    from ..io import read_image
+    from ..io import image_suffix, read_image
     from ._export import mesh_output_paths, write_mesh
 
     timer = StepTimer()
@@ -97,6 +98,11 @@ def _run_mesh(args: argparse.Namespace) -> int:
     names = parse_material_names(args.material_names)
     with timer("read"):
         image, file_spacing = read_image(args.labels)
+    if image_suffix(args.labels) in (".png", ".jpg", ".jpeg") and image.ndim == 3:
+        raise ValueError(
+            f"{Path(args.labels).name} is a colour picture (shape {image.shape}); a label "
+            "image has one value per pixel. Save the labels as a grey PNG, .tif or .npy."
+        )
     labels = as_labels(image, name=f"labels in {Path(args.labels).name}", min_ndim=2, max_ndim=3)
     spacing = normalize_spacing(args.spacing if args.spacing else file_spacing, labels.ndim)
 
