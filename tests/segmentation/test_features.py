@@ -28,7 +28,7 @@ def test_table_2_1():
     assert n_features("f7", 3, 2) == 4 + 7 * 2 + 1 + 3
 
 
-@pytest.mark.parametrize("shape", [(21, 30), (10, 13, 9)], ids=str)
+@pytest.mark.parametrize("shape", [(21, 30), (10, 13, 9), (6, 5, 4, 7)], ids=str)
 @pytest.mark.parametrize("feature_set", sorted(FEATURE_SETS))
 def test_every_set_matches_its_groups(shape, feature_set):
     rng = np.random.default_rng(len(shape))
