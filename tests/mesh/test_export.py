@@ -382,3 +382,14 @@ def test_calculix_solves_on_the_abaqus_file(tmp_path):
             if ln.split() and ln.split()[0].isdigit()]
     uz = np.array([float(r[3]) for r in rows])
     assert len(uz) == len(mesh.points) and uz.max() <= 0 and uz.min() < 0
+
+
+def test_triangle_itself_rebuilds_the_mesh_from_our_files(tmp_path):
+    triangle = pytest.importorskip("triangle", reason="the triangle package is optional")
+    mesh = sample_mesh(2)
+    write_mesh(mesh, tmp_path / "mesh.node")
+    data = triangle.load(str(tmp_path), "mesh")
+    rebuilt = triangle.triangulate(data, "r")  # -r: reconstruct the given mesh
+    assert np.array_equal(np.unique(np.sort(rebuilt["triangles"], axis=1), axis=0),
+                          np.unique(np.sort(data["triangles"], axis=1), axis=0))
+    np.testing.assert_array_equal(rebuilt["triangle_attributes"][:, 0], mesh.material)
