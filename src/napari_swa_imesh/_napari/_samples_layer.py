@@ -62,7 +62,7 @@ def new_samples_layer(viewer: "napari.viewer.Viewer", image_layer, materials: li
         name=name or f"{image_layer.name} samples", face_color="transparent",
         edge_width=_EDGE_WIDTH_PX, features=_empty_features(),
         text={"string": "{name}{flag}", "color": "white", "size": 9, "anchor": "upper_left"},
-        metadata={SAMPLES_KEY: image_layer.name})
+        metadata={SAMPLES_KEY: image_layer.name, MATERIALS_KEY: _material_table(materials)})
     set_layer_materials(layer, materials)
     set_current_material(layer, materials[0] if materials else Material(1, "material 1"),
                          depth=depth if image_layer.ndim == 3 else 1)
@@ -84,11 +84,14 @@ def layer_materials(layer) -> list[Material]:
     return table
 
 
+def _material_table(materials: list[Material]) -> list[dict]:
+    return [{"label": m.label, "name": m.name, "color": m.color or default_color(m.label)}
+            for m in materials]
+
+
 def set_layer_materials(layer, materials: list[Material]) -> None:
     """Store the material table in the layer and rename/recolour its shapes to match."""
-    layer.metadata[MATERIALS_KEY] = [
-        {"label": m.label, "name": m.name, "color": m.color or default_color(m.label)}
-        for m in materials]
+    layer.metadata[MATERIALS_KEY] = _material_table(materials)
     if len(layer.data) and "label" in layer.features:
         names = {m.label: m.name for m in materials}
         features = layer.features.copy()

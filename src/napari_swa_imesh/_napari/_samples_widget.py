@@ -170,6 +170,7 @@ class SamplesWidget(QWidget):
                                          Material(2, "material 2", default_color(2))]
         layer = sl.new_samples_layer(self.viewer, image, materials, depth=self.depth_spin.value())
         self.samples_combo.select(layer)
+        self._on_samples_layer_selected()
         self.viewer.layers.selection.active = layer
         layer.mode = "add_rectangle"
         return layer

@@ -1,0 +1,141 @@
+"""Samples widget: drawing with a material, flags, depth in 3-D, JSON round trip."""
+
+import json
+
+import numpy as np
+import pytest
+from conftest import wait_idle
+
+from napari_swa_imesh._napari._boxes import box_to_rectangle, rectangles_to_boxes
+from napari_swa_imesh._napari._samples_widget import SamplesWidget
+from napari_swa_imesh.segmentation import SampleBox, load_samples
+
+
+def rect(r0, c0, r1, c1):
+    """Rectangle covering pixels [r0, r1) x [c0, c1) (pixel edges at half integers)."""
+    return np.array([[r0, c0], [r0, c1], [r1, c1], [r1, c0]], float) - 0.5
+
+
+def test_rectangles_get_the_current_material_and_its_colour(mosaic_viewer):
+    viewer, image, _ = mosaic_viewer
+    widget = SamplesWidget(viewer)
+    layer = widget.new_samples_layer()
+    assert layer.mode == "add_rectangle"
+    assert tuple(layer.scale) == tuple(image.scale)
+    widget.set_materials([])
+    brick = widget.add_material("brick")
+    grass = widget.add_material("grass")
+    widget.select_material(brick.label)
+    layer.add_rectangles([rect(0, 0, 64, 64)])
+    widget.select_material(grass.label)
+    layer.add_rectangles([rect(100, 100, 164, 164)])
+    assert layer.features["name"].tolist() == ["brick", "grass"]
+    assert widget.box_table.rowCount() == 2
+    assert layer.edge_color[0].tolist() != layer.edge_color[1].tolist()
+    samples = widget.current_samples()
+    assert [(b.label, b.start, b.stop) for b in samples.boxes] == \
+        [(1, (0, 0), (64, 64)), (2, (100, 100), (164, 164))]
+    # re-assigning a box changes its material and colour
+    layer.selected_data = {1}
+    widget.select_material(brick.label)
+    widget.assign_selected()
+    assert layer.features["label"].tolist() == [1, 1]
+    np.testing.assert_allclose(layer.edge_color[1], layer.edge_color[0])
+
+
+def test_flags_outside_too_small_constant_and_not_a_box(mosaic_viewer):
+    viewer, image, _ = mosaic_viewer
+    image.data[200:220, 10:30] = 0.5          # a flat patch, as padding would be
+    widget = SamplesWidget(viewer)
+    layer = widget.new_samples_layer()
+    widget.scale_spin.setValue(4)             # tiles of 16 px
+    layer.add_rectangles([rect(0, 0, 64, 64), rect(240, 240, 270, 270), rect(10, 100, 20, 200),
+                          rect(200, 10, 220, 30)])
+    layer.add_ellipses([rect(100, 100, 120, 120)])
+    report = widget.report
+    assert report.flags[0] == []
+    assert report.flags[1] == ["outside"]
+    assert report.flags[2] == ["too small at scale 4"]
+    assert "constant" in report.flags[3]
+    assert report.flags[4] == ["not a box"]
+    assert report.blocking == [1, 4]
+    # flags are shown on the canvas (shape text) and in the table, never dropped
+    assert "outside" in layer.text.values[1]
+    assert widget.box_table.item(2, 3).text() == "too small at scale 4"
+    with pytest.raises(ValueError, match="outside the image.*move it inside"):
+        widget.current_samples()
+    # a larger scale flags more boxes: the flags follow the chosen scale
+    widget.set_scale(7)
+    assert "too small at scale 7" in widget.report.flags[0]
+
+
+def test_json_round_trip_through_the_widget(mosaic_viewer, tmp_path, notifications):
+    viewer, image, _ = mosaic_viewer
+    data = {"materials": [{"label": 1, "name": "brick", "color": "#d62728"},
+                          {"label": 2, "name": "grass", "color": "#2ca02c"}],
+            "boxes": [{"label": 1, "start": [0, 0], "stop": [64, 128]},
+                      {"label": 2, "start": [96, 96], "stop": [160, 160]},
+                      {"label": 1, "start": [200, 8], "stop": [240, 40]}]}
+    src = tmp_path / "in.json"
+    src.write_text(json.dumps(data))
+    widget = SamplesWidget(viewer)
+    widget.import_samples(src)
+    layer = widget.samples_layer()
+    assert len(layer.data) == 3
+    assert [m.name for m in widget.materials()] == ["brick", "grass"]
+    from napari.utils.colormaps.standardize_color import transform_color
+    np.testing.assert_allclose(layer.edge_color[1], transform_color("#2ca02c")[0])
+    widget.export_samples(tmp_path / "out.json")
+    assert load_samples(tmp_path / "out.json").to_dict() == load_samples(src).to_dict()
+    assert not notifications.errors
+    # a file whose boxes do not fit the image is refused with what to do
+    data["boxes"][0]["stop"] = [64, 999]
+    src.write_text(json.dumps(data))
+    widget.import_samples(src)
+    assert any("outside the image" in m and "move or shrink" in m for m in notifications.errors)
+
+
+def test_3d_rectangle_with_depth_is_a_centred_box(phantom_viewer):
+    viewer, image, _ = phantom_viewer
+    widget = SamplesWidget(viewer)
+    layer = widget.new_samples_layer()
+    widget.depth_spin.setValue(6)
+    widget._on_current_material()
+    corners = np.array([[20, 9.5, 9.5], [20, 9.5, 29.5], [20, 29.5, 29.5], [20, 29.5, 9.5]])
+    layer.add_rectangles([corners])
+    (box,) = widget.current_samples().boxes
+    assert box.start == (17, 10, 10) and box.stop == (23, 30, 30)
+    overlay = viewer.layers[f"{layer.name} extent"]
+    assert sorted({float(r[0, 0]) for r in overlay.data}) == [17, 18, 19, 21, 22]
+    # changing the depth of the selected box updates the box and its overlay
+    layer.selected_data = {0}
+    widget.depth_spin.setValue(2)
+    assert widget.current_samples().boxes[0].start[0] == 19
+    assert len(overlay.data) == 1
+
+
+@pytest.mark.parametrize("box", [SampleBox(1, (3, 5), (11, 9)),
+                                 SampleBox(2, (4, 0, 2), (9, 16, 3)),
+                                 SampleBox(3, (0, 0, 0), (1, 1, 1))])
+def test_box_rectangle_round_trip(box):
+    d = len(box.start)
+    for axis in range(d if d == 3 else 1):
+        corners, depth = box_to_rectangle(box, thickness_axis=axis)
+        back = rectangles_to_boxes([corners], [box.label], [depth], (32,) * d)
+        assert back.boxes[0] == box
+        assert back.thickness_axis[0] == (axis if d == 3 else None)
+
+
+def test_samples_from_truth_match_the_library(mosaic_viewer, qtbot):
+    from napari_swa_imesh.segmentation import samples_from_truth
+
+    viewer, image, truth = mosaic_viewer
+    widget = SamplesWidget(viewer)
+    widget.truth_combo.select(truth)
+    widget.scale_spin.setValue(3)
+    widget.per_material_spin.setValue(5)
+    widget.samples_from_truth()
+    wait_idle(qtbot, widget)
+    expected = samples_from_truth(truth.data, scale=3, per_material=5)
+    assert widget.current_samples().boxes == expected.boxes
+    assert [m.name for m in widget.materials()] == ["brick", "grass"]
