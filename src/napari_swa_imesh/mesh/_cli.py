@@ -69,10 +69,10 @@ def parse_material_names(items) -> dict[int, str]:
             material = int(key)
         except ValueError:
             material = -1
-        if not sep or material < 0 or not name.strip():
+        if not sep or material < 0 or not name.strip() or '"' in name:
             raise ValueError(
-                f"--material-names expects ID=NAME pairs with a non-negative integer ID, "
-                f"such as 1=bone; got {item!r}."
+                f"--material-names expects ID=NAME pairs with a non-negative integer ID "
+                f"and a name without quotes, such as 1=bone; got {item!r}."
             )
         name = name.strip()
         twin = next((m for m, n in names.items() if n == name and m != material), None)

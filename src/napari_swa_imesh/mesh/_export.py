@@ -14,8 +14,9 @@ What each format holds
           after it; every per-cell array as ``$ElementData``.
 ``.xdmf`` XDMF 3 with its arrays in a ``.h5`` beside it (same stem; needs h5py); every
           array.
-``.inp``  Abaqus; one ``*ELSET`` per material named after it (CPS3 triangles in 2-D,
-          C3D4 tetrahedra in 3-D); no per-cell arrays (the format has none).
+``.inp``  Abaqus; one ``*ELSET`` per material named after it (made a valid Abaqus
+          label: ``soft tissue`` -> ``soft_tissue``); CPS3 triangles in 2-D, C3D4
+          tetrahedra in 3-D; no per-cell arrays (the format has none).
 ``.node`` Triangle (2-D; attributes material, quality) or TetGen (3-D; region
 ``.ele``  attribute material); both files are written, with the same stem.
 ========  ==========================================================================
