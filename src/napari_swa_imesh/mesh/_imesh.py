@@ -152,7 +152,9 @@ def mesh_tree(tree: RegionTree, *, method: str = "template", exclude=(), spacing
         seconds.update(vseconds)
         t = time.perf_counter()
         table = _template_quality(d, spacing_t)
+        template_id = template_id.astype(np.intp)  # once, not once per look-up
         cell_data = {name: values[template_id] for name, values in table.items()}
+        del template_id
         seconds["quality"] = time.perf_counter() - t
         info["n_kuhn_leaves"] = int(vseconds.pop("_n_kuhn"))
         seconds.pop("_n_kuhn", None)
@@ -171,6 +173,7 @@ def mesh_tree(tree: RegionTree, *, method: str = "template", exclude=(), spacing
                 spacing=spacing_t, shape=tuple(tree.shape),
                 material_names=dict(material_names or {}), info=info)
 
+    t = time.perf_counter()
     n_el = mesh.n_cells
     info["n_vertices"] = int(len(points))
     info["n_elements"] = n_el
@@ -179,8 +182,7 @@ def mesh_tree(tree: RegionTree, *, method: str = "template", exclude=(), spacing
     info["balance_extra_leaves"] = extra
     # estimate: leaves added by the stronger balance times the mean elements per leaf
     info["balance_element_cost"] = int(round(extra * info["elements_per_leaf"]))
-    finite = np.isfinite(mesh.quality)
-    info["worst_ratio"] = float(mesh.quality[finite].max()) if finite.any() else math.inf
+    info["worst_ratio"] = float(np.max(mesh.quality, initial=0.0))
     if d == 2:
         info["min_angle"] = float(np.nanmin(cell_data["min_angle"]))
         info["max_angle"] = float(np.nanmax(cell_data["max_angle"]))
@@ -189,6 +191,7 @@ def mesh_tree(tree: RegionTree, *, method: str = "template", exclude=(), spacing
         info["min_dihedral"] = float(np.nanmin(cell_data["min_dihedral"]))
         info["max_dihedral"] = float(np.nanmax(cell_data["max_dihedral"]))
         info["angle_range"] = [info["min_dihedral"], info["max_dihedral"]]
+    seconds["stats"] = time.perf_counter() - t
     if method == "delaunay" and _labels is not None:
         from ._checks import check_mesh
 
@@ -261,7 +264,7 @@ def _template_mesh(bal: RegionTree, meshed: np.ndarray):
 
     t = time.perf_counter()
     keys, which, template_of, new_points = cut_leaves(okey, size, hanging, strides)
-    leaf_of = leaves[which].astype(np.int32 if len(bal) < 2**31 else np.int64)
+    leaf_of = leaves[which]  # intp: it indexes the leaf arrays again below
     del which
     seconds["simplices"] = time.perf_counter() - t
 
@@ -315,11 +318,12 @@ def cut_leaves(okey: np.ndarray, size: np.ndarray, hanging: np.ndarray, strides:
     # group the other leaves by the case of each face: (face, case, members)
     groups = []
     for f, fsites in enumerate(luts.FACE_SITES[d]):
-        code = np.zeros(len(other), dtype=np.int64)
+        # uint8 codes: numpy's stable sort is a radix sort for them
+        code = np.zeros(len(other), dtype=np.uint8)
         for bit, site in enumerate(fsites):
-            code |= hanging[other, site].astype(np.int64) << bit
+            code |= hanging[other, site].astype(np.uint8) << np.uint8(bit)
         order = np.argsort(code, kind="stable")
-        bounds = np.searchsorted(code[order], np.arange((1 << len(fsites)) + 1))
+        bounds = np.searchsorted(code[order], np.arange((1 << len(fsites)) + 1), side="left")
         for case in range(1 << len(fsites)):
             if bounds[case + 1] > bounds[case]:
                 if len(luts.FACE_LUT[d][f][case]) == 0:
