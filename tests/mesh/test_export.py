@@ -132,7 +132,8 @@ def test_files_read_by_meshio_are_positively_oriented(tmp_path, ndim, suffix):
     for block in m.cells:
         assert (signed_volumes(points, block.data) > 0).all()
     # Gmsh files come back with nodes grouped by entity, so compare point sets
-    np.testing.assert_array_equal(np.unique(points, axis=0), np.unique(mesh.points[:, ::-1], axis=0))
+    np.testing.assert_array_equal(np.unique(points, axis=0),
+                                  np.unique(mesh.points[:, ::-1], axis=0))
 
 
 @pytest.mark.parametrize("ndim", [2, 3])
@@ -338,7 +339,8 @@ def test_gmsh_itself_reads_named_groups_and_positive_elements(tmp_path, ndim):
     assert quality.min() > 0
 
 
-@pytest.mark.parametrize(("shape", "spacing"), [((9, 7), (0.5, 2.0)), ((5, 6, 7), (1.0, 0.5, 0.25))])
+@pytest.mark.parametrize(("shape", "spacing"),
+                         [((9, 7), (0.5, 2.0)), ((5, 6, 7), (1.0, 0.5, 0.25))])
 def test_mesher_output_passes_every_check_after_a_round_trip(tmp_path, shape, spacing):
     """Conforming, positive, volumes, labels recovered: from the file, not from memory."""
     import dataclasses

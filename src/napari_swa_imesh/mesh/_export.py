@@ -211,9 +211,9 @@ def _gmsh_mesh(mesh: Mesh, m):
     tags = _gmsh_tags(materials)
     blocks = [material == mat for mat in materials]
 
-    cell_data: dict[str, list] = {}
-    cell_data["gmsh:physical"] = [np.full(b.sum(), tags[int(mat)]) for mat, b in zip(materials, blocks)]
-    cell_data["gmsh:geometrical"] = [np.full(b.sum(), tags[int(mat)]) for mat, b in zip(materials, blocks)]
+    # one entity per material, tagged like its physical group
+    block_tags = [np.full(b.sum(), tags[int(mat)]) for mat, b in zip(materials, blocks)]
+    cell_data = {"gmsh:physical": block_tags, "gmsh:geometrical": block_tags}
     field_data = {names[int(mat)]: np.array([tags[int(mat)], dim]) for mat in materials}
 
     # Gmsh 4 keeps physical tags on entities, and meshio writes an entity only if some
@@ -348,7 +348,8 @@ def write_mesh(mesh: Mesh, path, *, force: bool = False) -> list[Path]:
     temps: list[str] = []
     try:
         # one unique stem for all files: writers derive twins (.ele, .h5) from it
-        fd, tmp = tempfile.mkstemp(prefix=".swa-imesh-", suffix=targets[0].suffix, dir=targets[0].parent)
+        fd, tmp = tempfile.mkstemp(prefix=".swa-imesh-", suffix=targets[0].suffix,
+                                   dir=targets[0].parent)
         os.close(fd)
         temps = [tmp] + [str(Path(tmp).with_suffix(t.suffix)) for t in targets[1:]]
         _write_files(mesh, suffix, temps, targets)
@@ -393,7 +394,8 @@ def _write_format(mesh: Mesh, m, suffix: str, temps: list[str], targets: list[Pa
         _write_abaqus(mesh, m, temps[0])
     else:
         quality = mesh.cell_data.get("quality")
-        write_node_ele(temps[0], temps[1], m.points, m.cells[0].data, m.cell_data["material"][0], quality)
+        write_node_ele(temps[0], temps[1], m.points, m.cells[0].data,
+                       m.cell_data["material"][0], quality)
 
 
 def _require_h5py(verb: str) -> None:
@@ -464,7 +466,9 @@ def read_mesh(path) -> Mesh:
         points, cells, material, cell_data, names = _read_meshio(p, suffix)
     if points.shape[1] == 3 and cells.shape[1] == 3:
         if np.any(points[:, 2] != 0):
-            raise ValueError(f"{p} holds triangles in 3-D space; only flat 2-D meshes are supported.")
+            raise ValueError(
+                f"{p} holds triangles in 3-D space; only flat 2-D meshes are supported."
+            )
         points = points[:, :2]
     points = np.ascontiguousarray(points[:, ::-1], dtype=np.float64)
     cells = _orient_positive(points, cells)
