@@ -108,3 +108,30 @@ def test_dimension_mismatch():
     mesh = mesh_labels(LABELS[2])
     with pytest.raises(ValueError, match="needs a 3-D mesh"):
         check_mesh(mesh, LABELS[3])
+
+
+@pytest.mark.parametrize("offset", [0, 2**22])  # packed int64 keys, then the two-key sort
+def test_facet_grouping_matches_numpy_unique(offset):
+    from napari_swa_imesh.mesh._checks import _group_rows
+
+    rng = np.random.default_rng(0)
+    rows = np.sort(rng.integers(0, 40, (3000, 3)), axis=1) + offset
+    inverse, counts = _group_rows(rows)
+    _, inv_ref, counts_ref = np.unique(rows, axis=0, return_inverse=True, return_counts=True)
+    np.testing.assert_array_equal(inverse, inv_ref.ravel())
+    np.testing.assert_array_equal(counts, counts_ref)
+
+
+def test_chunked_passes_give_the_same_answer(monkeypatch):
+    from napari_swa_imesh.mesh import _checks
+
+    lab = LABELS[3]
+    mesh = mesh_labels(lab, exclude=(0,))
+    keep = np.arange(mesh.n_cells) != 7
+    broken = _broken(mesh, cells=mesh.cells[keep], material=mesh.material[keep])
+    whole = [check_mesh(m, lab, exclude=(0,)) for m in (mesh, broken)]
+    monkeypatch.setattr(_checks, "_FACETS_PER_PASS", 97)
+    monkeypatch.setattr(_checks, "_CELLS_PER_CHUNK", 13)
+    chunked = [check_mesh(m, lab, exclude=(0,)) for m in (mesh, broken)]
+    assert chunked == whole
+    assert whole[0]["all_passed"] and not whole[1]["conforming"]

@@ -21,6 +21,8 @@ __all__ = ["check_mesh", "rasterize_materials"]
 
 _TOL = 1e-9
 _CANDIDATES_PER_CHUNK = 1 << 22
+_CELLS_PER_CHUNK = 1 << 20
+_FACETS_PER_PASS = 1 << 23
 
 
 def _index_points(mesh: Mesh) -> np.ndarray:
@@ -28,49 +30,53 @@ def _index_points(mesh: Mesh) -> np.ndarray:
     return np.asarray(mesh.points, dtype=float) / spacing
 
 
-def _rasterize(points: np.ndarray, cells: np.ndarray, material: np.ndarray, shape):
+def _rasterize(points: np.ndarray, cells: np.ndarray, material: np.ndarray, shape,
+               labels: np.ndarray | None = None):
     """Which elements cover each pixel centre.
 
-    Returns flat arrays over the pixels: number of covering elements, and the smallest and
-    largest covering material (so a pixel covered by two materials is visible).
+    Returns flat arrays over the pixels: the number of covering elements and the material
+    of the last one; with `labels` (flat), also how many covering elements disagree with
+    the label of the pixel. Elements are bucketed by their bounding box, each axis rounded
+    up to a power of two, and tested in batches of a few million candidate centres.
     """
     d = len(shape)
     n_pix = math.prod(shape)
     hits = np.zeros(n_pix, np.int64)
-    mat_lo = np.full(n_pix, np.iinfo(np.int64).max)
-    mat_hi = np.full(n_pix, np.iinfo(np.int64).min)
-    if len(cells) == 0:
-        return hits, mat_lo, mat_hi
-    p = points[cells]  # (M, d+1, d)
-    lo = np.ceil(p.min(axis=1) - 0.5 - _TOL).astype(np.int64)
-    hi = np.floor(p.max(axis=1) - 0.5 + _TOL).astype(np.int64)
-    lo = np.maximum(lo, 0)
-    hi = np.minimum(hi, np.array(shape) - 1)
-    extent = hi - lo + 1  # (M, d) pixel centres per axis in the bounding box
-    edges = p[:, 1:] - p[:, :1]  # (M, d, d), rows are edge vectors
-    det = _det(edges)
-    ok = (extent > 0).all(axis=1) & (np.abs(det) > _TOL)
-    inv = np.zeros_like(edges)
-    inv[ok] = _inv(edges[ok])
-    # bucket by the bounding box side rounded up to a power of two
-    side = np.left_shift(1, np.ceil(np.log2(np.maximum(extent.max(axis=1), 1))).astype(np.int64))
-    for b in np.unique(side[ok]):
-        offsets = np.stack(np.unravel_index(np.arange(int(b) ** d), (int(b),) * d), axis=1)
-        members = np.flatnonzero(ok & (side == b))
-        step = max(1, _CANDIDATES_PER_CHUNK // len(offsets))
-        for start in range(0, len(members), step):
-            e = members[start:start + step]
-            pix = lo[e, None, :] + offsets[None]  # (n, b^d, d)
-            inbox = (pix <= hi[e, None, :]).all(axis=-1)
-            lam = np.einsum("nkd,nde->nke", pix + 0.5 - p[e, None, 0, :], inv[e])  # barycentric 1..d
-            inside = inbox & (lam >= -_TOL).all(axis=-1) & (lam.sum(axis=-1) <= 1 + _TOL)
-            which, k = np.nonzero(inside)
-            flat = np.ravel_multi_index(tuple(pix[which, k].T), shape)
-            mats = material[e[which]].astype(np.int64)
-            hits += np.bincount(flat, minlength=n_pix)
-            np.minimum.at(mat_lo, flat, mats)
-            np.maximum.at(mat_hi, flat, mats)
-    return hits, mat_lo, mat_hi
+    last = np.full(n_pix, -1, np.int64)
+    n_wrong = 0
+    for start in range(0, len(cells), _CELLS_PER_CHUNK):
+        cc = cells[start:start + _CELLS_PER_CHUNK]
+        mat = material[start:start + _CELLS_PER_CHUNK]
+        p = points[cc]  # (m, d+1, d)
+        lo = np.maximum(np.ceil(p.min(axis=1) - 0.5 - _TOL).astype(np.int64), 0)
+        hi = np.minimum(np.floor(p.max(axis=1) - 0.5 + _TOL).astype(np.int64), np.array(shape) - 1)
+        extent = hi - lo + 1  # (m, d) pixel centres per axis in the bounding box
+        edges = p[:, 1:] - p[:, :1]  # (m, d, d), rows are edge vectors
+        det = _det(edges)
+        ok = (extent > 0).all(axis=1) & (np.abs(det) > _TOL)
+        side = np.left_shift(1, np.ceil(np.log2(np.maximum(extent, 1))).astype(np.int64))  # (m, d)
+        bucket = np.ravel_multi_index(tuple(np.log2(side).astype(np.int64).T), (64,) * d)
+        for b in np.unique(bucket[ok]):
+            box = tuple(int(x) for x in np.unravel_index(b, (64,) * d))
+            box = tuple(1 << x for x in box)
+            offsets = np.stack(np.unravel_index(np.arange(math.prod(box)), box), axis=1)
+            members = np.flatnonzero(ok & (bucket == b))
+            step = max(1, _CANDIDATES_PER_CHUNK // len(offsets))
+            for s0 in range(0, len(members), step):
+                e = members[s0:s0 + step]
+                inv = _inv(edges[e])
+                pix = lo[e, None, :] + offsets[None]  # (n, box, d)
+                inbox = (pix <= hi[e, None, :]).all(axis=-1)
+                lam = np.einsum("nkd,nde->nke", pix + 0.5 - p[e, None, 0, :], inv)  # barycentric 1..d
+                inside = inbox & (lam >= -_TOL).all(axis=-1) & (lam.sum(axis=-1) <= 1 + _TOL)
+                which, k = np.nonzero(inside)
+                flat = np.ravel_multi_index(tuple(pix[which, k].T), shape)
+                mats = mat[e[which]]
+                hits += np.bincount(flat, minlength=n_pix)
+                last[flat] = mats
+                if labels is not None:
+                    n_wrong += int(np.count_nonzero(mats != labels[flat]))
+    return hits, last, n_wrong
 
 
 def rasterize_materials(mesh: Mesh, *, fill: int = -1) -> np.ndarray:
@@ -86,7 +92,7 @@ def rasterize_materials(mesh: Mesh, *, fill: int = -1) -> np.ndarray:
     Returns
     -------
     ndarray of int64, shape ``mesh.shape``
-        Where elements of different materials cover one pixel centre, the largest wins.
+        Where elements of different materials cover one pixel centre, one of them wins.
 
     Examples
     --------
@@ -95,9 +101,9 @@ def rasterize_materials(mesh: Mesh, *, fill: int = -1) -> np.ndarray:
     >>> rasterize_materials(mesh_labels(lab, exclude=[0])).tolist()
     [[1, -1], [2, 2]]
     """
-    hits, _, mat_hi = _rasterize(_index_points(mesh), np.asarray(mesh.cells),
-                                 np.asarray(mesh.material), tuple(mesh.shape))
-    out = np.where(hits > 0, mat_hi, fill)
+    hits, last, _ = _rasterize(_index_points(mesh), np.asarray(mesh.cells),
+                               np.asarray(mesh.material, dtype=np.int64), tuple(mesh.shape))
+    out = np.where(hits > 0, last, fill)
     return out.reshape(mesh.shape)
 
 
@@ -128,10 +134,16 @@ def _group_rows(rows: np.ndarray):
         order = np.argsort(key, kind="stable")
         sorted_key = key[order]
         new = np.r_[True, sorted_key[1:] != sorted_key[:-1]]
+        del key, sorted_key
     else:
-        order = np.lexsort(rows.T[::-1])
-        sorted_rows = rows[order]
-        new = np.r_[True, (sorted_rows[1:] != sorted_rows[:-1]).any(axis=1)]
+        # two int64 keys: all columns but the last packed, then the last
+        head = np.zeros(len(rows), np.int64)
+        for j in range(k - 1):
+            head = head * n + rows[:, j]
+        order = np.lexsort((rows[:, -1], head))
+        sorted_head, sorted_last = head[order], rows[order, -1]
+        new = np.r_[True, (sorted_head[1:] != sorted_head[:-1]) | (sorted_last[1:] != sorted_last[:-1])]
+        del head, sorted_head, sorted_last
     group_sorted = np.cumsum(new) - 1
     inverse = np.empty(len(rows), np.int64)
     inverse[order] = group_sorted
@@ -139,23 +151,40 @@ def _group_rows(rows: np.ndarray):
     return inverse, counts
 
 
-def _facets(cells: np.ndarray):
-    """All facets of all cells: sorted vertex ids (F, d) and the opposite vertex (F,)."""
-    n_vert = cells.shape[1]
-    facets = np.concatenate([np.delete(cells, i, axis=1) for i in range(n_vert)])
-    opposite = np.concatenate([cells[:, i] for i in range(n_vert)])
-    return np.sort(facets, axis=1), opposite
+def _facet_passes(sorted_cells: np.ndarray, n_points: int):
+    """Yield (facets (F, d) sorted ids, opposite (F,)) in passes over ranges of the lowest id.
+
+    A facet of a cell whose ids are sorted is that cell without one column, still sorted;
+    every copy of a facet has the same lowest id, so each pass sees all copies of its
+    facets and memory stays bounded by ``_FACETS_PER_PASS``.
+    """
+    n_vert = sorted_cells.shape[1]
+    n_pass = max(1, -(-len(sorted_cells) * n_vert // _FACETS_PER_PASS))
+    bounds = np.linspace(0, n_points, n_pass + 1).astype(np.int64)
+    for lo, hi in zip(bounds[:-1], bounds[1:]):
+        facets, opposite = [], []
+        for i in range(n_vert):
+            lowest = sorted_cells[:, 1 if i == 0 else 0]
+            sel = np.flatnonzero((lowest >= lo) & (lowest < hi))
+            facets.append(np.delete(sorted_cells[sel], i, axis=1))
+            opposite.append(sorted_cells[sel, i])
+        yield np.concatenate(facets), np.concatenate(opposite)
 
 
 def _side(points, facets, opposite) -> np.ndarray:
     """Sign of the opposite vertex relative to the facet with its vertices in sorted order."""
-    base = points[facets[:, 0]]
-    a = points[facets[:, 1]] - base
-    c = points[opposite] - base
-    if points.shape[1] == 2:
-        return np.sign(a[:, 0] * c[:, 1] - a[:, 1] * c[:, 0])
-    b = points[facets[:, 2]] - base
-    return np.sign(np.einsum("fi,fi->f", a, np.cross(b, c)))
+    out = np.empty(len(facets))
+    for start in range(0, len(facets), _CELLS_PER_CHUNK):
+        f = facets[start:start + _CELLS_PER_CHUNK]
+        base = points[f[:, 0]]
+        a = points[f[:, 1]] - base
+        c = points[opposite[start:start + _CELLS_PER_CHUNK]] - base
+        if points.shape[1] == 2:
+            out[start:start + len(f)] = np.sign(a[:, 0] * c[:, 1] - a[:, 1] * c[:, 0])
+        else:
+            b = points[f[:, 2]] - base
+            out[start:start + len(f)] = np.sign(np.einsum("fi,fi->f", a, np.cross(b, c)))
+    return out
 
 
 def _outward_normal(points, facets, opposite) -> np.ndarray:
@@ -197,7 +226,14 @@ def check_mesh(mesh: Mesh, labels, *, exclude=()) -> dict:
         the labels back, excluded pixels uncovered) and ``all_passed``; and the numbers
         behind them (``n_facets_shared_3plus``, ``n_misoriented_facets``,
         ``n_boundary_facets_off_box``, ``n_unmatched_facets``, ``min_volume``,
-        ``volume_error``, ``n_outside_leaf``, ``n_pixels_wrong``, ``n_unused_points``).
+        ``volume_error``, ``n_outside_leaf``, ``n_pixels_wrong`` (missed or wrongly
+        covered pixels plus covering elements of a wrong material), ``n_unused_points``).
+
+    Notes
+    -----
+    Works in chunks (elements, and facets in passes over vertex-id ranges), so memory stays
+    at a few hundred MB beyond the mesh itself; time is O(M log M) plus one barycentric test
+    per pixel centre in each element's bounding box.
 
     Examples
     --------
@@ -214,7 +250,8 @@ def check_mesh(mesh: Mesh, labels, *, exclude=()) -> dict:
     exclude_arr = np.asarray(list(exclude) if not np.isscalar(exclude) else [exclude], dtype=np.int64)
     included = ~np.isin(lab, exclude_arr)
     points = _index_points(mesh)
-    cells = np.asarray(mesh.cells, dtype=np.int64)
+    # int32 ids halve the memory of the facet arrays (4 per tetrahedron)
+    cells = np.asarray(mesh.cells, dtype=np.int32 if len(mesh.points) < 2**31 else np.int64)
     material = np.asarray(mesh.material, dtype=np.int64)
     voxel = float(np.prod(mesh.spacing)) if mesh.spacing else 1.0
     out: dict = {}
@@ -232,51 +269,61 @@ def check_mesh(mesh: Mesh, labels, *, exclude=()) -> dict:
     out["volume_sum"] = bool(abs(vol.sum() - n_inc) <= 1e-9 * max(1, n_inc))
 
     # facets: shared by at most two cells, from opposite sides; the rest on the boundary
-    facets, opposite = _facets(cells)
-    inverse, counts = _group_rows(facets)
-    per_occurrence = counts[inverse]
-    out["n_facets_shared_3plus"] = int((counts >= 3).sum())
-    twice = per_occurrence == 2
-    side_sum = np.bincount(inverse[twice], weights=_side(points, facets[twice], opposite[twice]),
-                           minlength=len(counts))
-    out["n_misoriented_facets"] = int(((counts == 2) & (side_sum != 0)).sum())
-    once = per_occurrence == 1
-    fpts = points[facets[once]]  # (B, d, d)
     box = np.array(lab.shape, dtype=float)
-    on_box = ((np.abs(fpts).max(axis=1) <= _TOL) |
-              (np.abs(fpts - box).max(axis=1) <= _TOL)).any(axis=1)
-    off = ~on_box
-    out["n_boundary_facets_off_box"] = int(off.sum())
-    normal = _outward_normal(points, facets[once][off], opposite[once][off])
-    probe = fpts[off].mean(axis=1) + 0.25 * normal
-    pix = np.floor(probe).astype(np.int64)
-    in_image = ((pix >= 0) & (pix < np.array(lab.shape))).all(axis=1)
-    probe_included = np.zeros(len(pix), dtype=bool)
-    probe_included[in_image] = included[tuple(pix[in_image].T)]
-    out["n_unmatched_facets"] = int((probe_included | ~np.isfinite(normal).all(axis=1)).sum())
-    out["conforming"] = (out["n_facets_shared_3plus"] == 0 and out["n_misoriented_facets"] == 0
-                         and out["n_unmatched_facets"] == 0)
+    shared_3plus = misoriented = off_box = unmatched = 0
+    for facets, opposite in _facet_passes(np.sort(cells, axis=1), len(points)):
+        inverse, counts = _group_rows(facets)
+        per_occurrence = counts[inverse]
+        shared_3plus += int((counts >= 3).sum())
+        twice = per_occurrence == 2
+        twice = np.flatnonzero(twice)
+        side_sum = np.bincount(inverse[twice], weights=_side(points, facets[twice], opposite[twice]),
+                               minlength=len(counts))
+        misoriented += int(((counts == 2) & (side_sum != 0)).sum())
+        once = np.flatnonzero(per_occurrence == 1)
+        del inverse, per_occurrence, twice
+        fpts = points[facets[once]]  # (B, d, d)
+        on_box = ((np.abs(fpts).max(axis=1) <= _TOL) |
+                  (np.abs(fpts - box).max(axis=1) <= _TOL)).any(axis=1)
+        off = once[~on_box]
+        off_box += len(off)
+        # a boundary facet inside the box must face an excluded pixel
+        normal = _outward_normal(points, facets[off], opposite[off])
+        probe = fpts[~on_box].mean(axis=1) + 0.25 * normal
+        pix = np.floor(probe).astype(np.int64)
+        in_image = ((pix >= 0) & (pix < np.array(lab.shape))).all(axis=1)
+        probe_included = np.zeros(len(pix), dtype=bool)
+        probe_included[in_image] = included[tuple(pix[in_image].T)]
+        unmatched += int((probe_included | ~np.isfinite(normal).all(axis=1)).sum())
+    out["n_facets_shared_3plus"] = shared_3plus
+    out["n_misoriented_facets"] = misoriented
+    out["n_boundary_facets_off_box"] = off_box
+    out["n_unmatched_facets"] = unmatched
+    out["conforming"] = shared_3plus == 0 and misoriented == 0 and unmatched == 0
 
     # every element inside one maximal homogeneous block of the labels
     tree = build_tree(lab)
     leaf_map = tree.to_image(values=np.arange(len(tree)))
-    corner_pts = points[cells]  # (M, d+1, d)
-    centroid = np.floor(corner_pts.mean(axis=1)).astype(np.int64)
-    in_image = ((centroid >= 0) & (centroid < np.array(lab.shape))).all(axis=1)
-    leaf = np.zeros(len(cells), dtype=np.int64)
-    leaf[in_image] = leaf_map[tuple(centroid[in_image].T)]
-    lo = tree.origin[leaf][:, None, :]
-    hi = lo + tree.size[leaf][:, None, None]
-    inside = ((corner_pts >= lo - _TOL) & (corner_pts <= hi + _TOL)).all(axis=(1, 2)) & in_image
-    out["n_outside_leaf"] = int((~inside).sum())
-    out["inside_one_leaf"] = out["n_outside_leaf"] == 0
+    outside = 0
+    for start in range(0, len(cells), _CELLS_PER_CHUNK):
+        corner_pts = points[cells[start:start + _CELLS_PER_CHUNK]]  # (m, d+1, d)
+        centroid = np.floor(corner_pts.mean(axis=1)).astype(np.int64)
+        in_image = ((centroid >= 0) & (centroid < np.array(lab.shape))).all(axis=1)
+        leaf = np.zeros(len(corner_pts), dtype=np.int64)
+        leaf[in_image] = leaf_map[tuple(centroid[in_image].T)]
+        lo = tree.origin[leaf][:, None, :]
+        hi = lo + tree.size[leaf][:, None, None]
+        inside = ((corner_pts >= lo - _TOL) & (corner_pts <= hi + _TOL)).all(axis=(1, 2)) & in_image
+        outside += int((~inside).sum())
+    out["n_outside_leaf"] = outside
+    out["inside_one_leaf"] = outside == 0
 
     # the label image recovered at pixel centres
-    hits, mat_lo, mat_hi = _rasterize(points, cells, material, lab.shape)
-    flat_lab = lab.ravel()
+    hits, _, n_wrong_hits = _rasterize(points, cells, material, lab.shape, labels=lab.ravel())
     flat_inc = included.ravel()
-    wrong = np.where(flat_inc, (hits == 0) | (mat_lo != flat_lab) | (mat_hi != flat_lab), hits > 0)
-    out["n_pixels_wrong"] = int(wrong.sum())
+    missed = int(np.count_nonzero(flat_inc & (hits == 0)))
+    covered_excluded = int(np.count_nonzero(~flat_inc & (hits > 0)))
+    out["n_pixels_wrong"] = missed + covered_excluded + n_wrong_hits
     out["labels_recovered"] = out["n_pixels_wrong"] == 0
 
     out["all_passed"] = all(out[k] for k in ("conforming", "positive_volume", "volume_sum",
