@@ -73,9 +73,12 @@ class TaskPanel(QWidget):
     busy_changed(bool)
         Emitted when a computation starts (True) and when it has finished (False),
         whether it returned, failed or was cancelled.
+    reported(int, int, str)
+        A step report ``(done, total, message)`` of the running computation.
     """
 
     busy_changed = Signal(bool)
+    reported = Signal(int, int, str)
 
     def __init__(self, parent: QWidget | None = None):
         super().__init__(parent)
@@ -169,6 +172,7 @@ class TaskPanel(QWidget):
             if pbar.n != done:
                 pbar.update(int(done) - pbar.n)
             pbar.set_description(f"{self.title}: {message}")
+        self.reported.emit(int(done), int(total), str(message))
 
     def _on_returned(self, result, on_result) -> None:
         try:
