@@ -263,25 +263,20 @@ def _template_mesh(bal: RegionTree, meshed: np.ndarray):
     seconds["vertices"] = time.perf_counter() - t
 
     t = time.perf_counter()
-    keys, which, template_of, new_points = cut_leaves(okey, size, hanging, strides)
+    cells, which, template_of, _ = cut_leaves(okey, size, hanging, strides, used=used)
     leaf_of = leaves[which]  # intp: it indexes the leaf arrays again below
     del which
     seconds["simplices"] = time.perf_counter() - t
 
-    # number the used lattice points in lattice order
     t = time.perf_counter()
-    used[new_points] = True
-    new_id = np.cumsum(used, dtype=np.intp)
-    new_id -= 1
-    cells = new_id[keys]
-    del new_id, keys
     points = np.stack(np.unravel_index(np.flatnonzero(used), shape), axis=1).astype(np.float64)
     seconds["numbering"] = time.perf_counter() - t
     seconds["_n_kuhn"] = int(kuhn.sum())
     return points, cells, leaf_of, template_of, seconds
 
 
-def cut_leaves(okey: np.ndarray, size: np.ndarray, hanging: np.ndarray, strides: np.ndarray):
+def cut_leaves(okey: np.ndarray, size: np.ndarray, hanging: np.ndarray, strides: np.ndarray,
+               *, used: np.ndarray | None = None):
     """Cut leaves by the look-up tables; the dictionary step, shared with the quality table.
 
     Parameters
@@ -295,11 +290,17 @@ def cut_leaves(okey: np.ndarray, size: np.ndarray, hanging: np.ndarray, strides:
     strides : (d,) ndarray of the same dtype
         Strides of the lattice; keys are linear, so a template's key is
         ``okey + scale * (local @ strides)``.
+    used : (n_lattice,) ndarray of bool, optional
+        Flat lattice marking the corners and sites present. When given, the templates' new
+        points are marked in it, and elements come back as vertex numbers (the rank of the
+        key among the marked points, i.e. ``cumsum(used) - 1``) instead of keys, so the
+        big key array is never built.
 
     Returns
     -------
-    keys : (M, d+1) ndarray of the keys' dtype
-        Lattice key of every element vertex, positively oriented.
+    keys : (M, d+1) ndarray of intp
+        Lattice key (or vertex number, with `used`) of every element vertex, positively
+        oriented.
     which : (M,) ndarray of int32 (int64 for 2^31 leaves or more)
         Index (into the L leaves) of the leaf each element cuts.
     template_id : (M,) ndarray of int16
@@ -332,17 +333,33 @@ def cut_leaves(okey: np.ndarray, size: np.ndarray, hanging: np.ndarray, strides:
                 groups.append((f, case, other[order[bounds[case]:bounds[case + 1]]]))
     n_kuhn = len(luts.KUHN[d])
     total = len(nk) * n_kuhn + sum(len(sel) * len(luts.FACE_LUT[d][f][c]) for f, c, sel in groups)
+    new_points = []
+    for f, case, sel in groups:
+        new_local = _new_points(d, f, case)
+        if len(new_local):
+            new_keys = new_local.astype(kd) @ strides
+            new_points.append((okey[sel, None] + half[sel, None] * new_keys[None]).ravel())
+    new_points = np.concatenate(new_points) if new_points else np.zeros(0, kd)
+    vertex_id = None
+    if used is not None:
+        used[new_points] = True
+        vertex_id = np.cumsum(used, dtype=np.intp)
+        vertex_id -= 1
     # write every block straight into its slice of the outputs (no concatenation copies)
     keys = np.empty((total, d + 1), dtype=kd)
     which = np.empty(total, dtype=wd)
     template_of = np.empty(total, dtype=np.int16)
-    new_points = []
 
     def emit(start, sel, scale, local_keys, first_template):
         n, t = len(sel), len(local_keys)
         block = keys[start:start + n * t].reshape(n, t, d + 1)
-        np.multiply(scale[sel, None, None], local_keys[None], out=block)
-        block += okey[sel, None, None]
+        if vertex_id is None:
+            np.multiply(scale[sel, None, None], local_keys[None], out=block)
+            block += okey[sel, None, None]
+        else:
+            lattice_keys = scale[sel, None, None] * local_keys[None]
+            lattice_keys += okey[sel, None, None]
+            np.take(vertex_id, lattice_keys, out=block)
         which[start:start + n * t].reshape(n, t)[:] = sel[:, None]
         template_of[start:start + n * t].reshape(n, t)[:] = np.arange(first_template, first_template + t)
         return start + n * t
@@ -353,11 +370,6 @@ def cut_leaves(okey: np.ndarray, size: np.ndarray, hanging: np.ndarray, strides:
     for f, case, sel in groups:
         lut = luts.FACE_LUT[d][f][case]
         start = emit(start, sel, half, lut.astype(kd) @ strides, luts.FACE_TEMPLATE_ID[d][f][case])
-        new_local = _new_points(d, f, case)
-        if len(new_local):
-            new_keys = new_local.astype(kd) @ strides
-            new_points.append((okey[sel, None] + half[sel, None] * new_keys[None]).ravel())
-    new_points = np.concatenate(new_points) if new_points else np.zeros(0, kd)
     return keys, which, template_of, new_points
 
 
