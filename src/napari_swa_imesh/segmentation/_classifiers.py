@@ -8,6 +8,8 @@ classifiers store their parameters as plain arrays so a model saves to NPZ/JSON.
 
 from __future__ import annotations
 
+import warnings
+
 import numpy as np
 from scipy.spatial import cKDTree
 
@@ -237,8 +239,11 @@ class LVQClassifier(_Standardised):
         for i, c in enumerate(classes):
             zc = Z[y == c]
             k = int(min(self.prototypes_per_class, zc.shape[0]))
-            centres, _ = kmeans2(zc, zc[rng.choice(zc.shape[0], k, replace=False)],
-                                 minit="matrix", iter=10)
+            with warnings.catch_warnings():
+                # an empty cluster just leaves its seed tile as a prototype: harmless here
+                warnings.simplefilter("ignore", UserWarning)
+                centres, _ = kmeans2(zc, zc[rng.choice(zc.shape[0], k, replace=False)],
+                                     minit="matrix", iter=10)
             protos.append(centres)
             owner.append(np.full(k, i))
         P = np.concatenate(protos)
