@@ -255,3 +255,22 @@ def test_bounds_rejects_an_unsupported_dimension(capsys):
     code, _, stderr = run(capsys, "bounds", "--dim", "1")
     assert code == 2
     assert stderr.startswith("swa-imesh bounds: error:")
+
+
+def test_no_check_skips_the_checks(tmp_path, capsys):
+    import json
+
+    import numpy as np
+
+    from napari_swa_imesh.cli import main
+
+    lab = np.ones((16, 16), np.int32)
+    lab[4:9, 5:12] = 2
+    np.save(tmp_path / "lab.npy", lab)
+    code = main(["mesh", str(tmp_path / "lab.npy"), "-o", str(tmp_path / "m.vtu"),
+                 "--no-check", "--json"])
+    report = json.loads(capsys.readouterr().out)
+    assert code == 0 and report["checks"] == {"skipped": True}
+    assert "check" not in report["seconds"] or report["seconds"]["check"] == 0.0
+    code = main(["mesh", str(tmp_path / "lab.npy"), "-o", str(tmp_path / "m2.vtu")])
+    assert code == 0 and "conforming ok" in capsys.readouterr().out
