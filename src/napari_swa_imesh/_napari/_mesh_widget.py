@@ -191,8 +191,10 @@ class MeshWidget(QWidget):
             existing.metadata.update(metadata)
             layer = existing
         else:
+            # flat shading gives 3-D faces depth; in 2-D it would only darken the colours
             layer = self.viewer.add_surface(data, name=name, translate=translate,
-                                            metadata=metadata, shading="none")
+                                            metadata=metadata,
+                                            shading="flat" if mesh.ndim == 3 else "none")
         self.surface_layer = layer
         self.apply_colors()
         self._show_summary(mesh, checks, surface["n_faces"])
