@@ -1,0 +1,159 @@
+"""Screenshots of each step of the napari workflow, from a real napari window.
+
+Run under a display, or under Xvfb on a headless machine::
+
+    xvfb-run -a -s "-screen 0 1600x1000x24" python docs/screenshots.py
+
+It opens the plugin's two samples, runs samples -> RES -> classify -> mesh through the
+workflow widget exactly as a user's clicks would (the same methods the buttons call), and
+writes PNGs (palette-quantised to stay small) to ``docs/images/``.
+"""
+
+from __future__ import annotations
+
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+
+OUT = Path(__file__).resolve().parent / "images"
+WINDOW = (1500, 940)
+
+
+def wait(widget, timeout: float = 300.0) -> None:
+    """Let the event loop run until the widget's computation has finished."""
+    from qtpy.QtWidgets import QApplication
+
+    t0 = time.perf_counter()
+    while widget.tasks.busy:
+        QApplication.processEvents()
+        time.sleep(0.01)
+        if time.perf_counter() - t0 > timeout:
+            raise TimeoutError(f"{widget.tasks.title} did not finish in {timeout} s")
+    settle()
+    if widget.tasks.last_error:
+        raise RuntimeError(widget.tasks.last_error)
+
+
+def settle(seconds: float = 0.4) -> None:
+    from qtpy.QtWidgets import QApplication
+
+    t0 = time.perf_counter()
+    while time.perf_counter() - t0 < seconds:
+        QApplication.processEvents()
+        time.sleep(0.02)
+
+
+def save(viewer, name: str) -> Path:
+    """Screenshot of the whole window, quantised to 256 colours (UI art compresses well)."""
+    from PIL import Image
+
+    settle()
+    pixels = viewer.screenshot(canvas_only=False, flash=False)
+    image = Image.fromarray(np.asarray(pixels)[..., :3]).quantize(256, dither=Image.NONE)
+    path = OUT / name
+    image.save(path, optimize=True)
+    print(f"{path.relative_to(OUT.parent.parent)}: {path.stat().st_size // 1024} KB")
+    return path
+
+
+def open_workflow(viewer):
+    from napari_swa_imesh._napari._workflow import WorkflowWidget
+
+    flow = WorkflowWidget(viewer)
+    viewer.window.add_dock_widget(flow, area="right", name="SWA-IMESH workflow")
+    viewer.window._qt_window.resize(*WINDOW)
+    return flow
+
+
+def mosaic_steps(viewer) -> None:
+    viewer.open_sample("napari-swa-imesh", "texture_mosaic")
+    image, truth = viewer.layers
+    truth.visible = False
+    flow = open_workflow(viewer)
+    samples = flow.samples
+    samples.image_combo.select(image)
+    samples.truth_combo.select(truth)
+    samples.per_material_spin.setValue(16)
+    samples.samples_from_truth()
+    wait(samples)
+    viewer.layers.selection.active = samples.samples_layer()
+    viewer.reset_view()
+    save(viewer, "01_samples_2d.png")
+
+    flow.tabs.setCurrentIndex(1)
+    flow.res.compute()
+    wait(flow.res)
+    save(viewer, "02_res_2d.png")
+
+    flow.tabs.setCurrentIndex(2)
+    flow.classify.truth_combo.select(truth)
+    flow.classify.classify()
+    wait(flow.classify)
+    samples.samples_layer().visible = False
+    save(viewer, "03_classify_2d.png")
+
+    flow.tabs.setCurrentIndex(3)
+    flow.mesh.run_mesh()
+    wait(flow.mesh)
+    viewer.layers[f"{image.name} SWA labels"].visible = False
+    save(viewer, "04_mesh_2d.png")
+
+
+def phantom_steps(viewer) -> None:
+    viewer.open_sample("napari-swa-imesh", "tissue_phantom")
+    image, truth = viewer.layers
+    truth.visible = False
+    flow = open_workflow(viewer)
+    samples = flow.samples
+    samples.truth_combo.select(truth)
+    samples.per_material_spin.setValue(8)
+    samples.scale_spin.setValue(2)
+    samples.samples_from_truth()
+    wait(samples)
+    box = samples.current_samples().boxes[-1]
+    viewer.dims.set_point(0, (box.start[0] + 1) * image.scale[0])   # a neighbouring slice
+    viewer.reset_view()
+    save(viewer, "05_samples_3d.png")
+
+    flow.res.compute()
+    wait(flow.res)
+    flow.res.choose_scale(2)          # 4-voxel tiles: the grey-matter shell is thin
+    flow.tabs.setCurrentIndex(2)
+    flow.classify.truth_combo.select(truth)
+    flow.classify.classify()
+    wait(flow.classify)
+
+    flow.tabs.setCurrentIndex(3)
+    flow.mesh.set_excluded([1])       # leave the CSF out: its box hides the brain
+    flow.mesh.run_mesh()
+    wait(flow.mesh)
+    for layer in viewer.layers:
+        layer.visible = layer is flow.mesh.surface_layer
+    viewer.dims.ndisplay = 3
+    viewer.reset_view()
+    scene = getattr(viewer, "scene", None)          # napari >= 0.9 moved the camera
+    camera = scene.camera if scene is not None else viewer.camera
+    camera.angles = (-25, 40, 135)
+    camera.zoom *= 0.9
+    save(viewer, "06_mesh_3d.png")
+    flow.mesh.color_combo.setCurrentText("material")
+    save(viewer, "07_mesh_3d_materials.png")
+
+
+def main() -> int:
+    import napari
+
+    OUT.mkdir(parents=True, exist_ok=True)
+    for steps in (mosaic_steps, phantom_steps):
+        viewer = napari.Viewer(show=True)
+        try:
+            steps(viewer)
+        finally:
+            viewer.close()
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
