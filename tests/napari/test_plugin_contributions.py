@@ -95,3 +95,23 @@ def test_surface_gives_each_triangle_its_own_vertices_and_value():
     np.testing.assert_array_equal(surface["triangles"].ravel(), np.arange(3 * mesh.n_cells))
     np.testing.assert_allclose(surface["vertices"].reshape(-1, 3, 2), mesh.points[mesh.cells])
     np.testing.assert_array_equal(surface["material"], np.repeat(mesh.material, 3))
+
+
+@pytest.mark.parametrize("suffix", [".vtu", ".vtk", ".msh", ".xdmf", ".inp", ".node"])
+@pytest.mark.parametrize("ndim", [2, 3])
+def test_writer_writes_every_format_of_the_mesh_engine(tmp_path, suffix, ndim):
+    from napari_swa_imesh._napari._layers import MESH_KEY
+    from napari_swa_imesh._napari._writer import write_mesh_layer
+    from napari_swa_imesh.mesh._export import read_mesh
+
+    rng = np.random.default_rng(ndim)
+    mesh = mesh_labels(rng.integers(1, 3, (4,) * ndim), spacing=(2.0,) + (1.0,) * (ndim - 1))
+    surface = mesh_surface(mesh)
+    written = write_mesh_layer(str(tmp_path / f"m{suffix}"),
+                               (surface["vertices"], surface["triangles"]),
+                               {"name": "m", "metadata": {MESH_KEY: mesh}})
+    assert str(tmp_path / f"m{suffix}") in written
+    back = read_mesh(tmp_path / f"m{suffix}")
+    assert back.cells.shape == mesh.cells.shape         # elements, not the drawn faces
+    np.testing.assert_allclose(np.sort(back.points, axis=0), np.sort(mesh.points, axis=0))
+    np.testing.assert_array_equal(np.sort(back.material), np.sort(mesh.material))
