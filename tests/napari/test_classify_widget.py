@@ -3,7 +3,7 @@
 import csv
 
 import numpy as np
-from conftest import wait_idle
+from swa_napari_helpers import wait_idle
 from scipy import ndimage as ndi
 
 from napari_swa_imesh._napari._sample_data import make_texture_mosaic

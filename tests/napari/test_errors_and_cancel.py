@@ -4,7 +4,7 @@ import threading
 
 import numpy as np
 import pytest
-from conftest import wait_idle
+from swa_napari_helpers import wait_idle
 
 from napari_swa_imesh._napari import _classify_widget, _mesh_widget
 from napari_swa_imesh._napari._classify_widget import ClassifyWidget

@@ -1,7 +1,7 @@
 """RES widget: the Figure 2.14 layout in the dock, and choosing the scale by a click."""
 
 import numpy as np
-from conftest import wait_idle
+from swa_napari_helpers import wait_idle
 from matplotlib.backend_bases import MouseEvent
 
 from napari_swa_imesh._napari._layers import SCALE_KEY

@@ -12,7 +12,7 @@ rate: on a loaded machine Qt coalesces late timer events.
 import time
 
 import numpy as np
-from conftest import wait_idle
+from swa_napari_helpers import wait_idle
 from qtpy.QtCore import QTimer
 
 from napari_swa_imesh._napari._workflow import WorkflowWidget

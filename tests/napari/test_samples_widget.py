@@ -4,7 +4,7 @@ import json
 
 import numpy as np
 import pytest
-from conftest import wait_idle
+from swa_napari_helpers import wait_idle
 
 from napari_swa_imesh._napari._boxes import box_to_rectangle, rectangles_to_boxes
 from napari_swa_imesh._napari._samples_widget import SamplesWidget

@@ -8,7 +8,7 @@ every pixel "brick" would give 0.78 / 0.0 and a random labelling about 0.6 / 0.4
 
 import numpy as np
 import pytest
-from conftest import wait_idle
+from swa_napari_helpers import wait_idle
 
 from napari_swa_imesh._napari._classify_widget import SEGMENTATION_KEY
 from napari_swa_imesh._napari._layers import MESH_KEY

@@ -8,7 +8,7 @@ sit a few points below.
 """
 
 import numpy as np
-from conftest import PHANTOM_SHAPE, wait_idle
+from swa_napari_helpers import PHANTOM_SHAPE, wait_idle
 
 from napari_swa_imesh._napari._classify_widget import OUTPUT_TILES
 from napari_swa_imesh._napari._layers import EXTENT_KEY

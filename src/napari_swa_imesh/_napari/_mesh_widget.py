@@ -38,6 +38,13 @@ def quality_metric(ndim: int):
     return next(m for m in QUALITY_METRICS if m.name == "quality" and m.dim == ndim)
 
 
+def _labels_present(data: np.ndarray) -> list[int]:
+    """Sorted label values of `data`; a bincount (O(N), no sort) for non-negative ints."""
+    if data.dtype.kind in "iu" and data.size and data.min() >= 0 and data.max() < 1 << 24:
+        return np.flatnonzero(np.bincount(data.ravel())).tolist()
+    return np.unique(data).tolist()
+
+
 class MeshWidget(QWidget):
     """Mesh a Labels layer; show the mesh, its quality histogram and checks; export it.
 
@@ -121,7 +128,7 @@ class MeshWidget(QWidget):
         if layer is None:
             return
         names = {int(k): str(v) for k, v in layer.metadata.get("material_names", {}).items()}
-        for label in np.unique(np.asarray(layer.data)).tolist():
+        for label in _labels_present(np.asarray(layer.data)):
             text = f"{label}  {names.get(label, 'background' if label == 0 else '')}".rstrip()
             item = QListWidgetItem(text)
             item.setData(Qt.UserRole, int(label))
