@@ -40,3 +40,23 @@ def test_res_plot_and_scale_chosen_by_click(mosaic_viewer, qtbot):
     for ax in flow.res.figure.axes:
         assert any(line.get_linestyle() == "-" and np.allclose(line.get_xdata(), 2)
                    for line in ax.get_lines())
+
+
+def test_plots_follow_the_napari_theme(mosaic_viewer, qtbot):
+    viewer, image, truth = mosaic_viewer
+    flow = WorkflowWidget(viewer)
+    flow.samples.truth_combo.select(truth)
+    flow.samples.samples_from_truth()
+    wait_idle(qtbot, flow.samples)
+    flow.res.compute()
+    wait_idle(qtbot, flow.res)
+    flow.mesh.select_labels(truth)
+    flow.mesh.run_mesh()
+    wait_idle(qtbot, flow.mesh)
+    backgrounds = {}
+    for theme in ("dark", "light"):
+        viewer.theme = theme
+        backgrounds[theme] = (flow.res.figure.get_facecolor(), flow.mesh.figure.get_facecolor())
+    dark, light = backgrounds["dark"], backgrounds["light"]
+    for d, l in zip(dark, light):
+        assert sum(d[:3]) < 1.0 < sum(l[:3])      # dark background, then a light one

@@ -115,6 +115,15 @@ class MeshWidget(QWidget):
         layout.addWidget(self.canvas, 1)
         layout.addWidget(self.export_button)
         self._refresh_materials()
+        self.viewer.events.theme.connect(self._on_theme)
+
+    def _on_theme(self, event=None) -> None:
+        if self.mesh is None:
+            return
+        try:
+            self._draw_histogram(self.mesh)
+        except RuntimeError:  # the Qt side is gone; napari drops us with the Python side
+            pass
 
     # -- inputs ----------------------------------------------------------------------------
     def select_labels(self, layer) -> None:

@@ -88,6 +88,13 @@ class ResWidget(QWidget):
         layout.addWidget(scroll, 1)
         self.samples_combo.currentTextChanged.connect(self._on_samples_layer_selected)
         self._on_samples_layer_selected()
+        self.viewer.events.theme.connect(self._on_theme)
+
+    def _on_theme(self, event=None) -> None:
+        try:
+            self._draw()
+        except RuntimeError:  # the Qt side is gone; napari drops us with the Python side
+            pass
 
     def _on_samples_layer_selected(self, *_) -> None:
         layer = self.samples_combo.layer()
