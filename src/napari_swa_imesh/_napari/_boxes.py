@@ -29,7 +29,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..segmentation._samples import SampleBox
+from ..segmentation import SampleBox
 
 __all__ = ["BoxReport", "rectangles_to_boxes", "box_to_rectangle", "BLOCKING_FLAGS",
            "box_flags"]

@@ -9,10 +9,8 @@ from qtpy.QtCore import Qt, Signal
 from qtpy.QtWidgets import (QCheckBox, QComboBox, QFileDialog, QFormLayout, QLabel,
                             QListWidget, QListWidgetItem, QPushButton, QVBoxLayout, QWidget)
 
-from ..mesh._checks import check_mesh
-from ..mesh._export import MESH_SUFFIXES, write_mesh
-from ..mesh._imesh import mesh_labels
-from ..mesh._quality import QUALITY_METRICS
+from ..mesh import QUALITY_METRICS, check_mesh, mesh_labels, write_mesh
+from ..mesh._export import MESH_SUFFIXES
 from ._layers import MESH_KEY, LayerCombo, default_color, layer_spacing, mesh_translate
 from ._surface import mesh_surface
 from ._tasks import TaskPanel, notify_error, notify_info
@@ -20,7 +18,7 @@ from ._tasks import TaskPanel, notify_error, notify_info
 if TYPE_CHECKING:
     import napari
 
-    from ..mesh._types import Mesh
+    from ..mesh import Mesh
 
 __all__ = ["MeshWidget", "COLOR_BY_QUALITY", "COLOR_BY_MATERIAL", "CHECKS_KEY",
            "SURFACE_VALUES_KEY"]

@@ -14,7 +14,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 import pandas as pd
 
-from ..segmentation._samples import Material, Samples
+from ..segmentation import Material, Samples
 from ._boxes import BoxReport, box_flags, box_to_rectangle, rectangles_to_boxes
 from ._layers import (EXTENT_KEY, MATERIALS_KEY, SAMPLES_KEY, SCALE_KEY, default_color,
                       index_to_layer_data)

@@ -11,8 +11,7 @@ from qtpy.QtWidgets import (QColorDialog, QFileDialog, QFormLayout, QGroupBox, Q
                             QHeaderView, QLabel, QPushButton, QSpinBox, QTableWidget,
                             QTableWidgetItem, QVBoxLayout, QWidget)
 
-from ..segmentation._samples import Material, Samples, load_samples, samples_from_truth, \
-    save_samples
+from ..segmentation import Material, Samples, load_samples, samples_from_truth, save_samples
 from . import _samples_layer as sl
 from ._layers import SCALE_KEY, LayerCombo, default_color
 from ._tasks import TaskPanel, notify_error, notify_info, notify_warning

@@ -2,7 +2,7 @@
 
 A Surface layer carries only triangles; the mesh widget keeps the real mesh (tetrahedra in
 3-D, materials, quality) in the layer's metadata, and this writer writes that, in the
-format the suffix names (every format of :func:`napari_swa_imesh.mesh._export.write_mesh`).
+format the suffix names (every format of :func:`napari_swa_imesh.mesh.write_mesh`).
 """
 
 from __future__ import annotations
@@ -42,7 +42,7 @@ def write_mesh_layer(path: str, data: Any, attributes: dict) -> list[str]:
     list of str
         Every file written.
     """
-    from ..mesh._export import write_mesh
+    from ..mesh import write_mesh
 
     mesh = mesh_of_attributes(attributes)
     return [str(p) for p in write_mesh(mesh, path, force=True)]
