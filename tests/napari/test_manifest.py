@@ -67,3 +67,16 @@ def test_wheel_contains_the_manifest(tmp_path):
         entry_points = next(n for n in names if n.endswith("entry_points.txt"))
         assert "napari_swa_imesh:napari.yaml" in zf.read(entry_points).decode()
         assert zf.read("napari_swa_imesh/napari.yaml").startswith(b"name: napari-swa-imesh")
+
+
+def test_only_the_plugin_package_imports_gui_modules():
+    """napari, Qt and magicgui appear in import lines of the _napari package only."""
+    import re
+
+    gui = re.compile(r"^\s*(from|import)\s+(napari|qtpy|PyQt\d|PySide\d|magicgui|vispy)\b",
+                     re.MULTILINE)
+    package = ROOT / "src/napari_swa_imesh"
+    offenders = [p.relative_to(package) for p in package.rglob("*.py")
+                 if "_napari" not in p.parts and gui.search(p.read_text())]
+    assert offenders == []
+    assert any(gui.search(p.read_text()) for p in (package / "_napari").glob("*.py"))

@@ -110,3 +110,15 @@ def test_tile_resolution_labels_overlay_the_image(phantom_viewer, qtbot):
         np.testing.assert_allclose(tiles.data_to_world(t - 0.5), image.data_to_world(t * s - 0.5))
     full = upsample_tiles(tiles.data, 2, PHANTOM_SHAPE)
     np.testing.assert_array_equal(full, flow.classify.result.labels)
+
+    # a mesh of the tile labels covers exactly the image's voxels in world coordinates
+    flow.mesh.select_labels(tiles)
+    flow.mesh.set_excluded([])
+    flow.mesh.run_mesh()
+    wait_idle(qtbot, flow.mesh, timeout=120_000)
+    assert flow.mesh.checks["all_passed"]
+    surface = flow.mesh.surface_layer
+    world = flow.mesh.mesh.points * surface.scale + surface.translate
+    np.testing.assert_allclose(world.min(axis=0), image.data_to_world((-0.5,) * 3))
+    np.testing.assert_allclose(world.max(axis=0),
+                               image.data_to_world(np.array(PHANTOM_SHAPE) - 0.5))
