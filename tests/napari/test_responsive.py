@@ -5,8 +5,12 @@ in the main thread, the timer does not tick at all.
 The measure is the longest pause between ticks from the start of a run to its last step
 report (after which the main thread shows the result, which must happen there): run in the
 main thread, the computation freezes the event loop for its whole duration; run by the
-widget, no pause may come close to that. Tick counts are not compared with the nominal
-rate: on a loaded machine Qt coalesces late timer events.
+widget, the timer ticks all along (a blocked loop could tick at most once or twice before
+the last report, since queued reports and one coalesced timer event arrive together when
+the loop resumes) and no pause comes close to the frozen time (0.75 of it leaves room for
+the scheduler of a loaded machine: the pauses measured were 0.04-0.06 s on an idle one and
+up to 0.7 s under a load of 6 on 2 cores, against 1.3-1.9 s frozen). Tick counts are not
+compared with the nominal rate: on a loaded machine Qt coalesces late timer events.
 """
 
 import time
@@ -76,8 +80,8 @@ def test_event_loop_keeps_running_during_3d_classify_and_mesh(phantom_viewer, qt
     ticks, pause, seconds = _in_widget(qtbot, ticker, flow.classify.classify, flow.classify)
     print(f"classify: frozen {frozen:.2f} s in the main thread; in the widget {seconds:.2f} s, "
           f"{ticks} ticks, longest pause {pause:.3f} s")
-    assert ticks >= 5
-    assert pause < 0.5 * frozen
+    assert ticks >= 10
+    assert pause < 0.75 * frozen
 
     labels = flow.classify.result.labels
     frozen = _in_main_thread(ticker, lambda: check_mesh(
@@ -86,6 +90,6 @@ def test_event_loop_keeps_running_during_3d_classify_and_mesh(phantom_viewer, qt
     print(f"mesh: frozen {frozen:.2f} s in the main thread; in the widget {seconds:.2f} s, "
           f"{ticks} ticks, longest pause {pause:.3f} s")
     assert flow.mesh.checks["all_passed"]
-    assert ticks >= 5
-    assert pause < 0.5 * frozen
+    assert ticks >= 10
+    assert pause < 0.75 * frozen
     ticker.timer.stop()

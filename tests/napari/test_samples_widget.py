@@ -139,3 +139,15 @@ def test_samples_from_truth_match_the_library(mosaic_viewer, qtbot):
     expected = samples_from_truth(truth.data, scale=3, per_material=5)
     assert widget.current_samples().boxes == expected.boxes
     assert [m.name for m in widget.materials()] == ["brick", "grass"]
+
+
+def test_a_shapes_layer_drawn_before_the_widget_is_adopted(mosaic_viewer):
+    viewer, image, _ = mosaic_viewer
+    shapes = viewer.add_shapes([rect(0, 0, 32, 32), rect(64, 64, 128, 96)],
+                               shape_type="rectangle", name="my boxes")
+    widget = SamplesWidget(viewer)
+    widget.samples_combo.select(shapes)
+    widget._on_samples_layer_selected()
+    assert shapes.features["label"].tolist() == [1, 1]
+    boxes = widget.current_samples().boxes
+    assert [(b.start, b.stop) for b in boxes] == [((0, 0), (32, 32)), ((64, 64), (128, 96))]

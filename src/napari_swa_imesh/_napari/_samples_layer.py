@@ -69,6 +69,27 @@ def new_samples_layer(viewer: "napari.viewer.Viewer", image_layer, materials: li
     return layer
 
 
+def adopt_layer(layer, material: Material, *, depth: int = 1) -> None:
+    """Make any Shapes layer a samples layer: every shape without a material gets `material`.
+
+    Lets a user start from rectangles drawn before the plugin was opened.
+    """
+    n = len(layer.data)
+    features = layer.features.copy() if len(layer.features) == n else pd.DataFrame(index=range(n))
+    if "label" not in features:
+        features["label"] = material.label
+        features["name"] = material.name
+    if "depth" not in features:
+        features["depth"] = depth
+    if "flag" not in features:
+        features["flag"] = ""
+    layer.features = features
+    if MATERIALS_KEY not in layer.metadata:
+        set_layer_materials(layer, [material])
+    set_current_material(layer, material, depth=depth)
+    layer.text = {"string": "{name}{flag}", "color": "white", "size": 9, "anchor": "upper_left"}
+
+
 def layer_materials(layer) -> list[Material]:
     """Materials of a samples layer: its table, plus any label used by a shape but unlisted."""
     table = [Material(int(m["label"]), str(m["name"]), m.get("color"))
@@ -155,6 +176,9 @@ def samples_from_layer(layer, image_layer, *, scale: int | None = None
     if not len(layer.data):
         raise ValueError(f"the samples layer {layer.name!r} has no boxes; draw at least one "
                          "rectangle per material (rectangle tool) or import a samples file.")
+    if "label" not in layer.features:
+        raise ValueError(f"the Shapes layer {layer.name!r} gives no material per box; pick it "
+                         "in the samples widget, which assigns materials to its rectangles.")
     report = layer_report(layer, image_layer, scale=scale)
     for i in report.blocking:
         what = _shape_name(layer, i)

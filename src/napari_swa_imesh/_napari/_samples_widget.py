@@ -182,6 +182,10 @@ class SamplesWidget(QWidget):
         if self._watched is not None and self._watched is not layer:
             self._watched.events.data.disconnect(self._on_shapes_changed)
         if layer is not None and layer is not self._watched:
+            if "label" not in layer.features and layer.ndim in (2, 3):
+                first = (self.materials() or [Material(1, "material 1", default_color(1))])[0]
+                sl.adopt_layer(layer, first, depth=self.depth_spin.value() if layer.ndim == 3
+                               else 1)
             layer.events.data.connect(self._on_shapes_changed)
             image_name = layer.metadata.get(sl.SAMPLES_KEY)
             if image_name and image_name in self.viewer.layers:
