@@ -98,6 +98,7 @@ def mosaic_steps(viewer) -> None:
     flow.mesh.run_mesh()
     wait(flow.mesh)
     viewer.layers[f"{image.name} SWA labels"].visible = False
+    flow.mesh.surface_layer.opacity = 0.6       # the texture shows through the elements
     save(viewer, "04_mesh_2d.png")
 
 
