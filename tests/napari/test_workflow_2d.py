@@ -94,8 +94,8 @@ def test_mosaic_workflow(mosaic_viewer, qtbot, tmp_path, notifications):
     assert back.n_cells == mesh.n_cells
     np.testing.assert_array_equal(np.sort(back.material), np.sort(mesh.material))
     viewer.layers.selection = {surface}
-    written = viewer.layers.save(str(tmp_path / "mosaic.msh"), selected=True,
-                                 plugin="napari-swa-imesh")
+    # no plugin named: napari finds the writer from the layer type and the suffix
+    written = viewer.layers.save(str(tmp_path / "mosaic.msh"), selected=True)
     assert written == [str(tmp_path / "mosaic.msh")]
     back = read_mesh(tmp_path / "mosaic.msh")
     assert back.n_cells == mesh.n_cells
