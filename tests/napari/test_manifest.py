@@ -40,7 +40,6 @@ def test_top_level_manifest_is_a_symlink_to_the_packaged_one():
     assert top.resolve() == (ROOT / "src/napari_swa_imesh/napari.yaml").resolve()
 
 
-@pytest.mark.slow  # about 20 s: pip builds the wheel
 def test_wheel_contains_the_manifest(tmp_path):
     import importlib.util
 
