@@ -151,3 +151,29 @@ def test_a_shapes_layer_drawn_before_the_widget_is_adopted(mosaic_viewer):
     assert shapes.features["label"].tolist() == [1, 1]
     boxes = widget.current_samples().boxes
     assert [(b.start, b.stop) for b in boxes] == [((0, 0), (32, 32)), ((64, 64), (128, 96))]
+
+
+def test_a_rectangle_drawn_with_the_mouse_lies_on_the_current_slice(phantom_viewer):
+    """Drive napari's own rectangle tool (mouse press, drag, release) on slice 20 of the
+    2:1:1 phantom: the box is centred on that slice, in voxel indices."""
+    from napari.utils._test_utils import read_only_mouse_event
+    from napari.utils.interactions import (mouse_move_callbacks, mouse_press_callbacks,
+                                           mouse_release_callbacks)
+
+    viewer, image, _ = phantom_viewer
+    widget = SamplesWidget(viewer)
+    widget.depth_spin.setValue(4)
+    layer = widget.new_samples_layer()
+    viewer.dims.set_point(0, 20 * image.scale[0])        # world coordinate of slice 20
+    start, end = (40.0, 9.5, 9.5), (40.0, 29.5, 25.5)     # world: pixel edges in-plane
+    for kind, position, callbacks in (("mouse_press", start, mouse_press_callbacks),
+                                      ("mouse_move", end, mouse_move_callbacks),
+                                      ("mouse_release", end, mouse_release_callbacks)):
+        event = read_only_mouse_event(type=kind, position=position, dims_displayed=[1, 2],
+                                      is_dragging=kind == "mouse_move")
+        callbacks(layer, event)
+    assert len(layer.data) == 1
+    (box,) = widget.current_samples().boxes
+    assert box.start == (18, 10, 10) and box.stop == (22, 30, 26)
+    assert layer.features["depth"].tolist() == [4]
+    assert widget.box_table.rowCount() == 1
