@@ -45,7 +45,7 @@ def test_widgets_in_the_plugins_menu_and_the_workflow_under_layers_segment(make_
     plugins = commands("napari/plugins")
     assert {f"{PLUGIN}.{w}_widget" for w in ("workflow", "samples", "res", "classify",
                                             "mesh")} <= plugins
-    _, widget = viewer.window.add_plugin_dock_widget(PLUGIN, "Segment and mesh (workflow)")
+    _, widget = viewer.window.add_plugin_dock_widget(PLUGIN, "Segment and mesh")
     assert isinstance(widget, WorkflowWidget)
     assert [widget.tabs.tabText(i) for i in range(4)] == ["Samples", "RES", "Classify", "Mesh"]
 
