@@ -51,7 +51,7 @@ def test_segment_recovers_two_textures_at_input_shape(shape):
 
 def test_default_scale_is_the_suggested_res():
     img, truth, s = two_textures((64, 128))
-    res = segment(img, s)
+    res = segment(img, s, method="reference")
     assert res.res is not None and res.scale == res.res.suggested_scale
 
 

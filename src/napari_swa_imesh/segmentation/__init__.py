@@ -6,7 +6,10 @@ The pipeline of the reference's chapter 2, as functions on arrays:
   :func:`tile_correlation_lengths`, :func:`feature_stack` (sets F1..F7);
 * samples: :class:`Samples` (JSON sample boxes), :func:`samples_from_truth`;
 * RES: :func:`res_statistics`, :func:`plot_res`;
-* classification: :class:`SWAModel` (GM, MD, LVQ), :func:`load_model`, :func:`segment`;
+* classification: :func:`segment` (method "recommended" by default, or "reference"),
+  :class:`RecommendedModel` (multi-scale per-pixel statistics, boundary refinement, MRF,
+  bias correction), :class:`SWAModel` (the reference: GM, MD, LVQ on tiles),
+  :func:`load_model`;
 * scores: :func:`dice_scores`, :func:`jaccard_scores`, :func:`confusion_matrix`,
   :func:`evaluate`.
 """
@@ -25,9 +28,17 @@ from ._haar import haar_analysis, haar_synthesis
 from ._metrics import confusion_matrix, dice_scores, evaluate, jaccard_scores
 from ._model import SWAModel, load_model
 from ._moments import moment_pyramid, tile_moments
+from ._recommended import (
+    RecommendedModel,
+    estimate_bias_field,
+    multiscale_feature_names,
+    multiscale_features,
+    potts_mean_field,
+)
 from ._res import MOMENT_NAMES, ResStatistics, plot_res, res_statistics
 from ._samples import Material, SampleBox, Samples, load_samples, samples_from_truth, save_samples
 from ._segment import (
+    METHODS,
     SegmentationResult,
     segment,
     segment_steps,
@@ -41,7 +52,9 @@ __all__ = [
     "GaussianClassifier", "LVQClassifier", "MinimumDistanceClassifier", "leave_one_out_error",
     "Material", "SampleBox", "Samples", "load_samples", "save_samples", "samples_from_truth",
     "ResStatistics", "res_statistics", "plot_res",
-    "SWAModel", "load_model", "SegmentationResult", "segment", "segment_steps",
+    "SWAModel", "load_model", "SegmentationResult", "segment", "segment_steps", "METHODS",
+    "RecommendedModel", "estimate_bias_field", "multiscale_feature_names",
+    "multiscale_features", "potts_mean_field",
     "sieve_labels", "tile_placement", "upsample_tiles",
     "confusion_matrix", "dice_scores", "evaluate", "jaccard_scores",
     "entropy_feature_names", "feature_stack", "haar_analysis", "haar_synthesis",

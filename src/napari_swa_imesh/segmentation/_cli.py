@@ -28,19 +28,29 @@ def add_commands(subparsers) -> None:
     p.set_defaults(func=_run_res)
 
     p = subparsers.add_parser(
-        "segment", help="classify the image tile by tile into a label image",
-        description="Segment an image with SWA: features of tiles at one scale, classified by "
-                    "a classifier fitted on sample boxes (or a saved model).")
+        "segment", help="classify the image into a full-resolution label image",
+        description="Segment an image with SWA, fitted on sample boxes (or a saved model). "
+                    "Default: the recommended method (multi-scale per-pixel statistics, "
+                    "coarse-to-fine at boundaries, MRF, bias correction). --scale, "
+                    "--features or --classifier select the reference method (tiles at one "
+                    "scale) unless --method says otherwise.")
     p.add_argument("image")
     src = p.add_mutually_exclusive_group(required=True)
     src.add_argument("--samples", help="samples JSON to fit a classifier on")
     src.add_argument("--model", help="a saved model (.npz) to apply")
+    p.add_argument("--method", default=None, choices=["recommended", "reference"],
+                   help="default: reference if --scale/--features/--classifier is given, "
+                        "else recommended")
     p.add_argument("--scale", type=int, default=None,
-                   help="tile scale j (tiles of 2^j px); default: the suggested RES")
-    p.add_argument("--features", default="F1", help="feature set F1..F7 (default F1)")
-    p.add_argument("--classifier", default="gm", choices=["gm", "md", "lvq"])
+                   help="reference: tile scale j (tiles of 2^j px); recommended: largest "
+                        "scale considered; default: the suggested RES")
+    p.add_argument("--features", default=None,
+                   help="reference feature set F1..F7 (default F1)")
+    p.add_argument("--classifier", default=None, choices=["gm", "md", "lvq"],
+                   help="reference classifier (default gm)")
     p.add_argument("--sieve", type=int, default=0,
-                   help="remove components smaller than N tiles")
+                   help="remove components smaller than N tiles (reference) or pixels "
+                        "(recommended)")
     p.add_argument("--model-out", default=None, help="save the fitted model (.npz)")
     p.add_argument("--signatures", default=None, help="write the material signatures (CSV)")
     p.add_argument("--tiles", action="store_true",
@@ -130,7 +140,7 @@ def _run_segment(args: argparse.Namespace) -> int:
         truth = read_image(args.truth)[0] if args.truth else None
     gen = segment_steps(image, samples, scale=args.scale, feature_set=args.features,
                         classifier=args.classifier, sieve=args.sieve, model=model,
-                        spacing=spacing)
+                        spacing=spacing, method=args.method)
     with timer("segment"):
         while True:
             try:
@@ -155,10 +165,16 @@ def _run_segment(args: argparse.Namespace) -> int:
     if args.json:
         print_json(summary)
     else:
-        print(f"scale {result.scale} (tiles of {1 << result.scale} px), "
-              f"{result.model.feature_set} + {result.model.classifier_name.upper()}: "
-              f"eps_l = {result.eps_l:.2f}% ({summary['eps_l_method']}), "
-              f"eps_m = {result.eps_m:.3f}")
+        if result.method == "recommended":
+            print(f"recommended method: scales {', '.join(map(str, result.scales))} (windows "
+                  f"of {', '.join(str((1 << j) + 1 if j else 1) for j in result.scales)} px), "
+                  f"suggested RES {result.model.res_scale}; eps_l = {result.eps_l:.2f}% "
+                  f"({summary['eps_l_method']})")
+        else:
+            print(f"scale {result.scale} (tiles of {1 << result.scale} px), "
+                  f"{result.model.feature_set} + {result.model.classifier_name.upper()}: "
+                  f"eps_l = {result.eps_l:.2f}% ({summary['eps_l_method']}), "
+                  f"eps_m = {result.eps_m:.3f}")
         for row in result.signatures:
             print(f"  {row['name']}: {row['tiles']} tiles, mean {row['mean_mean']:.4g} "
                   f"(+-{row['mean_std']:.3g}), variance {row['variance_mean']:.4g}")

@@ -6,6 +6,12 @@ package), ``scale``, ``feature_set``, ``feature_names``, ``classifier``, ``ndim`
 ``materials`` (label, name, colour), ``spacing`` (units of the training image) and the
 training scores (``eps_l``, ``eps_m``, tiles per material). Load it with
 :func:`load_model`; it applies to any image of the same dimensionality.
+
+A ``method`` entry in ``meta`` says which model wrote the file: absent or "reference" for
+:class:`SWAModel`, "recommended" for
+:class:`~napari_swa_imesh.segmentation._recommended.RecommendedModel` (its arrays are
+``level{j}_*``, one Gaussian classifier per scale). Older files have no ``method`` and
+load as before.
 """
 
 from __future__ import annotations
@@ -193,19 +199,34 @@ class SWAModel:
         return p
 
 
-def load_model(path) -> SWAModel:
-    """Read a model written by :meth:`SWAModel.save`."""
+def load_model(path):
+    """Read a model written by :meth:`SWAModel.save` or :meth:`RecommendedModel.save`.
+
+    Returns
+    -------
+    SWAModel or RecommendedModel
+        As the file's ``method`` says (files without one are reference models).
+    """
     p = Path(path)
     if not p.is_file():
         raise FileNotFoundError(f"no model file at {p}; check the path.")
     try:
         with np.load(p, allow_pickle=False) as data:
             meta = json.loads(str(data["meta"]))
-            params = {k[len("param_"):]: data[k] for k in data.files if k.startswith("param_")}
+            arrays = {k: data[k] for k in data.files if k != "meta"}
     except (OSError, ValueError, KeyError) as exc:
         raise ValueError(f"{p} is not a swa-imesh model file: {exc}") from exc
     if meta.get("format") != MODEL_FORMAT:
         raise ValueError(f"{p} is not a swa-imesh model file (format {meta.get('format')!r}).")
+    method = meta.get("method", "reference")
+    if method == "recommended":
+        from ._recommended import RecommendedModel
+
+        return RecommendedModel.from_saved(meta, arrays)
+    if method != "reference":
+        raise ValueError(f"{p} holds a model of method {method!r}, which this version does "
+                         "not know; update napari-swa-imesh.")
+    params = {k[len("param_"):]: v for k, v in arrays.items() if k.startswith("param_")}
     model = SWAModel(scale=meta["scale"], feature_set=meta["feature_set"],
                      classifier=meta["classifier"])
     for k, v in meta.get("classifier_options", {}).items():
