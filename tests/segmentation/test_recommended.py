@@ -213,3 +213,36 @@ def test_error_paths(tmp_path):
         segment(img, tiny)
     with pytest.raises(ValueError, match="end in .npz"):
         fitted.save(tmp_path / "m.pkl")
+
+
+# -- command line ---------------------------------------------------------------------------
+def test_cli_method_rule_and_res_plot(tmp_path, capsys):
+    from napari_swa_imesh.cli import main
+    from napari_swa_imesh.segmentation import save_samples
+
+    img, truth, s, _ = edge_image((48, 64), contrast="texture")
+    np.save(tmp_path / "img.npy", img)
+    np.save(tmp_path / "truth.npy", truth)
+    save_samples(s, tmp_path / "s.json")
+    base = ["segment", tmp_path / "img.npy", "--samples", tmp_path / "s.json", "--truth",
+            tmp_path / "truth.npy", "--json", "--force"]
+
+    def run(*extra):
+        assert main([str(a) for a in base + list(extra)]) == 0
+        return json.loads(capsys.readouterr().out)
+
+    out = run("-o", tmp_path / "a.npy", "--res-plot", tmp_path / "res.png",
+              "--model-out", tmp_path / "m.npz")
+    assert out["method"] == "recommended" and out["model"]["coarse_scale"] == out["scale"]
+    assert (tmp_path / "res.png").stat().st_size > 0
+    assert run("-o", tmp_path / "b.npy", "--scale", 2)["method"] == "reference"
+    assert run("-o", tmp_path / "c.npy", "--classifier", "md")["method"] == "reference"
+    assert run("-o", tmp_path / "d.npy", "--scale", 3, "--method", "recommended"
+               )["method"] == "recommended"
+    applied = main([str(a) for a in ["segment", tmp_path / "img.npy", "--model",
+                                     tmp_path / "m.npz", "-o", tmp_path / "e.npy", "--json"]])
+    assert applied == 0
+    assert json.loads(capsys.readouterr().out)["method"] == "recommended"
+    code = main([str(a) for a in base + ["-o", tmp_path / "f.npy", "--method", "recommended",
+                                         "--features", "F2"]])
+    assert code == 2 and "reference method" in capsys.readouterr().err

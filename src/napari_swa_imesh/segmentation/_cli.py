@@ -53,6 +53,9 @@ def add_commands(subparsers) -> None:
                         "(recommended)")
     p.add_argument("--model-out", default=None, help="save the fitted model (.npz)")
     p.add_argument("--signatures", default=None, help="write the material signatures (CSV)")
+    p.add_argument("--res-plot", default=None,
+                   help="write the RES plot with the scales used shaded (PNG/PDF/SVG; needs "
+                        "--samples)")
     p.add_argument("--tiles", action="store_true",
                    help="write one label per tile instead of full resolution")
     p.add_argument("--truth", default=None, help="ground truth to report Dice against")
@@ -130,7 +133,8 @@ def _run_segment(args: argparse.Namespace) -> int:
     from ._segment import segment_steps
 
     timer = StepTimer()
-    outputs = [args.output] + [p for p in (args.model_out, args.signatures) if p]
+    outputs = [args.output] + [p for p in (args.model_out, args.signatures, args.res_plot)
+                               if p]
     for p in outputs:            # refuse before any work, so nothing is half written
         check_writable(p, force=args.force)
     with timer("read"):
@@ -155,6 +159,17 @@ def _run_segment(args: argparse.Namespace) -> int:
             result.model.save(args.model_out, force=args.force)
         if args.signatures:
             write_signatures_csv(result.signatures, args.signatures, force=args.force)
+        if args.res_plot:
+            from ._recommended import plot_res_scales
+            from ._res import res_statistics
+
+            stats = result.res if result.res is not None else (
+                res_statistics(image, samples) if samples is not None else None)
+            if stats is None:
+                raise ValueError("--res-plot needs --samples: the RES statistics come from "
+                                 "the sample boxes.")
+            plot_res_scales(stats, result.scales or (result.scale,)).savefig(args.res_plot,
+                                                                             dpi=120)
     summary = result.summary()
     summary["seconds"] = {**summary["seconds"], **timer.seconds}
     summary["output"] = args.output

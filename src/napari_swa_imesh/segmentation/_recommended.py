@@ -49,7 +49,7 @@ from ._classifiers import GaussianClassifier
 from ._samples import Material, Samples
 
 __all__ = ["RecommendedModel", "multiscale_features", "multiscale_feature_names",
-           "estimate_bias_field", "potts_mean_field", "RECOMMENDED_METHOD"]
+           "estimate_bias_field", "potts_mean_field", "plot_res_scales", "RECOMMENDED_METHOD"]
 
 RECOMMENDED_METHOD = "recommended"
 _CHUNK = 1 << 19        # pixels per likelihood batch (bounds float64 temporaries)
@@ -696,6 +696,37 @@ class RecommendedModel:
             params = {k[len(prefix):]: v for k, v in arrays.items() if k.startswith(prefix)}
             model.levels[j] = GaussianClassifier().set_params(params)
         return model
+
+
+def plot_res_scales(stats, scales, *, figure=None, dark: bool = False):
+    """The RES plot (:func:`plot_res`) with the scales a segmentation used shaded.
+
+    The coarse scale is the solid line (``selected_scale``), the band from the finest
+    refinement scale to it is shaded green, and the suggested RES stays dashed red, so the
+    user sees where the classifier's scales sit on the statistics they came from.
+
+    Parameters
+    ----------
+    stats : ResStatistics
+    scales : sequence of int
+        E.g. ``result.scales`` (coarse first).
+    figure : matplotlib.figure.Figure, optional
+    dark : bool
+
+    Returns
+    -------
+    matplotlib.figure.Figure
+    """
+    from ._res import plot_res
+
+    scales = [int(j) for j in scales]
+    fig = plot_res(stats, figure=figure, selected_scale=max(scales), dark=dark)
+    for ax in fig.axes:
+        ax.axvspan(min(scales) - 0.25, max(scales) + 0.25, color="#2ca02c", alpha=0.12, lw=0)
+    fig.suptitle(f"{fig._suptitle.get_text()}; scales used: "
+                 f"{', '.join(map(str, scales))}", fontsize=10,
+                 color=fig._suptitle.get_color())
+    return fig
 
 
 def _within_variance(values: np.ndarray, labels: np.ndarray) -> float:
