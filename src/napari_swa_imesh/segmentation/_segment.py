@@ -29,7 +29,7 @@ from .._validation import as_image, normalize_spacing
 from ._model import SWAModel
 from ._moments import tile_moments
 from ._recommended import RECOMMENDED_METHOD, RecommendedModel, majority_tiles, \
-    potts_mean_field, _argmax_first
+    potts_mean_field
 from ._res import MOMENT_NAMES, ResStatistics, res_statistics
 from ._samples import Samples
 
@@ -241,7 +241,8 @@ def _recommended_steps(image, samples, *, scale, sieve, model, spacing):
     t = time.perf_counter()
     img = model._check_image(img)
     ll, level = model._labels_and_ll(img)
-    labels = np.asarray(model.labels, np.int32)[_argmax_first(potts_mean_field(ll, model.beta))]
+    labels = np.asarray(model.labels, np.int32)[potts_mean_field(ll, model.beta,
+                                                                 labels_only=True)]
     del ll
     seconds["classify"] = time.perf_counter() - t
     yield 3, total, "sieving and tiling"
