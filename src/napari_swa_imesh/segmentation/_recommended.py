@@ -23,14 +23,19 @@ Why each part is here (measured on the texture mosaics and 3-D tissue phantoms o
 * **Boundaries: coarse-to-fine, as the reference's future-work tree refinement.** A pixel
   whose level-j window straddles two labels has mixed statistics; it is relabelled by
   level j-1, down to the finest level whose cross-validated error is at most
-  ``refine_error`` percent (textures stop refining early, intensity-distinct tissues refine
-  to the pixel).
-* **Spatial regularisation.** A Potts MRF by a few mean-field sweeps on the per-pixel
-  log-likelihoods over the 3^d neighbourhood (vectorised, no graph cut needed).
+  ``refine_error`` percent (12: textures stop one or two levels below J, where the MRF can
+  still repair the finer level's mistakes; intensity-distinct tissues refine to the pixel).
+* **Spatial regularisation.** A Potts MRF (beta 2) by five mean-field sweeps on the
+  per-pixel log-likelihoods over the 2d face neighbours, vectorised over the pixels that
+  are unsure or touch another label (no graph cut needed).
 * **Smooth multiplicative bias** (MR-like data; EM-style, after Van Leemput et al. 1999):
   the field is the locally weighted least-squares ratio of the image to its class means,
   ``b = G*(I mu) / G*(mu^2)``, with G a wide Gaussian on a coarse grid; the image is divided
-  by it and the classifiers refitted, twice.
+  by it and the classifiers refitted, twice; kept only where it helps (``"auto"``).
+
+Explainability: :meth:`RecommendedModel.summary` lists the cross-validated error of every
+level, the scales used (windows in px), and the features with the largest Fisher ratios;
+:func:`plot_res_scales` shades the scales used on the RES plot.
 """
 
 from __future__ import annotations
