@@ -23,7 +23,8 @@ def add_command(subparsers) -> None:
     p = subparsers.add_parser(
         "demo", help="segment and mesh a generated texture mosaic",
         description="Run the whole pipeline on a generated two-texture mosaic: RES, SWA "
-                    "segmentation (F1 + GM at the suggested RES), Dice against the truth, "
+                    "segmentation (the recommended method, up to the suggested RES), Dice "
+                    "against the truth, "
                     "IMESH triangle mesh written as .vtu.")
     p.add_argument("--out", default="swa-imesh-demo", help="folder for every file (created)")
     p.add_argument("--layout", default="halves", choices=["halves", "circle", "voronoi"])
@@ -38,7 +39,7 @@ def run_demo(args) -> int:
     from .io import write_labels
     from .segmentation._cli import write_signatures_csv
     from .segmentation._metrics import evaluate
-    from .segmentation._res import plot_res
+    from .segmentation._recommended import plot_res_scales
     from .segmentation._samples import save_samples
     from .segmentation._segment import segment
 
@@ -61,14 +62,15 @@ def run_demo(args) -> int:
     fitted = segment(train, samples)                 # scale: the suggested RES
     result = segment(mosaic, model=fitted.model)
     seconds["segment"] = time.perf_counter() - t
-    plot_res(fitted.res).savefig(out / "res.png", dpi=110)
+    plot_res_scales(fitted.res, result.scales).savefig(out / "res.png", dpi=110)
     fitted.model.save(out / "model.npz", force=args.force)
     write_labels(out / "labels.tif", result.labels, force=args.force)
     write_signatures_csv(result.signatures, out / "signatures.csv", force=args.force)
     ev = evaluate(result.labels, truth)
 
     summary = {
-        "scale": result.scale, "suggested_scale": fitted.res.suggested_scale,
+        "method": result.method, "scales": list(result.scales), "scale": result.scale,
+        "suggested_scale": fitted.res.suggested_scale,
         "eps_l": fitted.eps_l, "dice": ev["dice"], "mean_dice": ev["mean_dice"],
         "files": str(out),
     }
@@ -93,8 +95,10 @@ def run_demo(args) -> int:
         return 0
     print(f"texture mosaic ({args.layout}) of {', '.join(textures)}: trained on the photos' "
           f"top halves, tested on their bottom halves")
-    print(f"suggested RES: scale {fitted.res.suggested_scale} "
-          f"(tiles of {1 << result.scale} px); leave-one-out error {fitted.eps_l:.2f}%")
+    print(f"suggested RES: scale {fitted.res.suggested_scale}; {result.method} method using "
+          f"scales {', '.join(str(j) for j in result.scales)} (windows of up to "
+          f"{(1 << max(result.scales)) + 1} px); training error {fitted.eps_l:.2f}% "
+          f"({fitted.model.scores.get('eps_l_method', 'leave-one-out')})")
     print("Dice: " + ", ".join(f"{textures[m - 1]} {d:.3f}" for m, d in ev["dice"].items())
           + f"  (mean {ev['mean_dice']:.3f})")
     if "mesh" in summary:

@@ -7,7 +7,7 @@ import pytest
 from swa_napari_helpers import wait_idle
 
 from napari_swa_imesh._napari import _classify_widget, _mesh_widget
-from napari_swa_imesh._napari._classify_widget import ClassifyWidget
+from napari_swa_imesh._napari._classify_widget import METHOD_REFERENCE, ClassifyWidget
 from napari_swa_imesh._napari._mesh_widget import MeshWidget
 from napari_swa_imesh._napari._res_widget import ResWidget
 from napari_swa_imesh._napari._samples_widget import SamplesWidget
@@ -53,6 +53,7 @@ def test_box_too_small_for_the_scale(mosaic_viewer, qtbot, notifications):
     samples.set_scale(4)
     assert samples.report.flags[1] == ["too small at scale 4"]
     classify = ClassifyWidget(viewer)
+    classify.method_combo.setCurrentText(METHOD_REFERENCE)   # tiles need whole-tile boxes
     classify.samples_combo.select(layer)
     classify.scale_spin.setValue(4)
     n_layers = len(viewer.layers)

@@ -10,7 +10,7 @@ sit a few points below.
 import numpy as np
 from swa_napari_helpers import PHANTOM_SHAPE, wait_idle
 
-from napari_swa_imesh._napari._classify_widget import OUTPUT_TILES
+from napari_swa_imesh._napari._classify_widget import METHOD_REFERENCE, OUTPUT_TILES
 from napari_swa_imesh._napari._layers import EXTENT_KEY
 from napari_swa_imesh._napari._workflow import WorkflowWidget
 from napari_swa_imesh.mesh._export import read_mesh
@@ -93,6 +93,7 @@ def test_tile_resolution_labels_overlay_the_image(phantom_viewer, qtbot):
     samples.scale_spin.setValue(2)
     samples.samples_from_truth()
     wait_idle(qtbot, samples)
+    flow.classify.method_combo.setCurrentText(METHOD_REFERENCE)   # one tile scale
     flow.classify.scale_spin.setValue(2)
     flow.classify.output_combo.setCurrentText(OUTPUT_TILES)
     flow.classify.classify()

@@ -22,11 +22,14 @@ if TYPE_CHECKING:
 
     from ..segmentation import SegmentationResult, SWAModel
 
-__all__ = ["ClassifyWidget", "SEGMENTATION_KEY", "OUTPUT_FULL", "OUTPUT_TILES"]
+__all__ = ["ClassifyWidget", "SEGMENTATION_KEY", "OUTPUT_FULL", "OUTPUT_TILES", "METHOD_RECOMMENDED",
+           "METHOD_REFERENCE"]
 
 SEGMENTATION_KEY = "swa_imesh_segmentation"   # Labels metadata: the run's summary
 OUTPUT_FULL = "full resolution"
 OUTPUT_TILES = "one label per tile"
+METHOD_RECOMMENDED = "recommended (multi-scale, full resolution)"
+METHOD_REFERENCE = "reference (one tile scale)"
 _SEGMENT_STEPS = 5   # segment_steps reports done = 0..5
 
 
@@ -50,6 +53,13 @@ class ClassifyWidget(QWidget):
 
         self.image_combo = LayerCombo(self.viewer, ("Image",))
         self.samples_combo = LayerCombo(self.viewer, ("Shapes",), accept=sl.is_samples_layer)
+        self.method_combo = QComboBox()
+        self.method_combo.addItems([METHOD_RECOMMENDED, METHOD_REFERENCE])
+        self.method_combo.setToolTip(
+            "recommended: per-pixel statistics at every scale up to the RES, refined at "
+            "boundaries, MRF-smoothed and bias-corrected (full-resolution labels); reference: "
+            "the dissertation's method, one feature set and classifier on tiles of one scale.")
+        self.method_combo.currentTextChanged.connect(self._on_method_changed)
         self.feature_combo = QComboBox()
         self.feature_combo.addItems(list(FEATURE_SETS))
         self.feature_combo.setToolTip("Table 2.1: F1 moments, F2 entropy, F3 correlation "
@@ -99,6 +109,7 @@ class ClassifyWidget(QWidget):
         form = QFormLayout()
         form.addRow("image", self.image_combo)
         form.addRow("samples", self.samples_combo)
+        form.addRow("method", self.method_combo)
         form.addRow("feature set", self.feature_combo)
         form.addRow("classifier", self.classifier_combo)
         form.addRow("scale j", self.scale_spin)
@@ -124,6 +135,18 @@ class ClassifyWidget(QWidget):
         layout.addWidget(model_box)
         self.samples_combo.currentTextChanged.connect(self._on_samples_layer_selected)
         self._on_samples_layer_selected()
+        self._on_method_changed()
+
+    def _on_method_changed(self, *_) -> None:
+        # feature set and classifier belong to the reference method only
+        reference = self.method_combo.currentText() == METHOD_REFERENCE
+        self.feature_combo.setEnabled(reference)
+        self.classifier_combo.setEnabled(reference)
+        self.scale_spin.setToolTip(
+            "Tile scale j (tiles of 2^j px per axis); by default the scale chosen in the RES "
+            "plots, else the suggested RES." if reference else
+            "Largest scale the recommended method looks at (windows of 2^j+1 px); by default "
+            "the scale chosen in the RES plots, else the suggested RES.")
 
     # -- settings --------------------------------------------------------------------------
     def _on_samples_layer_selected(self, *_) -> None:
@@ -185,9 +208,12 @@ class ClassifyWidget(QWidget):
                 f"smaller than one tile at scale {scale} and give no training tile; enlarge "
                 "them or choose a smaller scale.")
         truth = self._truth(data.shape)
-        options = dict(scale=scale, feature_set=self.feature_combo.currentText(),
-                       classifier=self.classifier_combo.currentText().lower(),
-                       sieve=self.sieve_spin.value(), spacing=layer_spacing(image))
+        options = dict(scale=scale, sieve=self.sieve_spin.value(), spacing=layer_spacing(image))
+        if self.method_combo.currentText() == METHOD_REFERENCE:
+            options.update(method="reference", feature_set=self.feature_combo.currentText(),
+                           classifier=self.classifier_combo.currentText().lower())
+        else:
+            options.update(method="recommended")
 
         def steps():
             result = yield from segment_steps(data, samples, **options)
@@ -261,8 +287,15 @@ class ClassifyWidget(QWidget):
     def _show_scores(self, result, dice, names) -> None:
         eps_l, eps_m = result.eps_l, result.eps_m
         how = result.model.scores.get("eps_l_method", "")
-        parts = [f"scale {result.scale} (tiles of {1 << result.scale} px), "
-                 f"{result.model.feature_set}, {result.model.classifier_name.upper()}"]
+        if getattr(result, "method", "reference") == "recommended":
+            scales = list(result.scales)
+            parts = [f"recommended: scales {', '.join(map(str, scales))} (windows up to "
+                     f"{(1 << max(scales)) + 1} px; pixels per scale "
+                     f"{result.summary().get('pixels_per_scale', {})}), "
+                     f"{result.model.feature_set}, {result.model.classifier_name.upper()}"]
+        else:
+            parts = [f"scale {result.scale} (tiles of {1 << result.scale} px), "
+                     f"{result.model.feature_set}, {result.model.classifier_name.upper()}"]
         if eps_l is not None:
             parts.append(f"eps_l = {eps_l:.2f} % ({how}), eps_m = {eps_m:.3f}")
         regularized = result.model.scores.get("regularized")
