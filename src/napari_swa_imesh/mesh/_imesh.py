@@ -394,12 +394,17 @@ def _template_quality(d: int, spacing: tuple[float, ...]) -> dict[str, np.ndarra
     tpl = luts.TEMPLATES[d] * np.asarray(spacing)  # (n, d+1, d)
     pts = tpl.reshape(-1, d)
     cells = np.arange(len(pts)).reshape(-1, d + 1)
-    table = {"quality": radius_edge_ratio(pts, cells)}
-    if d == 2:
-        table["min_angle"], table["max_angle"] = triangle_angles(pts, cells)
+    return _quality_data(pts, cells)
+
+
+def _quality_data(points: np.ndarray, cells: np.ndarray) -> dict[str, np.ndarray]:
+    """Per-cell quality arrays: radius-to-edge plus angles (2-D) or dihedral angles (3-D)."""
+    data = {"quality": radius_edge_ratio(points, cells)}
+    if points.shape[1] == 2:
+        data["min_angle"], data["max_angle"] = triangle_angles(points, cells)
     else:
-        table["min_dihedral"], table["max_dihedral"] = dihedral_angles(pts, cells)
-    return table
+        data["min_dihedral"], data["max_dihedral"] = dihedral_angles(points, cells)
+    return data
 
 
 # ---------------------------------------------------------------------------- delaunay
@@ -438,11 +443,7 @@ def _delaunay_mesh(bal: RegionTree, meshed: np.ndarray):
     info = {"n_delaunay_simplices": int(len(simplices)), "n_zero_volume": int(zero.sum()),
             "n_outside_dropped": int((~zero & ~meshed[leaf]).sum())}
     simplices, leaf = simplices[keep], leaf[keep]
-    cell_data = {"quality": radius_edge_ratio(points, simplices)}
-    if d == 2:
-        cell_data["min_angle"], cell_data["max_angle"] = triangle_angles(points, simplices)
-    else:
-        cell_data["min_dihedral"], cell_data["max_dihedral"] = dihedral_angles(points, simplices)
+    cell_data = _quality_data(points, simplices)
     # drop vertices no kept simplex uses
     used = np.zeros(len(points), bool)
     used[simplices.ravel()] = True
