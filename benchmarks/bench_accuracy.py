@@ -143,10 +143,9 @@ def _cross(d):
     return s
 
 
-ANTS_SCRIPT = r"""
-import json, sys, time
-import numpy as np, ants
-
+# peak-memory helpers pasted into each child script (the ANTs child runs in its own venv,
+# so they cannot be imported from here)
+PEAK_HELPERS = r"""
 def reset_peak():
     # a child starts with its parent's high-water mark (fork copies the parent's memory
     # before exec); Linux resets it on writing 5 to clear_refs
@@ -161,7 +160,12 @@ def peak_gb():
             if line.startswith("VmHWM:"):
                 return int(line.split()[1]) / 2**20
     return float("nan")
-img = np.load(sys.argv[1]); k = int(sys.argv[3])
+"""
+
+ANTS_SCRIPT = r"""
+import json, sys, time
+import numpy as np, ants
+""" + PEAK_HELPERS + r"""img = np.load(sys.argv[1]); k = int(sys.argv[3])
 reset_peak()
 base = peak_gb()
 t = time.perf_counter()
@@ -300,22 +304,7 @@ def phantom_tables(quick, rows, ants_python):
 COST = r"""
 import json, sys, time
 import numpy as np
-
-def reset_peak():
-    # a child starts with its parent's high-water mark (fork copies the parent's memory
-    # before exec); Linux resets it on writing 5 to clear_refs
-    try:
-        with open("/proc/self/clear_refs", "w") as fh:
-            fh.write("5")
-    except OSError:
-        pass
-def peak_gb():
-    with open("/proc/self/status") as fh:
-        for line in fh:
-            if line.startswith("VmHWM:"):
-                return int(line.split()[1]) / 2**20
-    return float("nan")
-image = np.load(sys.argv[1]); truth = np.load(sys.argv[2]); which = sys.argv[4]
+""" + PEAK_HELPERS + r"""image = np.load(sys.argv[1]); truth = np.load(sys.argv[2]); which = sys.argv[4]
 from napari_swa_imesh.segmentation import load_samples, segment, dice_scores
 from skimage.feature import multiscale_basic_features
 from sklearn.ensemble import RandomForestClassifier
