@@ -133,3 +133,15 @@ def test_errors_are_clear():
         SWAModel(scale=1).predict_tiles(img)
     with pytest.raises(ValueError, match="choose 0"):
         segment(img, s, scale=9)
+
+
+@pytest.mark.parametrize("features", ["F1", "F2", "F5"])
+def test_signatures_are_the_moments_of_the_classified_tiles(features):
+    from napari_swa_imesh.segmentation import tile_moments
+    from napari_swa_imesh.segmentation._segment import material_signatures
+
+    img, truth, s = two_textures((64, 64))
+    res = segment(img, s, scale=2, feature_set=features)
+    moments, counts = tile_moments(img, 2)
+    expected = material_signatures(moments, counts, res.tile_labels, res.model)
+    assert res.signatures == expected

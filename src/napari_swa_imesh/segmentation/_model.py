@@ -150,6 +150,11 @@ class SWAModel:
         -------
         (ceil(M/2^j), ceil(N/2^j)[, ...]) ndarray of int32
         """
+        feats, _ = self.tile_features(image)
+        return self.classify_features(feats)
+
+    def tile_features(self, image) -> tuple[np.ndarray, np.ndarray]:
+        """The model's feature set on every tile of `image`: (features, valid pixel counts)."""
         if not self.materials:
             raise ValueError("this model is not fitted; call fit() or load a saved model.")
         img = as_image(image)
@@ -159,6 +164,10 @@ class SWAModel:
             )
         _check_scale(self.scale, img.shape)
         feats, counts, _ = feature_stack(img, self.scale, self.feature_set)
+        return feats, counts
+
+    def classify_features(self, feats: np.ndarray) -> np.ndarray:
+        """Labels (int32, tile grid shape) of tile features from :meth:`tile_features`."""
         tiles = feats.reshape(-1, feats.shape[-1])
         # partial tiles at the far edge get features from their valid pixels; a non-finite
         # feature (e.g. a one-pixel sliver's skewness) is replaced by the training mean so
@@ -167,7 +176,7 @@ class SWAModel:
         if bad.any():
             tiles = tiles.copy()
             tiles[bad] = np.broadcast_to(self.classifier.offset_, tiles.shape)[bad]
-        return self.classifier.predict(tiles).reshape(counts.shape).astype(np.int32)
+        return self.classifier.predict(tiles).reshape(feats.shape[:-1]).astype(np.int32)
 
     # -- file format -------------------------------------------------------------------
     def save(self, path, *, force: bool = False) -> Path:

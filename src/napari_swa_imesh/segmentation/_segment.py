@@ -296,7 +296,8 @@ def _reference_steps(image, samples, *, scale, feature_set, classifier, sieve, m
                          "Leave the scale unset when applying a saved model.")
     yield 2, total, f"classifying tiles at scale {model.scale}"
     t = time.perf_counter()
-    tiles = model.predict_tiles(img)
+    feats, counts = model.tile_features(img)
+    tiles = model.classify_features(feats)
     seconds["classify"] = time.perf_counter() - t
     yield 3, total, "sieving and upsampling"
     t = time.perf_counter()
@@ -306,7 +307,11 @@ def _reference_steps(image, samples, *, scale, feature_set, classifier, sieve, m
     seconds["output"] = time.perf_counter() - t
     yield 4, total, "material signatures"
     t = time.perf_counter()
-    moments, counts = tile_moments(img, model.scale)
+    if set(MOMENT_NAMES) <= set(model.feature_names):   # the moments are features already
+        moments = feats[..., [model.feature_names.index(n) for n in MOMENT_NAMES]]
+    else:
+        moments, counts = tile_moments(img, model.scale)
+    del feats
     signatures = material_signatures(moments, counts, tiles, model)
     seconds["signatures"] = time.perf_counter() - t
     seconds["total"] = time.perf_counter() - t0
