@@ -31,14 +31,11 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from .._validation import as_image
-from ._moments import moment_pyramid
+from ._moments import MOMENT_NAMES, moment_pyramid
 from ._samples import Samples
 
 __all__ = ["ResStatistics", "res_statistics", "suggest_res", "plot_res", "MOMENT_NAMES",
            "box_tile_moments"]
-
-MOMENT_NAMES = ("mean", "variance", "skewness", "kurtosis")
-
 
 @dataclass
 class ResStatistics:
