@@ -10,7 +10,7 @@ from pathlib import Path
 
 import numpy as np
 
-__all__ = ["StepTimer", "print_json", "to_jsonable", "check_writable"]
+__all__ = ["StepTimer", "print_json", "to_jsonable"]
 
 
 def to_jsonable(obj):
@@ -48,22 +48,3 @@ class StepTimer:
             yield
         finally:
             self.seconds[name] = self.seconds.get(name, 0.0) + time.perf_counter() - t0
-
-
-def check_writable(path, *, force: bool = False) -> Path:
-    """Refuse to replace an existing file unless `force`; return the path.
-
-    Raises
-    ------
-    FileExistsError
-        If `path` exists and `force` is false.
-    """
-    p = Path(path)
-    if p.exists() and not force:
-        raise FileExistsError(
-            f"{p} already exists; choose another output name or pass --force "
-            "(force=True) to replace it."
-        )
-    if p.exists() and p.is_dir():
-        raise IsADirectoryError(f"{p} is a directory; give a file name to write.")
-    return p

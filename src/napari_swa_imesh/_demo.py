@@ -34,7 +34,7 @@ def add_command(subparsers) -> None:
 
 
 def run_demo(args) -> int:
-    from ._cli_util import check_writable
+    from .io import check_writable
     from .data import texture_mosaic, texture_training
     from .io import write_labels
     from .segmentation._cli import write_signatures_csv

@@ -9,15 +9,120 @@ per array axis in that same order.
 from __future__ import annotations
 
 import os
+import shutil
 import tempfile
+import threading
+from collections.abc import Iterator, Sequence
+from contextlib import contextmanager
 from pathlib import Path
 
 import numpy as np
 
-from ._cli_util import check_writable
 from ._validation import normalize_spacing
 
-__all__ = ["read_image", "write_labels", "image_suffix", "IMAGE_SUFFIXES"]
+__all__ = ["read_image", "write_labels", "write_labels_to", "label_array", "check_label_format",
+           "image_suffix", "IMAGE_SUFFIXES", "LABEL_SUFFIXES", "check_writable", "atomic_write"]
+
+LABEL_SUFFIXES = (".npy", ".tif", ".tiff", ".nii", ".nii.gz", ".png")
+_UMASK_LOCK = threading.Lock()
+
+
+def check_writable(path, *, force: bool = False) -> Path:
+    """Check that `path` may be written (before any work); return it as a Path.
+
+    Raises
+    ------
+    FileExistsError
+        `path` exists and `force` is false.
+    IsADirectoryError
+        `path` is a folder.
+    FileNotFoundError
+        Its folder does not exist.
+    """
+    p = Path(path)
+    if p.is_dir():
+        raise IsADirectoryError(f"{p} is a folder; give a file name to write.")
+    if p.exists() and not force:
+        raise FileExistsError(
+            f"{p} already exists; choose another output name, or allow replacing it "
+            "(--force on the command line)."
+        )
+    parent = p.parent if str(p.parent) else Path(".")
+    if not parent.is_dir():
+        raise FileNotFoundError(
+            f"folder {parent} does not exist; create it or choose another output path."
+        )
+    if not os.access(parent, os.W_OK | os.X_OK):
+        raise PermissionError(f"cannot write in folder {parent}; choose another output path.")
+    return p
+
+
+def _umask() -> int:
+    # os.umask can only be read by setting it; the lock keeps other threads of this
+    # process from creating files in between
+    with _UMASK_LOCK:
+        mask = os.umask(0o077)
+        os.umask(mask)
+    return mask
+
+
+@contextmanager
+def atomic_write(paths: Sequence, *, force: bool = False) -> Iterator[list[Path]]:
+    """Write several files all or nothing: yield temporary paths, then move them in place.
+
+    The temporary files lie in a hidden folder beside each target and carry the target's
+    own file name (so twins such as ``.xdmf``/``.h5`` name each other right). When the
+    block ends without an exception every file is given the mode a normal file would get
+    (``0o666`` less the umask) and moved over its target; on any exception the temporary
+    folder is removed and no target is touched. Every output of this package goes
+    through here.
+
+    Parameters
+    ----------
+    paths : sequence of str or Path
+        The files to write (checked with :func:`check_writable` first).
+    force : bool
+        Replace existing files.
+
+    Yields
+    ------
+    list of Path
+        One temporary path per target, in order; the caller writes each (a file not
+        written is an error).
+
+    Examples
+    --------
+    >>> import tempfile, pathlib
+    >>> folder = pathlib.Path(tempfile.mkdtemp())
+    >>> with atomic_write([folder / "a.txt"]) as (tmp,):
+    ...     _ = tmp.write_text("hello")
+    >>> (folder / "a.txt").read_text()
+    'hello'
+    """
+    targets = [check_writable(p, force=force) for p in paths]
+    if len({t.resolve() for t in targets}) != len(targets):
+        raise ValueError(f"two outputs name the same file ({', '.join(map(str, targets))}); "
+                         "give each output its own name.")
+    folders: dict[Path, Path] = {}
+    temps: list[Path] = []
+    try:
+        for t in targets:
+            parent = (t.parent if str(t.parent) else Path(".")).resolve()
+            if parent not in folders:
+                folders[parent] = Path(tempfile.mkdtemp(prefix=".swa-imesh-", dir=parent))
+            temps.append(folders[parent] / t.name)
+        yield temps
+        missing = [str(t) for t, tmp in zip(targets, temps) if not tmp.is_file()]
+        if missing:
+            raise RuntimeError(f"internal error: {', '.join(missing)} not written.")
+        mode = 0o666 & ~_umask()
+        for tmp in temps:
+            os.chmod(tmp, mode)
+        for tmp, t in zip(temps, targets):
+            os.replace(tmp, t)
+    finally:
+        for folder in folders.values():
+            shutil.rmtree(folder, ignore_errors=True)
 
 IMAGE_SUFFIXES = (".tif", ".tiff", ".png", ".jpg", ".jpeg", ".npy", ".nii", ".nii.gz")
 
@@ -110,76 +215,144 @@ def _read_tiff(p: Path):
             ij = tif.imagej_metadata or {}
             if "spacing" in ij and image.ndim >= 3:
                 spacing[-3] = float(ij["spacing"])
+            shaped = (tif.shaped_metadata or ({},))[0] or {}
+            if len(shaped.get("spacing_per_axis", ())) == image.ndim:
+                spacing = [float(v) for v in shaped["spacing_per_axis"]]
         except Exception:  # spacing is best effort; the pixels are what matters
             spacing = [1.0] * image.ndim
     return image, tuple(spacing)
 
 
-def write_labels(path, labels: np.ndarray, *, spacing=None, force: bool = False) -> Path:
-    """Write a label image in the format its suffix names, without clobbering files.
+def label_array(labels, *, name: str = "labels") -> np.ndarray:
+    """`labels` in the smallest integer dtype that holds every value exactly.
+
+    Unsigned (uint8 .. uint64) when no value is negative, else signed (int8 .. int64).
+    Boolean and whole-number float arrays are accepted; anything that would change a
+    value (fractions, NaN, values beyond 64 bits) is refused.
+
+    Examples
+    --------
+    >>> label_array([0, 3, 70000]).dtype
+    dtype('uint32')
+    >>> int(label_array(np.array([2**40 + 3], np.int64))[0]) == 2**40 + 3
+    True
+    """
+    arr = np.asarray(labels)
+    if arr.dtype.kind == "b":
+        return arr.astype(np.uint8)
+    if arr.dtype.kind == "f":
+        if not np.isfinite(arr).all() or not np.array_equal(arr, np.round(arr)):
+            raise ValueError(f"{name} hold non-integer values (dtype {arr.dtype}); a label "
+                             "image holds whole numbers. Round or segment it first.")
+        lo, hi = (float(arr.min()), float(arr.max())) if arr.size else (0.0, 0.0)
+        if lo < -2.0 ** 63 or hi >= (2.0 ** 64 if lo >= 0 else 2.0 ** 63):
+            raise ValueError(f"{name} hold values beyond 64-bit integers ({lo:g} .. {hi:g}); "
+                             "relabel them first.")
+        arr = arr.astype(np.uint64 if lo >= 0 else np.int64)
+    elif arr.dtype.kind not in "iu":
+        raise TypeError(f"{name} must be integers; got dtype {arr.dtype}.")
+    if arr.size == 0:
+        return arr.astype(np.uint8)
+    lo, hi = int(arr.min()), int(arr.max())
+    kinds = (np.uint8, np.uint16, np.uint32, np.uint64) if lo >= 0 else (
+        np.int8, np.int16, np.int32, np.int64)
+    for dtype in kinds:
+        info = np.iinfo(dtype)
+        if info.min <= lo and hi <= info.max:
+            return arr.astype(dtype, copy=False)
+    raise ValueError(f"{name} span {lo} .. {hi}, which no 64-bit integer type holds; "
+                     "relabel them first.")
+
+
+
+
+def check_label_format(path, labels: np.ndarray) -> None:
+    """Raise ValueError unless `path`'s format holds `labels` (from :func:`label_array`)
+    exactly: its suffix, dimensionality and value range."""
+    suffix = image_suffix(path)
+    if suffix not in LABEL_SUFFIXES:
+        raise ValueError(
+            f"cannot write labels as {Path(path).name!r}: unknown suffix {suffix!r}; use "
+            f"{', '.join(LABEL_SUFFIXES)}."
+        )
+    if suffix == ".png":
+        if labels.ndim != 2 or labels.dtype not in (np.uint8, np.uint16):
+            raise ValueError(
+                f"PNG holds 2-D labels from 0 to 65535; got shape {labels.shape} with "
+                f"values up to {labels.max() if labels.size else 0}. Use .tif, .nii.gz or "
+                ".npy."
+            )
+    if suffix in (".nii", ".nii.gz") and labels.ndim > 7:
+        raise ValueError(f"NIfTI holds up to 7 axes; got {labels.ndim}. Use .npy.")
+
+
+def write_labels(path, labels, *, spacing=None, origin=None, force: bool = False) -> Path:
+    """Write a label image in the format its suffix names; values are kept exactly.
 
     Parameters
     ----------
     path : str or Path
-        ``.npy``, ``.tif/.tiff``, ``.nii/.nii.gz`` or ``.png`` (2-D, labels < 65536).
+        ``.npy``, ``.tif/.tiff``, ``.nii/.nii.gz`` or ``.png`` (2-D, labels 0..65535).
     labels : ndarray of int
-        Label image.
+        Label image. Stored in the smallest integer type that holds every value
+        (:func:`label_array`); a format that cannot hold them is an error, never a wrap.
     spacing : sequence of float, optional
-        Voxel spacing to record (TIFF resolution / ImageJ spacing, NIfTI zooms).
+        Size of one array element per axis, in physical units (TIFF resolution and
+        ImageJ spacing, NIfTI zooms).
+    origin : sequence of float, optional
+        Physical position of the centre of element 0 per axis (NIfTI affine translation,
+        ImageJ ``xorigin``/``yorigin``/``zorigin``); default 0.
     force : bool
         Replace an existing file. Without it an existing file is an error.
 
     Returns
     -------
     Path
-        The written file. It is written to a temporary name first and moved into place,
-        so a failed write never leaves a half file where the user's was.
+        The written file (written through :func:`atomic_write`).
     """
-    p = check_writable(path, force=force)
-    labels = np.asarray(labels)
-    suffix = image_suffix(p)
-    sp = normalize_spacing(spacing, labels.ndim)
-    if labels.size and labels.min() >= 0 and labels.max() < 256:
-        data = labels.astype(np.uint8)
-    elif labels.size and labels.min() >= 0 and labels.max() < 65536:
-        data = labels.astype(np.uint16)
+    data = label_array(labels)
+    check_label_format(path, data)
+    with atomic_write([path], force=force) as (tmp,):
+        write_labels_to(tmp, data, spacing=spacing, origin=origin)
+    return Path(path)
+
+
+def write_labels_to(tmp, data: np.ndarray, *, spacing=None, origin=None) -> None:
+    """Write checked labels (:func:`label_array`, :func:`check_label_format`) to `tmp`,
+    a temporary path from :func:`atomic_write` with the target's name."""
+    suffix = image_suffix(tmp)
+    sp = normalize_spacing(spacing, data.ndim)
+    org = (0.0,) * data.ndim if origin is None else tuple(float(v) for v in origin)
+    if suffix == ".npy":
+        with open(tmp, "wb") as fh:
+            np.save(fh, data)
+    elif suffix in (".tif", ".tiff"):
+        import tifffile
+
+        imagej = data.ndim in (2, 3) and data.dtype in (np.uint8, np.uint16)
+        meta: dict = {}
+        if data.ndim == 3:
+            meta["spacing"] = sp[-3]
+        # ImageJ calibration: physical = (index - origin) * spacing, origin in pixels
+        for key, axis in (("xorigin", -1), ("yorigin", -2), ("zorigin", -3)):
+            if data.ndim >= -axis and org[axis] != 0:
+                meta[key] = -org[axis] / sp[axis]
+        if not imagej:
+            meta.pop("zorigin", None)
+            meta.update({"spacing_per_axis": list(sp), "origin": list(org)})
+        tifffile.imwrite(tmp, data, imagej=imagej, resolution=(1.0 / sp[-1], 1.0 / sp[-2]),
+                         metadata=meta or None)
+    elif suffix in (".nii", ".nii.gz"):
+        import nibabel as nib
+
+        affine = np.eye(4)
+        for axis in range(min(3, data.ndim)):
+            affine[axis, axis] = sp[axis]
+            affine[axis, 3] = org[axis]
+        img = nib.Nifti1Image(data, affine, dtype=data.dtype)
+        img.header.set_zooms(sp)
+        nib.save(img, str(tmp))
     else:
-        data = labels.astype(np.int32)
-    if suffix not in (".npy", ".tif", ".tiff", ".nii", ".nii.gz", ".png"):
-        raise ValueError(
-            f"cannot write labels as {suffix!r}; use .npy, .tif, .nii.gz or .png."
-        )
-    if suffix == ".png" and (labels.ndim != 2 or data.dtype == np.int32):
-        raise ValueError(
-            f"PNG holds 2-D labels below 65536; got shape {labels.shape}. Use .tif or .nii.gz."
-        )
-    fd, tmp = tempfile.mkstemp(prefix=".swa-imesh-", suffix=suffix, dir=p.parent or ".")
-    os.close(fd)
-    try:
-        if suffix == ".npy":
-            with open(tmp, "wb") as fh:
-                np.save(fh, data)
-        elif suffix in (".tif", ".tiff"):
-            import tifffile
+        import imageio.v3 as iio
 
-            meta = {"spacing": sp[-3]} if data.ndim == 3 else {}
-            tifffile.imwrite(
-                tmp, data, imagej=data.ndim in (2, 3) and data.dtype != np.int32,
-                resolution=(1.0 / sp[-1], 1.0 / sp[-2]), metadata=meta or None,
-            )
-        elif suffix in (".nii", ".nii.gz"):
-            import nibabel as nib
-
-            affine = np.diag(list(sp[:3]) + [1.0] * (4 - min(3, data.ndim)))[:4, :4]
-            img = nib.Nifti1Image(data, affine)
-            img.header.set_zooms(sp)
-            nib.save(img, tmp)
-        else:
-            import imageio.v3 as iio
-
-            iio.imwrite(tmp, data, extension=".png")
-        os.replace(tmp, p)
-    finally:
-        if os.path.exists(tmp):
-            os.unlink(tmp)
-    return p
+        iio.imwrite(tmp, data, extension=".png")

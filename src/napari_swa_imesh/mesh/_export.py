@@ -24,14 +24,12 @@ What each format holds
 
 from __future__ import annotations
 
-import os
 import re
-import tempfile
 from pathlib import Path
 
 import numpy as np
 
-from .._cli_util import check_writable
+from ..io import atomic_write, check_writable
 from ._triangle_tetgen import format_rows, read_node_ele, write_node_ele
 from ._types import Mesh
 
@@ -304,10 +302,6 @@ def mesh_output_paths(path, *, force: bool = False) -> list[Path]:
     targets = _targets(Path(path))
     for target in targets:
         check_writable(target, force=force)
-        if not target.parent.is_dir():
-            raise FileNotFoundError(
-                f"folder {target.parent} does not exist; create it or choose another output path."
-            )
     return targets
 
 
@@ -344,22 +338,15 @@ def write_mesh(mesh: Mesh, path, *, force: bool = False) -> list[Path]:
     """
     _check_mesh_arg(mesh)
     targets = mesh_output_paths(path, force=force)
-    suffix = targets[0].suffix.lower()
-    temps: list[str] = []
-    try:
-        # one unique stem for all files: writers derive twins (.ele, .h5) from it
-        fd, tmp = tempfile.mkstemp(prefix=".swa-imesh-", suffix=targets[0].suffix,
-                                   dir=targets[0].parent)
-        os.close(fd)
-        temps = [tmp] + [str(Path(tmp).with_suffix(t.suffix)) for t in targets[1:]]
-        _write_files(mesh, suffix, temps, targets)
-        for tmp, target in zip(temps, targets):
-            os.replace(tmp, target)
-    finally:
-        for tmp in temps:
-            if os.path.exists(tmp):
-                os.unlink(tmp)
+    with atomic_write(targets, force=force) as temps:
+        write_mesh_to(mesh, temps)
     return targets
+
+
+def write_mesh_to(mesh: Mesh, temps: list[Path]) -> None:
+    """Write `mesh` to the temporary paths that :func:`atomic_write` gave for the targets
+    of :func:`mesh_output_paths` (same names, so twins name each other right)."""
+    _write_files(mesh, temps[0].suffix.lower(), [str(t) for t in temps], temps)
 
 
 def _write_files(mesh: Mesh, suffix: str, temps: list[str], targets: list[Path]) -> None:
@@ -382,10 +369,6 @@ def _write_format(mesh: Mesh, m, suffix: str, temps: list[str], targets: list[Pa
     elif suffix == ".xdmf":
         _require_h5py("write")
         meshio.write(temps[0], m, file_format="xdmf", data_format="HDF")
-        # the .xdmf names its .h5 file; name the one it will have once moved into place
-        xdmf = Path(temps[0])
-        text = xdmf.read_text().replace(f"{Path(temps[1]).name}:/", f"{targets[1].name}:/")
-        xdmf.write_text(text)
     elif suffix == ".msh":
         tagged, element_data = _gmsh_mesh(mesh, m)
         meshio.write(temps[0], tagged, file_format="gmsh", binary=False)

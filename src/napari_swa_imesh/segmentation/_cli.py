@@ -7,7 +7,8 @@ import csv
 import io as _io
 from pathlib import Path
 
-from .._cli_util import StepTimer, check_writable, print_json
+from .._cli_util import StepTimer, print_json
+from ..io import check_writable
 
 __all__ = ["add_commands"]
 
@@ -200,15 +201,22 @@ def _run_segment(args: argparse.Namespace) -> int:
     return 0
 
 
-def write_signatures_csv(signatures: list[dict], path, *, force: bool = False) -> Path:
-    """Write the material-signature table (one row per material) as CSV."""
-    p = check_writable(path, force=force)
+def signatures_csv_text(signatures: list[dict]) -> str:
+    """The material-signature table (one row per material) as CSV text."""
     buf = _io.StringIO()
     writer = csv.DictWriter(buf, fieldnames=list(signatures[0]))
     writer.writeheader()
     writer.writerows(signatures)
-    p.write_text(buf.getvalue())
-    return p
+    return buf.getvalue()
+
+
+def write_signatures_csv(signatures: list[dict], path, *, force: bool = False) -> Path:
+    """Write the material-signature table (one row per material) as CSV."""
+    from ..io import atomic_write
+
+    with atomic_write([path], force=force) as (tmp,):
+        tmp.write_text(signatures_csv_text(signatures))
+    return Path(path)
 
 
 def _run_samples_from_truth(args: argparse.Namespace) -> int:

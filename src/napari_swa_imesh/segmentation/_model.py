@@ -16,22 +16,19 @@ load as before.
 
 from __future__ import annotations
 
-import json
-import os
-import tempfile
 from pathlib import Path
 
 import numpy as np
 
-from .._cli_util import check_writable
 from .._validation import as_image
+from ..io import atomic_write
 from ._classifiers import LVQClassifier, leave_one_out_error, make_classifier
 from ._features import feature_stack, n_features
+from ._model_io import MODEL_FORMAT, check_model_path, read_model_file, write_model_to
 from ._samples import Material, Samples
 
 __all__ = ["SWAModel", "load_model", "training_tiles", "MODEL_FORMAT"]
 
-MODEL_FORMAT = "swa-imesh-model"
 
 
 def training_tiles(image: np.ndarray, samples: Samples, scale: int, feature_set: str
@@ -181,13 +178,17 @@ class SWAModel:
     # -- file format -------------------------------------------------------------------
     def save(self, path, *, force: bool = False) -> Path:
         """Write the model as NPZ + JSON metadata (no pickle); see the module docstring."""
+        check_model_path(path)
+        with atomic_write([path], force=force) as (tmp,):
+            write_model_to(tmp, *self.file_content())
+        return Path(path)
+
+    def file_content(self) -> tuple[dict, dict[str, np.ndarray]]:
+        """The JSON ``meta`` and the arrays :meth:`save` writes."""
         from .. import __version__
 
-        p = check_writable(path, force=force)
-        if p.suffix != ".npz":
-            raise ValueError(f"model files end in .npz; got {p.name}.")
         meta = {
-            "format": MODEL_FORMAT, "version": __version__, "scale": self.scale,
+            "version": __version__, "scale": self.scale,
             "feature_set": self.feature_set, "feature_names": self.feature_names,
             "classifier": self.classifier_name, "ndim": self.ndim, "spacing": self.spacing,
             "materials": [{"label": m.label, "name": m.name, "color": m.color}
@@ -197,15 +198,7 @@ class SWAModel:
                                    if not k.endswith("_") and not k.startswith("_")},
         }
         arrays = {f"param_{k}": v for k, v in self.classifier.get_params().items()}
-        fd, tmp = tempfile.mkstemp(prefix=".swa-imesh-", suffix=".npz", dir=p.parent or ".")
-        os.close(fd)
-        try:
-            np.savez_compressed(tmp, meta=np.array(json.dumps(meta)), **arrays)
-            os.replace(tmp, p)
-        finally:
-            if os.path.exists(tmp):
-                os.unlink(tmp)
-        return p
+        return meta, arrays
 
 
 def load_model(path):
@@ -216,17 +209,16 @@ def load_model(path):
     SWAModel or RecommendedModel
         As the file's ``method`` says (files without one are reference models).
     """
+    meta, arrays = read_model_file(path)
     p = Path(path)
-    if not p.is_file():
-        raise FileNotFoundError(f"no model file at {p}; check the path.")
     try:
-        with np.load(p, allow_pickle=False) as data:
-            meta = json.loads(str(data["meta"]))
-            arrays = {k: data[k] for k in data.files if k != "meta"}
-    except (OSError, ValueError, KeyError) as exc:
-        raise ValueError(f"{p} is not a swa-imesh model file: {exc}") from exc
-    if meta.get("format") != MODEL_FORMAT:
-        raise ValueError(f"{p} is not a swa-imesh model file (format {meta.get('format')!r}).")
+        return _model_from_file(meta, arrays, p)
+    except (KeyError, TypeError, ValueError, IndexError, AttributeError) as exc:
+        raise ValueError(f"{p} is a damaged or incomplete swa-imesh model file "
+                         f"({type(exc).__name__}: {exc}); save the model again.") from exc
+
+
+def _model_from_file(meta: dict, arrays: dict, p: Path):
     method = meta.get("method", "reference")
     if method == "recommended":
         from ._recommended import RecommendedModel

@@ -40,17 +40,15 @@ level, the scales used (windows in px), and the features with the largest Fisher
 
 from __future__ import annotations
 
-import json
-import os
-import tempfile
 from pathlib import Path
 
 import numpy as np
 from scipy import ndimage as ndi
 
-from .._cli_util import check_writable
 from .._validation import as_image
+from ..io import atomic_write
 from ._classifiers import GaussianClassifier
+from ._model_io import check_model_path, write_model_to
 from ._samples import Material, Samples
 
 __all__ = ["RecommendedModel", "multiscale_features", "multiscale_feature_names",
@@ -676,14 +674,17 @@ class RecommendedModel:
     # -- file format -------------------------------------------------------------------
     def save(self, path, *, force: bool = False) -> Path:
         """Write NPZ arrays + JSON ``meta`` (``method``: "recommended"; no pickles)."""
-        from .. import __version__
-        from ._model import MODEL_FORMAT
+        check_model_path(path)
+        with atomic_write([path], force=force) as (tmp,):
+            write_model_to(tmp, *self.file_content())
+        return Path(path)
 
-        p = check_writable(path, force=force)
-        if p.suffix != ".npz":
-            raise ValueError(f"model files end in .npz; got {p.name}.")
+    def file_content(self) -> tuple[dict, dict[str, np.ndarray]]:
+        """The JSON ``meta`` and the arrays :meth:`save` writes."""
+        from .. import __version__
+
         meta = {
-            "format": MODEL_FORMAT, "method": self.method, "version": __version__,
+            "method": self.method, "version": __version__,
             "scale": self.scale, "finest_scale": self.finest_scale,
             "res_scale": self.res_scale, "max_scale": self.max_scale,
             "feature_set": self.feature_set, "feature_names": self.feature_names,
@@ -699,15 +700,7 @@ class RecommendedModel:
         }
         arrays = {f"level{j}_{k}": v for j, clf in self.levels.items()
                   for k, v in clf.get_params().items()}
-        fd, tmp = tempfile.mkstemp(prefix=".swa-imesh-", suffix=".npz", dir=p.parent or ".")
-        os.close(fd)
-        try:
-            np.savez_compressed(tmp, meta=np.array(json.dumps(meta)), **arrays)
-            os.replace(tmp, p)
-        finally:
-            if os.path.exists(tmp):
-                os.unlink(tmp)
-        return p
+        return meta, arrays
 
     @classmethod
     def from_saved(cls, meta: dict, arrays: dict[str, np.ndarray]) -> "RecommendedModel":

@@ -13,14 +13,11 @@ versions still load.
 from __future__ import annotations
 
 import json
-import os
-import tempfile
 from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
 
-from .._cli_util import check_writable
 from .._tree import build_tree
 from .._validation import as_labels
 
@@ -178,12 +175,11 @@ def load_samples(path) -> Samples:
 
 def save_samples(samples: Samples, path, *, force: bool = False) -> Path:
     """Write `samples` as JSON; an existing file is replaced only with ``force``."""
-    p = check_writable(path, force=force)
-    fd, tmp = tempfile.mkstemp(prefix=".swa-imesh-", suffix=".json", dir=p.parent or ".")
-    with os.fdopen(fd, "w") as fh:
-        json.dump(samples.to_dict(), fh, indent=2)
-    os.replace(tmp, p)
-    return p
+    from ..io import atomic_write
+
+    with atomic_write([path], force=force) as (tmp,):
+        tmp.write_text(json.dumps(samples.to_dict(), indent=2))
+    return Path(path)
 
 
 def samples_from_truth(
