@@ -22,7 +22,7 @@ from .._tree import build_tree
 from .._validation import as_labels
 
 __all__ = ["Material", "SampleBox", "Samples", "load_samples", "save_samples",
-           "samples_from_truth"]
+           "samples_from_truth", "window_scale"]
 
 
 @dataclass(frozen=True)
@@ -79,6 +79,41 @@ class Samples:
 
     def boxes_of(self, label: int) -> list[SampleBox]:
         return [b for b in self.boxes if b.label == label]
+
+    def window_scales(self) -> dict[int, int]:
+        """Per material: the largest scale j whose window (2^j + 1 px per axis) fits
+        inside one of its boxes (:func:`window_scale` of its largest box).
+
+        The recommended method trains level j on windows of that size, so a material can
+        only be trained up to this scale; the smallest value over materials caps every
+        level.
+
+        Examples
+        --------
+        >>> s = Samples.from_dict({"boxes": [{"label": 1, "start": [0, 0], "stop": [64, 80]},
+        ...                                  {"label": 2, "start": [0, 0], "stop": [9, 9]}]})
+        >>> s.window_scales()
+        {1: 5, 2: 3}
+        """
+        return {m.label: max((window_scale(b.shape) for b in self.boxes_of(m.label)),
+                             default=-1) for m in self.materials}
+
+    def window_limit(self, scale: int) -> tuple[int, str] | None:
+        """If some material cannot be trained at `scale`, the scale every material can be
+        trained at and a sentence that says which box to enlarge; else None."""
+        scales = self.window_scales()
+        worst = min(scales, key=lambda m: scales[m])
+        if scales[worst] >= scale:
+            return None
+        side = (1 << scale) + 1
+        biggest = max(self.boxes_of(worst), key=lambda b: min(b.shape))
+        index = self.boxes.index(biggest)
+        shape = "x".join(map(str, biggest.shape))
+        return scales[worst], (
+            f"scale {scale} needs windows of {side} px inside a box of every material, but "
+            f"the largest box of {self.name_of(worst)!r} (box #{index}, label {worst}) is "
+            f"{shape} px; enlarge it to at least {side} px per axis, or use scale "
+            f"{scales[worst]} or less")
 
     @classmethod
     def from_dict(cls, data: dict) -> "Samples":
@@ -159,6 +194,18 @@ class Samples:
             raise ValueError(
                 f"material(s) {missing} have no sample box; draw a box for each or remove them."
             )
+
+
+def window_scale(shape) -> int:
+    """Largest scale j with a window of 2^j + 1 px inside a box of `shape` (0 for any box).
+
+    Examples
+    --------
+    >>> [window_scale((n, 100)) for n in (1, 2, 3, 8, 9, 65)]
+    [0, 0, 1, 2, 3, 6]
+    """
+    side = min(int(n) for n in shape)
+    return max(0, (side - 1).bit_length() - 1) if side > 1 else 0
 
 
 def load_samples(path) -> Samples:
