@@ -10,7 +10,7 @@ from collections.abc import Sequence
 
 import numpy as np
 
-__all__ = ["as_image", "as_labels", "normalize_spacing"]
+__all__ = ["as_image", "as_labels", "normalize_spacing", "label_dtype"]
 
 
 def as_image(
@@ -148,3 +148,15 @@ def normalize_spacing(spacing: float | Sequence[float] | None, ndim: int) -> tup
     if not (np.isfinite(values).all() and (values > 0).all()):
         raise ValueError(f"spacing values must be positive and finite; got {tuple(values)}.")
     return tuple(float(v) for v in values)
+
+
+def label_dtype(labels) -> np.dtype:
+    """int32 when every label fits it, else int64 (labels are 1 .. 2^63 - 1).
+
+    Examples
+    --------
+    >>> label_dtype([1, 2]), label_dtype([1, 2**40])
+    (dtype('int32'), dtype('int64'))
+    """
+    top = max((int(v) for v in labels), default=0)
+    return np.dtype(np.int32 if top <= np.iinfo(np.int32).max else np.int64)

@@ -80,6 +80,10 @@ class GaussianClassifier(_Standardised):
 
     Parameters
     ----------
+    priors : {"proportional", "equal"}
+        ``"proportional"``: n_i/n, the reference's eq. 2.30 (the training set's class
+        frequencies). ``"equal"``: 1/K, for training sets whose class sizes say nothing
+        about the image (sample boxes drawn by hand).
     shrinkage : float
         Ridge added to every class covariance, as a fraction of its mean eigenvalue.
         Covariances of constant or few tiles are singular; a tiny ridge keeps them
@@ -89,15 +93,19 @@ class GaussianClassifier(_Standardised):
 
     name = "gm"
 
-    def __init__(self, shrinkage: float = 1e-6):
+    def __init__(self, shrinkage: float = 1e-6, priors: str = "proportional"):
+        if priors not in ("proportional", "equal"):
+            raise ValueError(f"priors must be 'proportional' or 'equal'; got {priors!r}.")
         self.shrinkage = float(shrinkage)
+        self.priors = priors
 
     def fit(self, X, y) -> "GaussianClassifier":
         X, y, classes, counts = _check_training(X, y)
         Z = self._fit_scaler(X)
         p = Z.shape[1]
         self.classes_ = classes
-        self.priors_ = counts / counts.sum()
+        self.priors_ = (counts / counts.sum() if self.priors == "proportional"
+                        else np.full(classes.size, 1.0 / classes.size))
         self.means_ = np.stack([Z[y == c].mean(axis=0) for c in classes])
         covs, reg = [], []
         for c in classes:
@@ -157,12 +165,14 @@ class GaussianClassifier(_Standardised):
             sign, logdet = np.linalg.slogdet(cov_wo)
             r = zc - mean_wo
             maha = np.einsum("np,np->n", r, np.linalg.solve(cov_wo, r[:, :, None])[..., 0])
-            prior = (n - 1) / (counts.sum() - 1)
+            proportional = getattr(self, "priors", "proportional") == "proportional"
+            prior = (n - 1) / (counts.sum() - 1) if proportional else self.priors_[i]
             g[rows, i] = 0.5 * maha + 0.5 * logdet - np.log(prior)
             others = [k for k in range(classes.size) if k != i]
-            # the other classes' priors change because one tile is gone from the total
-            g[np.ix_(rows, others)] += np.log(self.priors_[others]) - np.log(
-                counts[others] / (counts.sum() - 1))
+            if proportional:
+                # the other classes' priors change because one tile is gone from the total
+                g[np.ix_(rows, others)] += np.log(self.priors_[others]) - np.log(
+                    counts[others] / (counts.sum() - 1))
         return classes[np.argmin(g, axis=1)]
 
 
@@ -301,7 +311,7 @@ def make_classifier(name: str):
     """Return an unfitted classifier for ``"gm"``, ``"md"`` or ``"lvq"``."""
     key = str(name).lower()
     if key == "gm":
-        return GaussianClassifier()
+        return GaussianClassifier(priors="equal")
     if key == "md":
         return MinimumDistanceClassifier()
     if key == "lvq":

@@ -25,7 +25,7 @@ from ..io import atomic_write
 from ._classifiers import LVQClassifier, leave_one_out_error, make_classifier
 from ._features import feature_stack, n_features
 from ._model_io import MODEL_FORMAT, check_model_path, read_model_file, write_model_to
-from ._samples import Material, Samples
+from ._samples import Material, Samples, check_contrast
 
 __all__ = ["SWAModel", "load_model", "training_tiles", "MODEL_FORMAT"]
 
@@ -121,6 +121,7 @@ class SWAModel:
         """Fit on the full tiles inside the sample boxes and score with leave-one-out."""
         img = as_image(image)
         samples.check(img.shape)
+        check_contrast(img, samples)
         _check_scale(self.scale, img.shape)
         n_features(self.feature_set, img.ndim, self.scale)  # validates the set name
         X, y, names = training_tiles(img, samples, self.scale, self.feature_set)
@@ -159,6 +160,7 @@ class SWAModel:
             raise ValueError(
                 f"the model was fitted on {self.ndim}-D images; got a {img.ndim}-D image."
             )
+        check_contrast(img)
         _check_scale(self.scale, img.shape)
         feats, counts, _ = feature_stack(img, self.scale, self.feature_set)
         return feats, counts

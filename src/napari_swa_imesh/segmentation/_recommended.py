@@ -40,16 +40,17 @@ level, the scales used (windows in px), and the features with the largest Fisher
 
 from __future__ import annotations
 
+import warnings
 from pathlib import Path
 
 import numpy as np
 from scipy import ndimage as ndi
 
-from .._validation import as_image
+from .._validation import as_image, label_dtype
 from ..io import atomic_write
 from ._classifiers import GaussianClassifier
 from ._model_io import check_model_path, write_model_to
-from ._samples import Material, Samples
+from ._samples import Material, Samples, check_contrast
 
 __all__ = ["RecommendedModel", "multiscale_features", "multiscale_feature_names",
            "estimate_bias_field", "potts_mean_field", "plot_res_scales", "RECOMMENDED_METHOD"]
@@ -221,10 +222,9 @@ def estimate_bias_field(image, labels, class_means: dict[int, float], *,
     (M, N[, P]) ndarray of float32
         The field (1 where the image matches the class means).
     """
-    lut = np.zeros(int(max(class_means)) + 1, np.float32)
-    for k, v in class_means.items():
-        lut[k] = v
-    mu = lut[labels]
+    keys = np.array(sorted(class_means))                 # labels may be any 63-bit value
+    values = np.array([class_means[k] for k in keys], np.float32)
+    mu = values[np.minimum(np.searchsorted(keys, labels), keys.size - 1)]
     factor = max(1, min(image.shape) // 32)
     num = _block_mean(np.asarray(image, np.float32) * mu, factor)
     den = _block_mean(mu * mu, factor)
@@ -416,11 +416,16 @@ class RecommendedModel:
         self.fisher: dict[str, float] = {}
         self.ndim: int | None = None
         self.spacing: tuple[float, ...] | None = None
+        self.intensity: tuple[float, float] = (0.0, 1.0)   # (offset, scale), see fit
         self.scores: dict = {}
 
     @property
     def labels(self) -> list[int]:
         return [m.label for m in self.materials]
+
+    def label_values(self) -> np.ndarray:
+        """Material labels in :attr:`labels` order, in a dtype that holds them."""
+        return np.asarray(self.labels, label_dtype(self.labels))
 
     @property
     def scales(self) -> list[int]:
@@ -444,6 +449,7 @@ class RecommendedModel:
         """
         img = as_image(image)
         samples.check(img.shape)
+        check_contrast(img, samples)
         if res_scale is None and self.max_scale is None:
             from ._res import res_statistics
 
@@ -451,11 +457,23 @@ class RecommendedModel:
         self.res_scale = res_scale
         top = self.max_scale if self.max_scale is not None else min(
             6, res_scale if res_scale is not None else 2)
-        biggest = max(max(b.shape) for b in samples.boxes)
-        top = max(0, min(top, int(np.floor(np.log2(max(biggest - 1, 1))))))
+        limit = samples.window_limit(top)
+        if limit is not None:
+            # box sizes are the user's, not the image's: a level no box of some material
+            # can train is never used, and the user hears which box to enlarge
+            if self.max_scale is not None:
+                raise ValueError(limit[1] + ".")
+            warnings.warn(f"{limit[1]}; using scales up to {limit[0]}.", UserWarning,
+                          stacklevel=2)
+            top = limit[0]
         self.materials = list(samples.materials)
         self.ndim = img.ndim
         self.spacing = None if spacing is None else tuple(float(s) for s in spacing)
+        # intensities in units of the boxes' spread above the image minimum: every result
+        # is invariant to x -> a x + b (a > 0), and the bias stays multiplicative
+        inside = np.concatenate([img[b.slices].ravel() for b in samples.boxes])
+        self.intensity = (float(img.min()), float(inside.std()) or float(img.std()))
+        img = self._standardise(img)
         work = img.astype(np.float32)
         field = None
         rounds = 3 if self.bias_correction else 1
@@ -470,7 +488,7 @@ class RecommendedModel:
                 if r == 0:
                     first = (X, y, names, dict(self.class_means))
             else:
-                self.levels[self.finest_scale] = GaussianClassifier().fit(X, y)
+                self.levels[self.finest_scale] = GaussianClassifier(priors="equal").fit(X, y)
             if r + 1 < rounds:
                 field = self._bias_field(img, work)
                 # keep the intensity scale of the training boxes: b = 1 on them on average
@@ -537,10 +555,10 @@ class RecommendedModel:
             cols = np.flatnonzero(levels <= j)
             wrong = 0
             for f in (0, 1):            # 2-fold CV: train on one half, test on the other
-                clf = GaussianClassifier().fit(X[fold == f][:, cols], y[fold == f])
+                clf = GaussianClassifier(priors="equal").fit(X[fold == f][:, cols], y[fold == f])
                 wrong += int(np.sum(clf.predict(X[fold != f][:, cols]) != y[fold != f]))
             self.level_error[j] = 100.0 * wrong / y.size
-            self.levels[j] = GaussianClassifier().fit(X[:, cols], y)
+            self.levels[j] = GaussianClassifier(priors="equal").fit(X[:, cols], y)
         best = min(self.level_error.values())
         self.scale = min(j for j, e in self.level_error.items() if e <= best + self.tolerance)
         good = [j for j in range(self.scale + 1) if self.level_error[j] <= self.refine_error]
@@ -568,18 +586,20 @@ class RecommendedModel:
         const = (-0.5 * clf.logdet_ + np.log(clf.priors_)).astype(np.float32)
         offset = clf.offset_.astype(np.float32)
         scale = (1.0 / clf.scale_).astype(np.float32)
+        # rows follow self.labels (the materials' order), not the classifier's sorted classes
+        row = [self.labels.index(int(c)) for c in clf.classes_]
         out = np.empty((clf.classes_.size, feats.shape[0]), np.float32)
         for i in range(0, feats.shape[0], _CHUNK):
             z = (feats[i:i + _CHUNK, :n] - offset) * scale
             for c in range(clf.classes_.size):
                 w = z @ inv[c].T - shift[c]
-                out[c, i:i + _CHUNK] = const[c] - 0.5 * np.einsum("ij,ij->i", w, w)
+                out[row[c], i:i + _CHUNK] = const[c] - 0.5 * np.einsum("ij,ij->i", w, w)
         return out
 
     def _predict_level(self, image: np.ndarray, level: int) -> np.ndarray:
         feats, _ = multiscale_features(image, level)
         ll = self._log_likelihood(feats.reshape(-1, feats.shape[-1]), level)
-        return np.asarray(self.labels)[_argmax_first(ll)].reshape(image.shape)
+        return self.label_values()[_argmax_first(ll)].reshape(image.shape)
 
     def _bias_field(self, image: np.ndarray, work: np.ndarray) -> np.ndarray:
         """Field of `image` given the labels of its current correction `work`.
@@ -595,8 +615,9 @@ class RecommendedModel:
         field = estimate_bias_field(image[sub], labels, self.class_means)
         return field if step == 1 else _upsample_linear(field, image.shape)
 
-    def corrected(self, image) -> tuple[np.ndarray, np.ndarray | None]:
-        """The image divided by its estimated bias field (float32), and the field."""
+    def _corrected(self, image) -> tuple[np.ndarray, np.ndarray | None]:
+        """The (standardised) image divided by its estimated bias field (float32), and
+        the field."""
         img = np.asarray(image, np.float32)
         if not self.bias_correction:
             return img, None
@@ -608,7 +629,7 @@ class RecommendedModel:
 
     def _labels_and_ll(self, img: np.ndarray):
         """Refined labels, per-pixel log-likelihoods and level (before the MRF)."""
-        work, _ = self.corrected(img)
+        work, _ = self._corrected(img)
         feats, _ = multiscale_features(work, self.scale)
         del work
         flat = feats.reshape(-1, feats.shape[-1])
@@ -643,9 +664,9 @@ class RecommendedModel:
         return np.moveaxis(potts_mean_field(ll, self.beta), 0, -1), level
 
     def predict(self, image) -> np.ndarray:
-        """Full-resolution labels, the input's shape (int32)."""
+        """Full-resolution labels, the input's shape (int32, int64 for labels >= 2^31)."""
         ll, _ = self._labels_and_ll(self._check_image(image))
-        return np.asarray(self.labels, np.int32)[potts_mean_field(ll, self.beta,
+        return self.label_values()[potts_mean_field(ll, self.beta,
                                                                   labels_only=True)]
 
     def predict_tiles(self, image) -> np.ndarray:
@@ -653,12 +674,21 @@ class RecommendedModel:
         return majority_tiles(self.predict(image), self.scale, self.labels)
 
     def _check_image(self, image) -> np.ndarray:
+        """The image, checked and standardised like the training image (a new array)."""
         if not self.materials:
             raise ValueError("this model is not fitted; call fit() or load a saved model.")
         img = as_image(image)
         if img.ndim != self.ndim:
             raise ValueError(
                 f"the model was fitted on {self.ndim}-D images; got a {img.ndim}-D image.")
+        check_contrast(img)
+        return self._standardise(img)
+
+    def _standardise(self, img: np.ndarray) -> np.ndarray:
+        """``(img - offset) / scale`` in place on a float64 array of our own."""
+        offset, scale = self.intensity
+        img -= offset
+        img /= scale
         return img
 
     def summary(self) -> dict:
@@ -697,6 +727,7 @@ class RecommendedModel:
             "class_means": {str(k): v for k, v in self.class_means.items()},
             "level_error": {str(k): v for k, v in self.level_error.items()},
             "fisher": self.fisher, "scores": self.scores,
+            "intensity": {"offset": self.intensity[0], "scale": self.intensity[1]},
         }
         arrays = {f"level{j}_{k}": v for j, clf in self.levels.items()
                   for k, v in clf.get_params().items()}
@@ -718,6 +749,8 @@ class RecommendedModel:
         model.level_error = {int(k): float(v) for k, v in meta["level_error"].items()}
         model.fisher = dict(meta.get("fisher", {}))
         model.scores = meta.get("scores", {})
+        intensity = meta.get("intensity", {"offset": 0.0, "scale": 1.0})
+        model.intensity = (float(intensity["offset"]), float(intensity["scale"]))
         for j in model.level_error:
             prefix = f"level{j}_"
             params = {k[len(prefix):]: v for k, v in arrays.items() if k.startswith(prefix)}
@@ -774,11 +807,12 @@ def majority_tiles(labels: np.ndarray, scale: int, materials: list[int]) -> np.n
     >>> majority_tiles(np.array([[1, 1, 2], [1, 2, 2]]), 1, [1, 2]).tolist()
     [[1, 2]]
     """
+    dtype = label_dtype(materials)
     if scale == 0:
-        return np.asarray(labels, np.int32).copy()
+        return np.asarray(labels, dtype).copy()
     s = 1 << scale
     counts = np.stack([_block_sum(labels == m, s) for m in materials])
-    return np.asarray(materials, np.int32)[counts.argmax(axis=0)]
+    return np.asarray(materials, dtype)[counts.argmax(axis=0)]
 
 
 def _block_sum(mask: np.ndarray, s: int) -> np.ndarray:

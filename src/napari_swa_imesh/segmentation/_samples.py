@@ -22,7 +22,7 @@ from .._tree import build_tree
 from .._validation import as_labels
 
 __all__ = ["Material", "SampleBox", "Samples", "load_samples", "save_samples",
-           "samples_from_truth", "window_scale"]
+           "samples_from_truth", "window_scale", "check_contrast"]
 
 
 @dataclass(frozen=True)
@@ -97,6 +97,36 @@ class Samples:
         """
         return {m.label: max((window_scale(b.shape) for b in self.boxes_of(m.label)),
                              default=-1) for m in self.materials}
+
+    def tile_counts(self, scale: int) -> dict[int, int]:
+        """Per material: full tiles of 2^scale px in its boxes (aligned to each box's corner).
+
+        Examples
+        --------
+        >>> s = Samples.from_dict({"boxes": [{"label": 1, "start": [0, 0], "stop": [8, 12]}]})
+        >>> s.tile_counts(2)
+        {1: 6}
+        """
+        return {m.label: sum(int(np.prod([n >> scale for n in b.shape]))
+                             for b in self.boxes_of(m.label)) for m in self.materials}
+
+    def tile_limit(self, scale: int, need: int) -> tuple[int, str] | None:
+        """If some material has fewer than `need` full tiles at `scale`, the largest scale
+        where every material has them (-1: none) and a sentence naming the box to enlarge;
+        else None."""
+        counts = self.tile_counts(scale)
+        short = [m for m in counts if counts[m] < need]
+        if not short:
+            return None
+        usable = next((j for j in range(scale - 1, -1, -1)
+                       if min(self.tile_counts(j).values()) >= need), -1)
+        worst = min(short, key=lambda m: counts[m])
+        biggest = max(self.boxes_of(worst), key=lambda b: int(np.prod(b.shape)))
+        return usable, (
+            f"at scale {scale} the boxes of {self.name_of(worst)!r} (label {worst}) hold "
+            f"{counts[worst]} full tile(s) of {1 << scale} px, fewer than the {need} the "
+            f"classifier needs; enlarge its box #{self.boxes.index(biggest)} or add boxes"
+            + (f", or use scale {usable} or less" if usable >= 0 else ""))
 
     def window_limit(self, scale: int) -> tuple[int, str] | None:
         """If some material cannot be trained at `scale`, the scale every material can be
@@ -194,6 +224,30 @@ class Samples:
             raise ValueError(
                 f"material(s) {missing} have no sample box; draw a box for each or remove them."
             )
+
+
+def check_contrast(image: np.ndarray, samples: "Samples | None" = None) -> None:
+    """Refuse an image with nothing to segment: one value everywhere, or (with `samples`)
+    sample boxes that all hold one and the same value.
+
+    Raises
+    ------
+    ValueError
+        With a sentence that says what to do.
+    """
+    lo, hi = float(image.min()), float(image.max())
+    if lo == hi:
+        raise ValueError(
+            f"the image holds one value everywhere ({lo:g}); there is nothing to segment. "
+            "Check that the right file or channel was given.")
+    if samples is None:
+        return
+    values = {float(image[b.slices].min()) for b in samples.boxes} | {
+        float(image[b.slices].max()) for b in samples.boxes}
+    if len(values) == 1:
+        raise ValueError(
+            f"every sample box holds the one value {values.pop():g}, so the materials cannot "
+            "be told apart; draw the boxes on the materials' own pixels.")
 
 
 def window_scale(shape) -> int:

@@ -19,6 +19,7 @@ returns the :class:`SegmentationResult` (napari thread workers and progress bars
 from __future__ import annotations
 
 import time
+import warnings
 from collections.abc import Generator
 from dataclasses import dataclass, field
 
@@ -26,7 +27,8 @@ import numpy as np
 from scipy import ndimage as ndi
 
 from .._validation import as_image, normalize_spacing
-from ._model import SWAModel
+from ._features import n_features
+from ._model import SWAModel, _check_scale
 from ._moments import tile_moments
 from ._recommended import RECOMMENDED_METHOD, RecommendedModel, majority_tiles, \
     potts_mean_field
@@ -234,15 +236,14 @@ def _recommended_steps(image, samples, *, scale, sieve, model, spacing):
         model.fit(img, samples, spacing=spacing, res_scale=res.suggested_scale)
         seconds["fit"] = time.perf_counter() - t
     elif scale is not None and scale != model.scale:
-        raise ValueError(f"the model works at scale {model.scale}; got scale={scale}. "
+        raise ValueError(f"the model works at scale {model.scale}; got scale {scale}. "
                          "Leave the scale unset when applying a saved model.")
     yield 2, total, (f"classifying pixels at scales {model.scale}..{model.finest_scale} "
                      f"with MRF smoothing")
     t = time.perf_counter()
     img = model._check_image(img)
     ll, level = model._labels_and_ll(img)
-    labels = np.asarray(model.labels, np.int32)[potts_mean_field(ll, model.beta,
-                                                                 labels_only=True)]
+    labels = model.label_values()[potts_mean_field(ll, model.beta, labels_only=True)]
     del ll
     seconds["classify"] = time.perf_counter() - t
     yield 3, total, "sieving and tiling"
@@ -286,13 +287,28 @@ def _reference_steps(image, samples, *, scale, feature_set, classifier, sieve, m
                     "no scale leaves every material two full tiles in its boxes; draw larger "
                     "sample boxes.")
             seconds["res"] = time.perf_counter() - t0
+            explicit = False
+        else:
+            explicit = True
+        _check_scale(scale, img.shape)
+        if classifier.lower() == "gm":
+            # a class covariance needs more tiles than features; with fewer, GM fits a
+            # ridge and calls every pixel the other material (measured on small boxes)
+            need = n_features(feature_set.upper(), img.ndim, scale) + 1
+            limit = samples.tile_limit(scale, need)
+            if limit is not None:
+                if explicit or limit[0] < 0:
+                    raise ValueError(limit[1] + ".")
+                warnings.warn(f"{limit[1]}; using scale {limit[0]}.", UserWarning,
+                              stacklevel=2)
+                scale = limit[0]
         yield 1, total, f"fitting {classifier.upper()} on {feature_set.upper()} at scale {scale}"
         t = time.perf_counter()
         model = SWAModel(scale=scale, feature_set=feature_set, classifier=classifier)
         model.fit(img, samples, spacing=spacing)
         seconds["fit"] = time.perf_counter() - t
     elif scale is not None and scale != model.scale:
-        raise ValueError(f"the model works at scale {model.scale}; got scale={scale}. "
+        raise ValueError(f"the model works at scale {model.scale}; got scale {scale}. "
                          "Leave the scale unset when applying a saved model.")
     yield 2, total, f"classifying tiles at scale {model.scale}"
     t = time.perf_counter()
