@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import argparse
 import sys
+import warnings
 
 from .mesh._cli import add_commands as add_mesh_commands
 from .segmentation._cli import add_commands as add_segmentation_commands
@@ -33,12 +34,20 @@ def main(argv: list[str] | None = None) -> int:
     """Run the command line; return the exit status."""
     parser = build_parser()
     args = parser.parse_args(argv)
-    try:
-        return int(args.func(args) or 0)
-    except (ValueError, TypeError, OSError, KeyError) as exc:
-        msg = exc.args[0] if isinstance(exc, KeyError) and exc.args else exc
-        print(f"swa-imesh {args.command}: error: {msg}", file=sys.stderr)
-        return 2
+    prefix = f"swa-imesh {args.command}"
+
+    def show(message, category, filename, lineno, file=None, line=None):
+        print(f"{prefix}: warning: {message}", file=sys.stderr)
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("always", UserWarning)
+        warnings.showwarning = show
+        try:
+            return int(args.func(args) or 0)
+        except (ValueError, TypeError, OSError, KeyError) as exc:
+            msg = exc.args[0] if isinstance(exc, KeyError) and exc.args else exc
+            print(f"{prefix}: error: {msg}", file=sys.stderr)
+            return 2
 
 
 if __name__ == "__main__":  # pragma: no cover

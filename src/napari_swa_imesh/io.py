@@ -21,7 +21,8 @@ import numpy as np
 from ._validation import normalize_spacing
 
 __all__ = ["read_image", "write_labels", "write_labels_to", "label_array", "check_label_format",
-           "image_suffix", "IMAGE_SUFFIXES", "LABEL_SUFFIXES", "check_writable", "atomic_write"]
+           "image_suffix", "IMAGE_SUFFIXES", "LABEL_SUFFIXES", "check_writable", "atomic_write",
+           "check_figure_path", "write_figure"]
 
 LABEL_SUFFIXES = (".npy", ".tif", ".tiff", ".nii", ".nii.gz", ".png")
 _UMASK_LOCK = threading.Lock()
@@ -356,3 +357,29 @@ def write_labels_to(tmp, data: np.ndarray, *, spacing=None, origin=None) -> None
         import imageio.v3 as iio
 
         iio.imwrite(tmp, data, extension=".png")
+
+
+def check_figure_path(path, *, force: bool = False) -> Path:
+    """Check that `path` may be written and that matplotlib writes its format.
+
+    Raises
+    ------
+    ValueError
+        The suffix is no format matplotlib can write (the message lists them).
+    """
+    from matplotlib.backend_bases import FigureCanvasBase
+
+    p = check_writable(path, force=force)
+    formats = sorted(FigureCanvasBase.get_supported_filetypes())
+    if p.suffix.lower().lstrip(".") not in formats:
+        raise ValueError(f"cannot write a plot as {p.name!r}: the suffix must name an image "
+                         f"format ({', '.join('.' + f for f in formats)}).")
+    return p
+
+
+def write_figure(figure, path, *, force: bool = False, dpi: int = 120) -> Path:
+    """Save a matplotlib figure through :func:`atomic_write`."""
+    check_figure_path(path, force=force)
+    with atomic_write([path], force=force) as (tmp,):
+        figure.savefig(tmp, dpi=dpi)
+    return Path(path)

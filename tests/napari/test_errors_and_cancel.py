@@ -62,7 +62,7 @@ def test_box_too_small_for_the_scale(mosaic_viewer, qtbot, notifications):
     warnings = notifications.messages("warning")
     assert any("smaller than one tile at scale 4" in w and "enlarge them" in w for w in warnings)
     (error,) = notifications.errors
-    assert "'grass'" in error and "Draw larger boxes" in error and "smaller scale" in error
+    assert "'grass'" in error and "enlarge its box" in error and "use scale 1 or less" in error
     assert classify.tasks.last_error == error
     assert len(viewer.layers) == n_layers        # no labels layer
     # the same boxes work at a scale they can hold

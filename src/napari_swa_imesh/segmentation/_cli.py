@@ -7,6 +7,8 @@ import csv
 import io as _io
 from pathlib import Path
 
+import numpy as np
+
 from .._cli_util import StepTimer, print_json
 from ..io import check_writable
 
@@ -89,13 +91,15 @@ def add_commands(subparsers) -> None:
 
 
 def _run_res(args: argparse.Namespace) -> int:
-    from ..io import read_image
+    from ..io import check_figure_path, read_image, write_figure
     from ._res import plot_res, res_statistics
     from ._samples import load_samples
 
     timer = StepTimer()
     if args.plot:
-        check_writable(args.plot, force=args.force)
+        check_figure_path(args.plot, force=args.force)
+    if args.max_scale is not None and args.max_scale < 0:
+        raise ValueError(f"--max-scale must be 0 or more; got {args.max_scale}.")
     with timer("read"):
         image, _ = read_image(args.image, gray=args.gray)
         samples = load_samples(args.samples)
@@ -103,8 +107,7 @@ def _run_res(args: argparse.Namespace) -> int:
         stats = res_statistics(image, samples, max_scale=args.max_scale)
     if args.plot:
         with timer("plot"):
-            fig = plot_res(stats)
-            fig.savefig(args.plot, dpi=120)
+            write_figure(plot_res(stats), args.plot, force=args.force)
     if args.json:
         print_json({**stats.to_dict(), "plot": args.plot, "seconds": timer.seconds})
     else:
@@ -126,23 +129,59 @@ def _res_text(stats) -> str:
     return "\n".join(lines)
 
 
+def _check_segment_args(args: argparse.Namespace) -> None:
+    """Every argument and output path, before any work (nothing is written on failure)."""
+    from ..io import LABEL_SUFFIXES, check_figure_path, image_suffix
+    from ._model_io import check_model_path
+
+    if image_suffix(args.output) not in LABEL_SUFFIXES:
+        raise ValueError(f"cannot write labels as {Path(args.output).name!r}; -o takes "
+                         f"{', '.join(LABEL_SUFFIXES)}.")
+    outputs = [args.output]
+    if args.model_out:
+        check_model_path(args.model_out)
+        outputs.append(args.model_out)
+    if args.signatures:
+        outputs.append(args.signatures)
+    if args.res_plot:
+        if not args.samples:
+            raise ValueError("--res-plot needs --samples: the RES statistics come from the "
+                             "sample boxes.")
+        check_figure_path(args.res_plot, force=args.force)
+        outputs.append(args.res_plot)
+    for p in outputs:
+        check_writable(p, force=args.force)
+    if len({Path(p).resolve() for p in outputs}) != len(outputs):
+        raise ValueError("two outputs name the same file; give -o, --model-out, "
+                         "--signatures and --res-plot different names.")
+    if args.sieve < 0:
+        raise ValueError(f"--sieve must be 0 or more; got {args.sieve}.")
+    if args.scale is not None and args.scale < 0:
+        raise ValueError(f"--scale must be 0 or more; got {args.scale}.")
+
+
 def _run_segment(args: argparse.Namespace) -> int:
-    from ..io import read_image, write_labels
+    from ..io import atomic_write, check_label_format, label_array, read_image, \
+        write_labels_to
     from ._metrics import evaluate
     from ._model import load_model
+    from ._model_io import write_model_to
     from ._samples import load_samples
-    from ._segment import segment_steps
+    from ._segment import segment_steps, tile_placement
 
     timer = StepTimer()
-    outputs = [args.output] + [p for p in (args.model_out, args.signatures, args.res_plot)
-                               if p]
-    for p in outputs:            # refuse before any work, so nothing is half written
-        check_writable(p, force=args.force)
+    _check_segment_args(args)
     with timer("read"):
         image, spacing = read_image(args.image, gray=args.gray)
         samples = load_samples(args.samples) if args.samples else None
         model = load_model(args.model) if args.model else None
         truth = read_image(args.truth)[0] if args.truth else None
+    if truth is not None and truth.shape != image.shape:
+        raise ValueError(f"--truth has shape {truth.shape} but the image has {image.shape}; "
+                         "give the truth of this image.")
+    materials = samples.labels if samples is not None else model.labels
+    check_label_format(args.output, label_array(np.zeros((1,) * image.ndim, np.int64)
+                                                + max(materials)))
     gen = segment_steps(image, samples, scale=args.scale, feature_set=args.features,
                         classifier=args.classifier, sieve=args.sieve, model=model,
                         spacing=spacing, method=args.method)
@@ -154,23 +193,31 @@ def _run_segment(args: argparse.Namespace) -> int:
                 result = stop.value
                 break
     with timer("write"):
-        labels = result.tile_labels if args.tiles else result.labels
-        write_labels(args.output, labels, spacing=spacing, force=args.force)
-        if args.model_out:
-            result.model.save(args.model_out, force=args.force)
-        if args.signatures:
-            write_signatures_csv(result.signatures, args.signatures, force=args.force)
+        if args.tiles:
+            # the header describes the tile grid: 2^j voxels per tile, first tile's centre
+            tile_spacing, origin = tile_placement(result.scale, spacing, image.ndim)
+            labels, out_spacing = label_array(result.tile_labels), tile_spacing
+        else:
+            labels, out_spacing, origin = label_array(result.labels), spacing, None
+        check_label_format(args.output, labels)
+        figure = None
         if args.res_plot:
             from ._recommended import plot_res_scales
             from ._res import res_statistics
 
-            stats = result.res if result.res is not None else (
-                res_statistics(image, samples) if samples is not None else None)
-            if stats is None:
-                raise ValueError("--res-plot needs --samples: the RES statistics come from "
-                                 "the sample boxes.")
-            plot_res_scales(stats, result.scales or (result.scale,)).savefig(args.res_plot,
-                                                                             dpi=120)
+            stats = result.res if result.res is not None else res_statistics(image, samples)
+            figure = plot_res_scales(stats, result.scales or (result.scale,))
+        outputs = [p for p in (args.output, args.model_out, args.signatures, args.res_plot)
+                   if p]
+        with atomic_write(outputs, force=args.force) as temps:
+            temps = dict(zip(outputs, temps))
+            write_labels_to(temps[args.output], labels, spacing=out_spacing, origin=origin)
+            if args.model_out:
+                write_model_to(temps[args.model_out], *result.model.file_content())
+            if args.signatures:
+                temps[args.signatures].write_text(signatures_csv_text(result.signatures))
+            if figure is not None:
+                figure.savefig(temps[args.res_plot], dpi=120)
     summary = result.summary()
     summary["seconds"] = {**summary["seconds"], **timer.seconds}
     summary["output"] = args.output
@@ -192,8 +239,11 @@ def _run_segment(args: argparse.Namespace) -> int:
                   f"eps_l = {result.eps_l:.2f}% ({summary['eps_l_method']}), "
                   f"eps_m = {result.eps_m:.3f}")
         for row in result.signatures:
-            print(f"  {row['name']}: {row['tiles']} tiles, mean {row['mean_mean']:.4g} "
-                  f"(+-{row['mean_std']:.3g}), variance {row['variance_mean']:.4g}")
+            if row["tiles"]:
+                print(f"  {row['name']}: {row['tiles']} tiles, mean {row['mean_mean']:.4g} "
+                      f"(+-{row['mean_std']:.3g}), variance {row['variance_mean']:.4g}")
+            else:
+                print(f"  {row['name']}: no tile classified as it")
         if truth is not None:
             print("  Dice: " + ", ".join(f"{k}: {v:.3f}" for k, v in summary["dice"].items())
                   + f"  (mean {summary['mean_dice']:.3f})")

@@ -20,7 +20,7 @@ from pathlib import Path
 
 import numpy as np
 
-from .._validation import as_image
+from .._validation import as_image, label_dtype
 from ..io import atomic_write
 from ._classifiers import LVQClassifier, leave_one_out_error, make_classifier
 from ._features import feature_stack, n_features
@@ -166,7 +166,7 @@ class SWAModel:
         return feats, counts
 
     def classify_features(self, feats: np.ndarray) -> np.ndarray:
-        """Labels (int32, tile grid shape) of tile features from :meth:`tile_features`."""
+        """Labels (int32, int64 for labels >= 2^31; tile grid shape) of tile features from :meth:`tile_features`."""
         tiles = feats.reshape(-1, feats.shape[-1])
         # partial tiles at the far edge get features from their valid pixels; a non-finite
         # feature (e.g. a one-pixel sliver's skewness) is replaced by the training mean so
@@ -175,7 +175,8 @@ class SWAModel:
         if bad.any():
             tiles = tiles.copy()
             tiles[bad] = np.broadcast_to(self.classifier.offset_, tiles.shape)[bad]
-        return self.classifier.predict(tiles).reshape(feats.shape[:-1]).astype(np.int32)
+        labels = self.classifier.predict(tiles).reshape(feats.shape[:-1])
+        return labels.astype(label_dtype(self.labels))
 
     # -- file format -------------------------------------------------------------------
     def save(self, path, *, force: bool = False) -> Path:

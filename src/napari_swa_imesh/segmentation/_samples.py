@@ -6,13 +6,14 @@ image axis)::
     {"materials": [{"label": 1, "name": "brick", "color": "#d62728"}, ...],
      "boxes": [{"label": 1, "start": [r0, c0], "stop": [r1, c1]}, ...]}
 
-``color`` is optional. Extra keys are ignored on reading, so files written by newer
-versions still load.
+``color`` is optional. Unknown keys are ignored with a warning that names them.
 """
 
 from __future__ import annotations
 
 import json
+import numbers
+import warnings
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -147,35 +148,49 @@ class Samples:
 
     @classmethod
     def from_dict(cls, data: dict) -> "Samples":
-        """Build from the JSON structure, checking it says what the schema says."""
-        if not isinstance(data, dict) or "boxes" not in data:
+        """Build from the JSON structure, checking it says what the schema says.
+
+        Labels and coordinates must be whole numbers (``1`` or ``1.0``, never ``1.5`` or
+        ``true``); keys the schema does not know are reported in a warning that names
+        them (a misspelled key would otherwise be ignored).
+        """
+        if not isinstance(data, dict) or not isinstance(data.get("boxes"), list):
             raise ValueError(
-                "samples must be a JSON object with 'materials' and 'boxes' lists; "
+                "samples must be a JSON object with a 'boxes' list (and a 'materials' list); "
                 "see the README for the schema."
             )
+        _warn_unknown(data, {"materials", "boxes"}, "the samples")
+        if not isinstance(data.get("materials", []), list):
+            raise ValueError("'materials' in the samples must be a list of objects with "
+                             "'label' and 'name'; see the README for the schema.")
         materials = []
         for i, m in enumerate(data.get("materials", [])):
-            try:
-                materials.append(Material(int(m["label"]), str(m.get("name", f"material {m['label']}")),
-                                          m.get("color")))
-            except (KeyError, TypeError, ValueError) as exc:
-                raise ValueError(f"material #{i} needs an integer 'label' (got {m!r}).") from exc
+            if not isinstance(m, dict) or "label" not in m:
+                raise ValueError(f"material #{i} needs an integer 'label'; got {m!r}.")
+            _warn_unknown(m, {"label", "name", "color"}, f"material #{i}")
+            label = _whole(m["label"], f"material #{i}'s label")
+            name = m.get("name", f"material {label}")
+            color = m.get("color")
+            if not isinstance(name, str) or (color is not None and not isinstance(color, str)):
+                raise ValueError(f"material #{i}: 'name' and 'color' must be text; got {m!r}.")
+            materials.append(Material(label, name, color))
         boxes = []
         for i, b in enumerate(data["boxes"]):
-            try:
-                start = tuple(int(v) for v in b["start"])
-                stop = tuple(int(v) for v in b["stop"])
-                label = int(b["label"])
-            except (KeyError, TypeError, ValueError) as exc:
+            if not isinstance(b, dict) or not all(k in b for k in ("label", "start", "stop")) \
+                    or not all(isinstance(b[k], list) for k in ("start", "stop")):
                 raise ValueError(
-                    f"box #{i} needs 'label', 'start' and 'stop' (integer lists); got {b!r}."
-                ) from exc
+                    f"box #{i} needs 'label', 'start' and 'stop' (integer lists); got {b!r}.")
+            _warn_unknown(b, {"label", "start", "stop"}, f"box #{i}")
+            label = _whole(b["label"], f"box #{i}'s label")
+            start = tuple(_whole(v, f"box #{i}'s start") for v in b["start"])
+            stop = tuple(_whole(v, f"box #{i}'s stop") for v in b["stop"])
             if len(start) != len(stop):
-                raise ValueError(f"box #{i}: start {start} and stop {stop} differ in length.")
+                raise ValueError(f"box #{i}: start {list(start)} and stop {list(stop)} differ "
+                                 "in length.")
             if any(b1 <= a for a, b1 in zip(start, stop)):
                 raise ValueError(
-                    f"box #{i} is empty: stop {stop} must exceed start {start} on every axis "
-                    "(stop is exclusive)."
+                    f"box #{i} is empty: stop {list(stop)} must exceed start {list(start)} on "
+                    "every axis (stop is exclusive)."
                 )
             boxes.append(SampleBox(label, start, stop))
         known = {m.label for m in materials}
@@ -186,10 +201,10 @@ class Samples:
         if len({m.label for m in materials}) != len(materials):
             raise ValueError("samples list the same material label twice; give each label once.")
         for m in materials:
-            if m.label <= 0:
+            if not 0 < m.label < 1 << 63:
                 raise ValueError(
                     f"material label {m.label} is not allowed: 0 is background in napari "
-                    "Labels, so materials are 1, 2, ...; renumber it."
+                    "Labels, so materials are 1, 2, ... up to 2^63 - 1; renumber it."
                 )
         return cls(materials, boxes)
 
@@ -224,6 +239,25 @@ class Samples:
             raise ValueError(
                 f"material(s) {missing} have no sample box; draw a box for each or remove them."
             )
+
+
+def _whole(value, what: str) -> int:
+    """`value` as an int when it is a whole number (not a bool, fraction or infinity)."""
+    if isinstance(value, (bool, np.bool_)) or not isinstance(value, numbers.Real) or (
+            not isinstance(value, numbers.Integral)
+            and not (np.isfinite(value) and float(value).is_integer())):
+        shown = json.dumps(value) if isinstance(value, (bool, int, float, str)) else value
+        raise ValueError(f"{what} must be a whole number; got {shown}. Give "
+                         "pixel indices and labels as integers.")
+    return int(value)
+
+
+def _warn_unknown(entry: dict, known: set[str], where: str) -> None:
+    unknown = sorted(set(entry) - known)
+    if unknown:
+        warnings.warn(f"{where} hold unknown key(s) {', '.join(map(repr, unknown))}, which "
+                      f"are ignored; the known keys are {', '.join(sorted(known))}.",
+                      UserWarning, stacklevel=3)
 
 
 def check_contrast(image: np.ndarray, samples: "Samples | None" = None) -> None:

@@ -47,9 +47,9 @@ class SegmentationResult:
 
     Attributes
     ----------
-    labels : ndarray of int32
+    labels : ndarray of int32 (int64 for labels >= 2^31)
         Full-resolution labels, exactly the input image's shape.
-    tile_labels : ndarray of int32
+    tile_labels : ndarray of int32 (int64 for labels >= 2^31)
         One label per tile (shape ``ceil(shape / 2**scale)``); place it over the image with
         :func:`tile_placement`. With the recommended method: the majority label per tile.
     scale : int
