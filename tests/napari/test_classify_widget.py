@@ -104,3 +104,68 @@ def test_recommended_is_the_default_and_beats_the_reference(mosaic_viewer, qtbot
     wait_idle(qtbot, classify)
     np.testing.assert_array_equal(classify.result.labels, result.labels)
     assert not notifications.errors
+
+
+def _unbalanced(viewer):
+    """Brick boxes of 64 px and one grass box of 16 px: scale 4 windows (17 px) do not fit
+    in any grass box."""
+    from test_samples_widget import rect
+
+    flow = WorkflowWidget(viewer)
+    samples = flow.samples
+    layer = samples.new_samples_layer()
+    samples.set_materials([])
+    brick, grass = samples.add_material("brick"), samples.add_material("grass")
+    samples.select_material(brick.label)
+    layer.add_rectangles([rect(0, 0, 64, 64), rect(0, 80, 64, 144)])
+    samples.select_material(grass.label)
+    layer.add_rectangles([rect(150, 150, 166, 230)])
+    return flow
+
+
+def test_window_limit_is_said_before_the_run_and_after_it(mosaic_viewer, qtbot,
+                                                          notifications):
+    viewer, image, truth = mosaic_viewer
+    flow = _unbalanced(viewer)
+    classify = flow.classify
+    assert classify.method_combo.currentText() == METHOD_RECOMMENDED
+    classify.scale_spin.setValue(4)
+    _, sentence = flow.samples.current_samples().window_limit(4)
+    # before any run: the panel says which box is too small and what to do
+    assert sentence in classify.scale_note.text()
+    assert classify.scale_note.text().startswith("Next run: scale 4, set in this panel")
+    classify.classify()
+    assert any(sentence in w for w in notifications.messages("warning"))
+    wait_idle(qtbot, classify)
+    assert classify.tasks.last_error is None
+    assert sentence in classify.scale_note.text()      # still said next to the result
+    # the reference method uses tiles, not windows: no window sentence
+    classify.method_combo.setCurrentText(METHOD_REFERENCE)
+    assert sentence not in classify.scale_note.text()
+
+
+def test_library_warnings_of_a_run_reach_the_panel(mosaic_viewer, qtbot, monkeypatch):
+    """A warning the library raises in the worker is shown in the classify panel, not
+    only as a passing notification."""
+    import warnings
+
+    from napari_swa_imesh._napari import _classify_widget
+
+    real = _classify_widget.segment_steps
+
+    def warning_steps(*args, **kwargs):
+        warnings.warn("scale capped at 3: the largest box of 'grass' is 16x80 px",
+                      UserWarning, stacklevel=2)
+        return (yield from real(*args, **kwargs))
+
+    monkeypatch.setattr(_classify_widget, "segment_steps", warning_steps)
+    viewer, image, truth = mosaic_viewer
+    flow = _unbalanced(viewer)
+    flow.classify.method_combo.setCurrentText(METHOD_REFERENCE)
+    flow.classify.scale_spin.setValue(3)
+    flow.classify.classify()
+    wait_idle(qtbot, flow.classify)
+    assert flow.classify.result is not None
+    note = flow.classify.scale_note.text()
+    assert note.startswith("Last run used scale 3: scale 3, set in this panel")
+    assert "scale capped at 3: the largest box of 'grass' is 16x80 px" in note

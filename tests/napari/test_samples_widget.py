@@ -177,3 +177,46 @@ def test_a_rectangle_drawn_with_the_mouse_lies_on_the_current_slice(phantom_view
     assert box.start == (18, 10, 10) and box.stop == (22, 30, 26)
     assert layer.features["depth"].tolist() == [4]
     assert widget.box_table.rowCount() == 1
+
+
+def _brick_and_thin_grass(viewer):
+    """Brick boxes of 64 px; grass boxes of 16 px (a 16-px tile fits, a 17-px window
+    of scale 4 does not) and 10 px (not even a tile)."""
+    from napari_swa_imesh._napari._workflow import WorkflowWidget
+
+    flow = WorkflowWidget(viewer)
+    widget = flow.samples
+    layer = widget.new_samples_layer()
+    widget.set_materials([])
+    brick, grass = widget.add_material("brick"), widget.add_material("grass")
+    widget.select_material(brick.label)
+    layer.add_rectangles([rect(0, 0, 64, 64), rect(0, 80, 64, 144)])
+    widget.select_material(grass.label)
+    layer.add_rectangles([rect(100, 100, 116, 156), rect(200, 200, 210, 210)])
+    return flow, layer
+
+
+def test_material_too_small_for_the_recommended_windows_is_flagged(mosaic_viewer):
+    viewer, image, _ = mosaic_viewer
+    flow, layer = _brick_and_thin_grass(viewer)
+    widget = flow.samples
+    widget.set_scale(3)
+    assert widget.report.flags == [[], [], [], []]   # 9-px windows fit in the 16-px box
+    # the classify tab's scale is the scale in use: the samples tab checks at it
+    flow.classify.scale_spin.setValue(4)
+    assert widget.scale_spin.value() == 4
+    flags = widget.report.flags
+    assert flags[0] == flags[1] == []
+    assert flags[2] == ["too small for scale 4 windows (needs 17 px)"]
+    assert flags[3] == ["too small at scale 4"]      # the existing flag, not repeated
+    assert widget.box_table.item(2, 3).text() == "too small for scale 4 windows (needs 17 px)"
+    assert "scale 4 windows" in layer.text.values[2]
+    # the summary gives the library's sentence: which box to enlarge, to what
+    _, sentence = widget.current_samples().window_limit(4)
+    assert sentence in widget.summary.text()
+    assert "enlarge it to at least 17 px" in sentence
+    # the flags are warnings: the samples can still be used
+    assert widget.report.blocking == []
+    # a scale every material can hold clears the flag
+    widget.set_scale(3)
+    assert widget.report.flags[2] == []

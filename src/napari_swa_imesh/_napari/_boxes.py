@@ -20,7 +20,12 @@ A shape is never dropped silently: every shape gets a flag string, empty when it
 pixel), ``outside`` (partly or wholly outside the image) make the samples unusable until
 fixed; ``too small at scale j`` (shorter than one 2^j tile along some axis: it gives no
 training tile) and ``constant`` (all its pixels equal: padding or saturation, no texture)
-are warnings.
+are warnings. ``too small for scale j windows (needs N px)`` marks every box of a
+material whose *largest* box cannot hold one window of ``N = 2^j + 1`` px per axis: the
+recommended method trains scale j on such windows, so that material cannot be trained at
+j (see :meth:`Samples.window_scales`); it is a warning too, the library caps the scale.
+A box already flagged ``too small at scale j`` (shorter than 2^j) does not get it again:
+that flag already says it is too small, and the two would differ only by the one pixel.
 """
 
 from __future__ import annotations
@@ -29,10 +34,10 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..segmentation import SampleBox
+from ..segmentation import Material, SampleBox, Samples
 
 __all__ = ["BoxReport", "rectangles_to_boxes", "box_to_rectangle", "BLOCKING_FLAGS",
-           "box_flags"]
+           "box_flags", "window_flags", "window_flag"]
 
 #: Flags that make a shape unusable as a sample box (the run is refused until fixed).
 BLOCKING_FLAGS = ("not a box", "empty", "outside")
@@ -142,6 +147,41 @@ def box_flags(report: BoxReport, image: np.ndarray) -> BoxReport:
         crop = np.asarray(image[box.slices])
         if crop.size and crop.min() == crop.max():
             shape_flags.append("constant")
+    return report
+
+
+def window_flag(scale: int) -> str:
+    """Flag text of a box whose material cannot hold a scale-`scale` window."""
+    return f"too small for scale {scale} windows (needs {(1 << scale) + 1} px)"
+
+
+def window_flags(report: BoxReport, scale: int | None) -> BoxReport:
+    """Flag the boxes of a material whose largest box holds no window at `scale`.
+
+    Boxes already flagged ``too small at scale j`` are left as they are.
+
+    Uses :meth:`Samples.window_scales` on the usable boxes of `report`, so the GUI flags
+    exactly the materials the library will refuse to train at `scale`.
+
+    Examples
+    --------
+    >>> r = BoxReport([SampleBox(1, (0, 0), (32, 32)), SampleBox(2, (0, 0), (8, 40))],
+    ...               [[], []], [None, None])
+    >>> window_flags(r, 3).flags
+    [[], ['too small for scale 3 windows (needs 9 px)']]
+    """
+    if scale is None:
+        return report
+    usable = [i for i, box in enumerate(report.boxes)
+              if box is not None and i not in report.blocking]
+    labels = sorted({report.boxes[i].label for i in usable})
+    samples = Samples([Material(label, str(label)) for label in labels],
+                      [report.boxes[i] for i in usable])
+    short = {label for label, j in samples.window_scales().items() if j < scale}
+    tile_flag = f"too small at scale {scale}"
+    for i in usable:
+        if report.boxes[i].label in short and tile_flag not in report.flags[i]:
+            report.flags[i].append(window_flag(scale))
     return report
 
 

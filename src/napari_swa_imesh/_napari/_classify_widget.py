@@ -36,6 +36,14 @@ _SEGMENT_STEPS = 5   # segment_steps reports done = 0..5
 class ClassifyWidget(QWidget):
     """Fit a classifier on the sample boxes (or apply a saved model) and label every tile.
 
+    The scale note under the settings says which scale the next run uses and where it
+    comes from: set in this panel, chosen on the RES tab for these very boxes, or the
+    suggested RES of the current boxes (computed in the run, as the command line does).
+    A scale chosen on the RES tab for boxes that have changed since is never used: the
+    panel drops it, says so, and classifies at the suggested RES of the current boxes.
+    With the recommended method it also says, before the run, when a material's boxes
+    are too small for the scale's windows (:meth:`Samples.window_limit`).
+
     Signals
     -------
     labels_ready(object)
@@ -50,6 +58,10 @@ class ClassifyWidget(QWidget):
         self.result: SegmentationResult | None = None
         self.dice: dict[int, float] | None = None
         self.loaded_model: SWAModel | None = None
+        self._scale_from_res: int | None = None   # spin value set from the RES choice
+        self._setting_scale = False
+        self._dropped_scale: int | None = None    # a RES choice dropped as stale
+        self._watcher = sl.SamplesWatcher(self.update_scale_note)
 
         self.image_combo = LayerCombo(self.viewer, ("Image",))
         self.samples_combo = LayerCombo(self.viewer, ("Shapes",), accept=sl.is_samples_layer)
@@ -74,6 +86,9 @@ class ClassifyWidget(QWidget):
         self.scale_spin.setSpecialValueText("suggested RES")
         self.scale_spin.setToolTip("Tile scale j (tiles of 2^j px per axis); by default the "
                                    "scale chosen in the RES plots, else the suggested RES.")
+        self.scale_spin.valueChanged.connect(self._on_scale_spin)
+        self.scale_note = QLabel("")
+        self.scale_note.setWordWrap(True)
         self.sieve_spin = QSpinBox()
         self.sieve_spin.setRange(0, 1_000_000)
         self.sieve_spin.setSpecialValueText("off")
@@ -113,6 +128,7 @@ class ClassifyWidget(QWidget):
         form.addRow("feature set", self.feature_combo)
         form.addRow("classifier", self.classifier_combo)
         form.addRow("scale j", self.scale_spin)
+        form.addRow(self.scale_note)
         form.addRow("sieve (tiles)", self.sieve_spin)
         form.addRow("output", self.output_combo)
         form.addRow("truth (Dice)", self.truth_combo)
@@ -134,6 +150,7 @@ class ClassifyWidget(QWidget):
         layout.addWidget(self.export_button)
         layout.addWidget(model_box)
         self.samples_combo.currentTextChanged.connect(self._on_samples_layer_selected)
+        self.image_combo.currentTextChanged.connect(self._on_layers_changed)
         self._on_samples_layer_selected()
         self._on_method_changed()
 
@@ -147,22 +164,96 @@ class ClassifyWidget(QWidget):
             "plots, else the suggested RES." if reference else
             "Largest scale the recommended method looks at (windows of 2^j+1 px); by default "
             "the scale chosen in the RES plots, else the suggested RES.")
+        self.update_scale_note()
 
     # -- settings --------------------------------------------------------------------------
     def _on_samples_layer_selected(self, *_) -> None:
         layer = self.samples_combo.layer()
-        if layer is None:
-            return
-        image_name = layer.metadata.get(sl.SAMPLES_KEY)
-        if image_name and image_name in self.viewer.layers:
-            self.image_combo.select(self.viewer.layers[image_name])
-        chosen = sl.chosen_scale(layer)
-        if chosen is not None:
-            self.scale_spin.setValue(chosen)
+        if layer is not None:
+            image_name = layer.metadata.get(sl.SAMPLES_KEY)
+            if image_name and image_name in self.viewer.layers:
+                self.image_combo.select(self.viewer.layers[image_name])
+            chosen = sl.chosen_scale(layer, self.image_combo.layer())
+            if chosen is not None:
+                self.set_scale(chosen)
+        self._on_layers_changed()
+
+    def _on_layers_changed(self, *_) -> None:
+        self._watcher.watch(self.samples_combo.layer(), self.image_combo.layer())
+        self.update_scale_note()
 
     def set_scale(self, scale: int) -> None:
-        """Classify at `scale` (the workflow calls this when a RES is chosen)."""
-        self.scale_spin.setValue(int(scale))
+        """Classify at `scale`, chosen on the RES tab (the workflow calls this).
+
+        The scale is used only while the samples layer's stored choice (see
+        :func:`._samples_layer.chosen_scale`) still matches the boxes and image.
+        """
+        self._set_spin(int(scale))
+        self._scale_from_res = int(scale)
+        self._dropped_scale = None
+        self.update_scale_note()
+
+    def _set_spin(self, value: int) -> None:
+        self._setting_scale = True
+        try:
+            self.scale_spin.setValue(value)
+        finally:
+            self._setting_scale = False
+
+    def _on_scale_spin(self, value: int) -> None:
+        if self._setting_scale:
+            return
+        self._scale_from_res = None          # typed here: the user's own choice
+        self._dropped_scale = None
+        self.update_scale_note()
+
+    def resolve_scale(self) -> tuple[int | None, str]:
+        """The scale the next run uses (None: the suggested RES) and where it comes from.
+
+        Drops (resets to "suggested RES") a scale that came from a RES choice no longer
+        matching the samples.
+        """
+        value = self.scale_spin.value()
+        if value >= 0 and self._scale_from_res == value:
+            layer, image = self.samples_combo.layer(), self.image_combo.layer()
+            choice = None if layer is None else sl.scale_choice(layer, image)
+            if choice is not None and choice.fresh and choice.scale == value:
+                return value, f"scale {value}, chosen on the RES tab for these sample boxes"
+            self._dropped_scale, self._scale_from_res = value, None
+            self._set_spin(-1)
+            value = -1
+        if value < 0:
+            source = ("the suggested RES of the current sample boxes (computed when you "
+                      "classify, as the command line does)")
+            if self._dropped_scale is not None:
+                source += (f"; scale {self._dropped_scale} chosen on the RES tab is not used: "
+                           "it was chosen for other sample boxes or another image (they "
+                           "changed since). Compute the RES again to choose a scale")
+            return None, source
+        return value, f"scale {value}, set in this panel"
+
+    def window_warning(self, samples, scale: int | None) -> str | None:
+        """The :meth:`Samples.window_limit` sentence for the recommended method at `scale`."""
+        if scale is None or self.method_combo.currentText() != METHOD_RECOMMENDED:
+            return None
+        limit = samples.window_limit(int(scale))
+        return None if limit is None else limit[1]
+
+    def update_scale_note(self) -> None:
+        """Say which scale the next run uses, where it comes from, and what to enlarge."""
+        scale, source = self.resolve_scale()
+        text = f"Next run: {source}."
+        layer, image = self.samples_combo.layer(), self.image_combo.layer()
+        if scale is not None and layer is not None and image is not None \
+                and layer.ndim == image.ndim:
+            try:
+                samples, _ = sl.samples_from_layer(layer, image)
+            except ValueError:
+                samples = None
+            warning = None if samples is None else self.window_warning(samples, scale)
+            if warning:
+                text += f" Warning: {warning}."
+        self.scale_note.setText(text)
 
     def select_layers(self, image=None, samples=None) -> None:
         if samples is not None:
@@ -192,15 +283,21 @@ class ClassifyWidget(QWidget):
             notify_error("no samples layer: draw sample boxes per material in the samples "
                          "widget (or import a samples file) before classifying.")
             return None
-        scale = self.scale_spin.value()
-        scale = None if scale < 0 else scale
+        scale, source = self.resolve_scale()
         try:
             data = sl.image_array(image)
             samples, report = sl.samples_from_layer(layer, image, scale=scale)
         except ValueError as exc:
             notify_error(f"cannot classify: {exc}")
             return None
-        small = [i for i, f in enumerate(report.flags) if any(x.startswith("too small")
+        if self._dropped_scale is not None:
+            notify_warning(f"classifying at {source}.")
+        window = self.window_warning(samples, scale)
+        self.scale_note.setText(f"Next run: {source}."
+                                + (f" Warning: {window}." if window else ""))
+        if window:
+            notify_warning(window)
+        small = [i for i, f in enumerate(report.flags) if any(x.startswith("too small at")
                                                                for x in f)]
         if small:
             notify_warning(
@@ -220,8 +317,23 @@ class ClassifyWidget(QWidget):
             dice = None if truth is None else dice_scores(result.labels, truth)
             return result, dice
 
+        def show(out):
+            self._show_result(image, *out)
+            self._show_scale_used(out[0], samples, source, window)
+
         return self.tasks.run(steps, title="SWA classification", total=_SEGMENT_STEPS,
-                              on_result=lambda out: self._show_result(image, *out))
+                              on_result=show)
+
+    def _show_scale_used(self, result, samples, source: str, window: str | None) -> None:
+        """After a run: the scale used, where it came from, and every warning about it."""
+        self._dropped_scale = None
+        used = result.scale
+        text = f"Last run used scale {used}: {source}."
+        later = window or self.window_warning(samples, used)
+        notes = ([later] if later else []) + [w for w in self.tasks.warnings if w != later]
+        if notes:
+            text += " Warning: " + " ".join(n.rstrip(".") + "." for n in notes)
+        self.scale_note.setText(text)
 
     def apply_model(self):
         """Apply the loaded model to the selected image, in a worker."""

@@ -10,8 +10,8 @@ from qtpy.QtWidgets import (QFormLayout, QHBoxLayout, QLabel, QPushButton, QScro
 
 from ..segmentation import plot_res, res_statistics
 from . import _samples_layer as sl
-from ._layers import SCALE_KEY, LayerCombo, theme_colors
-from ._tasks import TaskPanel, notify_error
+from ._layers import LayerCombo, theme_colors
+from ._tasks import TaskPanel, notify_error, notify_warning
 
 if TYPE_CHECKING:
     import napari
@@ -27,13 +27,22 @@ class ResWidget(QWidget):
     Click a panel or use the spin box to choose a scale; the suggested RES is the dashed
     line, the chosen scale the solid one.
 
+    The statistics remember the fingerprint of the samples they were computed on. When the
+    boxes, materials or image change (napari layer events, or another layer picked), the
+    plot is marked out of date: the chosen-scale line is removed, the scale cannot be
+    chosen, and the stored choice no longer counts (see :func:`._samples_layer.chosen_scale`)
+    until the statistics are computed again.
+
     Signals
     -------
     scale_chosen(int)
         The user chose a scale (also stored in the samples layer's metadata).
+    stale_changed(bool)
+        The statistics went out of date (True) or match the samples again (False).
     """
 
     scale_chosen = Signal(int)
+    stale_changed = Signal(bool)
 
     def __init__(self, napari_viewer: "napari.viewer.Viewer", parent: QWidget | None = None):
         from matplotlib.backends.backend_qtagg import FigureCanvasQTAgg
@@ -42,6 +51,9 @@ class ResWidget(QWidget):
         super().__init__(parent)
         self.viewer = napari_viewer
         self.stats: ResStatistics | None = None
+        self.stats_fingerprint: str | None = None   # of the samples `stats` were computed on
+        self.stale = False
+        self._watcher = sl.SamplesWatcher(self._check_stale)
         self.image_combo = LayerCombo(self.viewer, ("Image",))
         self.samples_combo = LayerCombo(self.viewer, ("Shapes",), accept=sl.is_samples_layer)
         self.max_scale_spin = QSpinBox()
@@ -87,6 +99,7 @@ class ResWidget(QWidget):
         layout.addWidget(self.reason)
         layout.addWidget(scroll, 1)
         self.samples_combo.currentTextChanged.connect(self._on_samples_layer_selected)
+        self.image_combo.currentTextChanged.connect(self._on_image_selected)
         self._on_samples_layer_selected()
         self.viewer.events.theme.connect(self._on_theme)
 
@@ -102,6 +115,47 @@ class ResWidget(QWidget):
             image_name = layer.metadata.get(sl.SAMPLES_KEY)
             if image_name and image_name in self.viewer.layers:
                 self.image_combo.select(self.viewer.layers[image_name])
+        self._on_image_selected()
+
+    def _on_image_selected(self, *_) -> None:
+        self._watcher.watch(self.samples_combo.layer(), self.image_combo.layer())
+        self._check_stale()
+
+    def current_fingerprint(self) -> str | None:
+        """Fingerprint of the samples and image selected now (None if they cannot be read)."""
+        layer, image = self.samples_combo.layer(), self.image_combo.layer()
+        if layer is None or image is None or layer.ndim != image.ndim:
+            return None
+        try:
+            return sl.samples_fingerprint(layer, image)
+        except ValueError:
+            return None
+
+    def _check_stale(self) -> None:
+        """Mark the statistics out of date when the samples differ from theirs."""
+        if self.stats is None:
+            return
+        stale = self.current_fingerprint() != self.stats_fingerprint
+        if stale == self.stale:
+            return
+        self.stale = stale
+        self.scale_spin.setEnabled(not stale)
+        self._show_reason()
+        self._draw()
+        self.stale_changed.emit(stale)
+
+    def _show_reason(self) -> None:
+        stats = self.stats
+        per_material = ", ".join(
+            f"{name}: {stats.material_res.get(m) if stats.material_res.get(m) is not None else 'not settled'}"
+            for m, name in zip(stats.materials, stats.names))
+        text = (f"Suggested RES: {stats.suggested_scale} ({stats.reason}) "
+                f"Per material: {per_material}.")
+        if self.stale:
+            text = ("OUT OF DATE: the sample boxes, materials or image changed since these "
+                    "statistics were computed; the scale chosen on them no longer applies. "
+                    "Press 'Compute RES statistics' again. (Were: " + text + ")")
+        self.reason.setText(text)
 
     def select_layers(self, image=None, samples=None) -> None:
         """Point the widget at these layers (the workflow keeps its tabs in step)."""
@@ -111,7 +165,11 @@ class ResWidget(QWidget):
             self.image_combo.select(image)
 
     def compute(self):
-        """Compute the RES statistics of the samples in a worker; plot them when done."""
+        """Compute the RES statistics of the samples in a worker; plot them when done.
+
+        The statistics are stamped with the fingerprint of the samples read here, so
+        edits made while the worker runs show them out of date at once.
+        """
         image, layer = self.image_combo.layer(), self.samples_combo.layer()
         if image is None:
             notify_error("no image layer: open an image (or File > Open Sample) and pick it "
@@ -123,6 +181,7 @@ class ResWidget(QWidget):
         try:
             data = sl.image_array(image)
             samples, _ = sl.samples_from_layer(layer, image)
+            fingerprint = sl.samples_fingerprint(layer, image)
         except ValueError as exc:
             notify_error(f"cannot compute the RES: {exc}")
             return None
@@ -135,48 +194,77 @@ class ResWidget(QWidget):
             yield 1, 1, "done"
             return stats
 
-        return self.tasks.run(steps, title="RES statistics", total=1, on_result=self.show_stats)
+        return self.tasks.run(steps, title="RES statistics", total=1,
+                              on_result=lambda stats: self.show_stats(stats, fingerprint))
 
-    def show_stats(self, stats: "ResStatistics") -> None:
-        """Plot `stats` and offer its scales; the suggested RES becomes the chosen scale."""
+    def show_stats(self, stats: "ResStatistics", fingerprint: str | None = None) -> None:
+        """Plot `stats` and offer its scales; the suggested RES becomes the chosen scale.
+
+        Parameters
+        ----------
+        stats : ResStatistics
+        fingerprint : str, optional
+            :func:`._samples_layer.samples_fingerprint` of the samples `stats` were computed
+            on; by default that of the samples selected now.
+        """
         self.stats = stats
+        self.stats_fingerprint = fingerprint if fingerprint is not None \
+            else self.current_fingerprint()
+        self.stale = self.current_fingerprint() != self.stats_fingerprint
         self.scale_spin.blockSignals(True)
         self.scale_spin.setRange(int(stats.scales.min()), int(stats.scales.max()))
-        layer = self.samples_combo.layer()
-        previous = None if layer is None else layer.metadata.get(SCALE_KEY)
+        layer, image = self.samples_combo.layer(), self.image_combo.layer()
+        choice = None if layer is None else sl.scale_choice(layer, image)
+        # keep an earlier choice only if it was made on these very samples
+        previous = choice.scale if choice is not None and choice.fresh and not self.stale \
+            else None
         start = previous if previous is not None and previous <= stats.scales.max() \
             else stats.suggested_scale
         self.scale_spin.setValue(int(start if start is not None else stats.scales.max()))
-        self.scale_spin.setEnabled(True)
+        self.scale_spin.setEnabled(not self.stale)
         self.scale_spin.blockSignals(False)
-        per_material = ", ".join(
-            f"{name}: {stats.material_res.get(m) if stats.material_res.get(m) is not None else 'not settled'}"
-            for m, name in zip(stats.materials, stats.names))
-        self.reason.setText(f"Suggested RES: {stats.suggested_scale} ({stats.reason}) "
-                            f"Per material: {per_material}.")
-        self.choose_scale(self.scale_spin.value())
+        self._show_reason()
+        if self.stale:
+            self._draw()
+            self.stale_changed.emit(True)
+        else:
+            self.choose_scale(self.scale_spin.value())
 
     def _draw(self) -> None:
         if self.stats is None:
             return
         dark, background, _ = theme_colors(self.viewer)
-        plot_res(self.stats, figure=self.figure, selected_scale=self.scale_spin.value(),
-                 dark=dark)
+        plot_res(self.stats, figure=self.figure,
+                 selected_scale=None if self.stale else self.scale_spin.value(), dark=dark)
         # match the dock exactly (plot_res knows only light and dark)
         self.figure.set_facecolor(background)
         for ax in self.figure.axes:
             ax.set_facecolor(background)
+            if self.stale:      # grey the panels: these numbers belong to other samples
+                for artist in ax.lines + ax.collections:
+                    artist.set_alpha(0.25)
+        if self.stale:
+            self.figure.suptitle("OUT OF DATE: the samples changed; compute the RES again",
+                                 color="#ff8c69", fontsize=10)
         self.canvas.draw_idle()
 
     def choose_scale(self, scale: int) -> None:
-        """Make `scale` the chosen one: mark it, store it with the samples, tell the others."""
+        """Make `scale` the chosen one: mark it, store it with the samples, tell the others.
+
+        Refused (with a warning) while the statistics are out of date.
+        """
         scale = int(scale)
+        if self.stale:
+            notify_warning("the RES statistics are out of date (the samples changed); "
+                           "compute them again before choosing a scale.")
+            return
         if self.scale_spin.value() != scale:
             self.scale_spin.setValue(scale)   # comes back here through the spin box
             return
         layer = self.samples_combo.layer()
-        if layer is not None:
-            layer.metadata[SCALE_KEY] = scale
+        if layer is not None and self.stats_fingerprint is not None:
+            sl.store_chosen_scale(layer, scale, fingerprint=self.stats_fingerprint,
+                                  suggested=self.stats.suggested_scale)
         self._draw()
         self.scale_chosen.emit(scale)
 

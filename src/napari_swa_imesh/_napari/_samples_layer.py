@@ -5,17 +5,25 @@ features hold, per shape, the material ``label`` and ``name``, the ``depth`` in 
 (3-D) and the ``flag`` text (see :mod:`._boxes`). Its metadata holds the material table
 (label, name, colour), the name of the image it samples, and the scale chosen from the RES
 plots, so every widget can rebuild the library's :class:`Samples` from the layers alone.
+
+The chosen scale is stored with the fingerprint (:func:`samples_fingerprint`) of the boxes,
+materials and image pixels its RES statistics were computed from. A choice whose
+fingerprint no longer matches the layers is *stale*: :func:`chosen_scale` then returns
+None, so no consumer can reuse a scale chosen on other boxes by accident.
 """
 
 from __future__ import annotations
 
+import hashlib
+from dataclasses import dataclass
 from typing import TYPE_CHECKING
 
 import numpy as np
 import pandas as pd
 
 from ..segmentation import Material, Samples
-from ._boxes import BoxReport, box_flags, box_to_rectangle, rectangles_to_boxes
+from ._boxes import (BoxReport, box_flags, box_to_rectangle, rectangles_to_boxes,
+                     window_flags)
 from ._layers import (EXTENT_KEY, MATERIALS_KEY, SAMPLES_KEY, SCALE_KEY, default_color,
                       index_to_layer_data)
 
@@ -24,7 +32,9 @@ if TYPE_CHECKING:
 
 __all__ = ["new_samples_layer", "layer_materials", "set_layer_materials", "layer_report",
            "samples_from_layer", "put_boxes", "restyle", "update_extent_overlay",
-           "is_samples_layer", "is_extent_layer", "image_array", "DEFAULT_DEPTH"]
+           "is_samples_layer", "is_extent_layer", "image_array", "DEFAULT_DEPTH",
+           "samples_fingerprint", "ScaleChoice", "scale_choice", "store_chosen_scale",
+           "chosen_scale", "SamplesWatcher", "report_window_limit"]
 
 DEFAULT_DEPTH = 8
 _EDGE_WIDTH_PX = 1.5  # in screen-ish units: edge widths are scaled by the layer scale
@@ -144,17 +154,69 @@ def _recolor(layer) -> None:
     layer.edge_color = [colors.get(int(v), default_color(int(v))) for v in layer.features["label"]]
 
 
-def layer_report(layer, image_layer, *, scale: int | None = None) -> BoxReport:
-    """Boxes (image pixel indices) and flags of every shape of a samples layer."""
-    image = image_array(image_layer)
+def _raw_report(layer, image_layer, image: np.ndarray, scale: int | None) -> BoxReport:
     features = layer.features
     n = len(layer.data)
     labels = features["label"].astype(int).tolist() if "label" in features else [1] * n
     depths = features["depth"].astype(int).tolist() if "depth" in features else [1] * n
     corners = [index_to_layer_data(v, layer, image_layer) for v in layer.data]
-    report = rectangles_to_boxes(corners, labels, depths, image.shape, scale=scale,
-                                 shape_types=list(layer.shape_type))
-    return box_flags(report, image)
+    return rectangles_to_boxes(corners, labels, depths, image.shape, scale=scale,
+                               shape_types=list(layer.shape_type))
+
+
+def layer_report(layer, image_layer, *, scale: int | None = None) -> BoxReport:
+    """Boxes (image pixel indices) and flags of every shape of a samples layer.
+
+    With a `scale`, boxes too small for a tile and materials too small for a window at
+    that scale are flagged (see :mod:`._boxes`).
+    """
+    image = image_array(image_layer)
+    report = box_flags(_raw_report(layer, image_layer, image, scale), image)
+    return window_flags(report, scale)
+
+
+def samples_fingerprint(layer, image_layer) -> str:
+    """Digest of everything a RES of these samples depends on.
+
+    The image layer's name, shape and dtype; per shape its material label and pixel box
+    (order included); the material table (labels and names, which the plots show); and
+    the image pixels inside every box, so editing the image under a box counts too.
+    Flags, colours and depth defaults are left out: they change no statistic.
+
+    Returns
+    -------
+    str
+        32 hex digits; equal for equal inputs, different (in practice) otherwise.
+    """
+    image = image_array(image_layer)
+    digest = hashlib.blake2b(digest_size=16)
+    digest.update(repr((image_layer.name, image.shape, str(image.dtype))).encode())
+    materials = sorted((m.label, m.name) for m in layer_materials(layer))
+    digest.update(repr(materials).encode())
+    shape = np.asarray(image.shape)
+    for box in _raw_report(layer, image_layer, image, None).boxes:
+        if box is None:
+            digest.update(b"none;")
+            continue
+        digest.update(repr((box.label, box.start, box.stop)).encode())
+        lo = np.clip(box.start, 0, shape)
+        hi = np.clip(box.stop, 0, shape)
+        crop = np.ascontiguousarray(image[tuple(slice(a, b) for a, b in zip(lo, hi))])
+        digest.update(crop.tobytes())
+    return digest.hexdigest()
+
+
+def report_window_limit(layer, report: BoxReport, scale: int | None
+                        ) -> tuple[int, str] | None:
+    """:meth:`Samples.window_limit` of the boxes of `report` at `scale` (None if fine).
+
+    None too when some shape is not yet a usable box: the blocking flags come first.
+    """
+    if scale is None or report.blocking or not any(b is not None for b in report.boxes):
+        return None
+    used = {b.label for b in report.boxes}
+    materials = [m for m in layer_materials(layer) if m.label in used]
+    return Samples(materials, list(report.boxes)).window_limit(int(scale))
 
 
 def _shape_name(layer, i: int) -> str:
@@ -275,7 +337,101 @@ def update_extent_overlay(viewer: "napari.viewer.Viewer", layer, image_layer,
     return overlay
 
 
-def chosen_scale(layer) -> int | None:
-    """The scale chosen from the RES plots for these samples, if any."""
+@dataclass(frozen=True)
+class ScaleChoice:
+    """A scale chosen from the RES plots and whether it still fits the samples.
+
+    Attributes
+    ----------
+    scale : int
+        The chosen scale j.
+    fresh : bool
+        True when the boxes, materials and image are those the RES was computed from.
+    suggested : int or None
+        The suggested RES of the statistics the choice was made on.
+    """
+
+    scale: int
+    fresh: bool
+    suggested: int | None = None
+
+
+def store_chosen_scale(layer, scale: int, *, fingerprint: str,
+                       suggested: int | None = None) -> None:
+    """Store `scale` as chosen on samples with `fingerprint` (that of the RES statistics)."""
+    layer.metadata[SCALE_KEY] = {"scale": int(scale), "fingerprint": str(fingerprint),
+                                 "suggested": None if suggested is None else int(suggested)}
+
+
+def scale_choice(layer, image_layer) -> ScaleChoice | None:
+    """The stored scale choice of a samples layer, checked against the layers now.
+
+    A choice stored without a fingerprint (an older plugin) counts as stale: nothing
+    says which boxes it was chosen on.
+    """
     value = layer.metadata.get(SCALE_KEY)
-    return None if value is None else int(value)
+    if value is None:
+        return None
+    if not isinstance(value, dict):
+        return ScaleChoice(int(value), False)
+    fresh = False
+    if image_layer is not None:
+        try:
+            fresh = value.get("fingerprint") == samples_fingerprint(layer, image_layer)
+        except ValueError:           # an RGB image: nothing can be fresh on it
+            fresh = False
+    suggested = value.get("suggested")
+    return ScaleChoice(int(value["scale"]), fresh, None if suggested is None else int(suggested))
+
+
+def chosen_scale(layer, image_layer) -> int | None:
+    """The scale chosen from the RES plots for exactly these samples and image, else None.
+
+    None also when a scale was chosen on other boxes, materials or image (a stale choice,
+    see :func:`scale_choice`).
+    """
+    choice = scale_choice(layer, image_layer)
+    return choice.scale if choice is not None and choice.fresh else None
+
+
+class SamplesWatcher:
+    """Call `callback()` whenever a samples layer or its image changes in a way that can
+    change the samples: shapes added, removed or moved (final data events only), their
+    features edited (material, depth), the image's pixels replaced.
+
+    Listens to napari's layer events (``events.data``, ``events.features``); call
+    :meth:`watch` with the layers in use (None to stop).
+    """
+
+    def __init__(self, callback):
+        self.callback = callback
+        self.layer = None
+        self.image_layer = None
+
+    def watch(self, layer, image_layer) -> None:
+        if layer is not self.layer:
+            if self.layer is not None:
+                self.layer.events.data.disconnect(self._on_data)
+                self.layer.events.features.disconnect(self._on_event)
+            if layer is not None:
+                layer.events.data.connect(self._on_data)
+                layer.events.features.connect(self._on_event)
+            self.layer = layer
+        if image_layer is not self.image_layer:
+            if self.image_layer is not None:
+                self.image_layer.events.data.disconnect(self._on_event)
+            if image_layer is not None:
+                image_layer.events.data.connect(self._on_event)
+            self.image_layer = image_layer
+
+    def _on_data(self, event=None) -> None:
+        action = str(getattr(event, "action", "")) if event is not None else ""
+        if action.endswith("ing"):      # adding/changing/removing: wait for the final event
+            return
+        self._on_event(event)
+
+    def _on_event(self, event=None) -> None:
+        try:
+            self.callback()
+        except RuntimeError:            # the widget's Qt side is gone: stop listening
+            self.watch(None, None)

@@ -13,7 +13,7 @@ from qtpy.QtWidgets import (QColorDialog, QFileDialog, QFormLayout, QGroupBox, Q
 
 from ..segmentation import Material, Samples, load_samples, samples_from_truth, save_samples
 from . import _samples_layer as sl
-from ._layers import SCALE_KEY, LayerCombo, default_color
+from ._layers import LayerCombo, default_color
 from ._tasks import TaskPanel, notify_error, notify_info, notify_warning
 
 if TYPE_CHECKING:
@@ -78,7 +78,10 @@ class SamplesWidget(QWidget):
         self.scale_spin.setRange(0, 16)
         self.scale_spin.setValue(3)
         self.scale_spin.setToolTip("Boxes shorter than one tile of 2^j pixels along some axis "
-                                   "give no training tile at scale j and are flagged.")
+                                   "give no training tile at scale j and are flagged; so are "
+                                   "the boxes of a material whose largest box holds no "
+                                   "window of 2^j+1 px (the recommended method's). Follows "
+                                   "the scale chosen on the RES tab and the classify tab's.")
         self.scale_spin.valueChanged.connect(self.check_boxes)
 
         self.box_table = QTableWidget(0, 4)
@@ -190,8 +193,9 @@ class SamplesWidget(QWidget):
             image_name = layer.metadata.get(sl.SAMPLES_KEY)
             if image_name and image_name in self.viewer.layers:
                 self.image_combo.select(self.viewer.layers[image_name])
-            if layer.metadata.get(SCALE_KEY) is not None:
-                self.scale_spin.setValue(int(layer.metadata[SCALE_KEY]))
+            chosen = sl.chosen_scale(layer, self.image_layer())
+            if chosen is not None:        # only a scale chosen on these very boxes
+                self.scale_spin.setValue(chosen)
         self._watched = layer
         self._show_materials(sl.layer_materials(layer) if layer is not None else [])
         self.check_boxes()
@@ -365,10 +369,12 @@ class SamplesWidget(QWidget):
                     item.setForeground(QColor("#ff8c69"))
                 self.box_table.setItem(i, column, item)
         n_flagged = sum(bool(f) for f in report.flags)
+        limit = sl.report_window_limit(layer, report, self.scale_spin.value())
         self.summary.setText(
             f"{len(report.boxes)} box(es), {n_flagged} flagged"
             + (f"; {len(report.blocking)} cannot be used until moved or deleted"
-               if report.blocking else ""))
+               if report.blocking else "")
+            + (f". Recommended method: {limit[1]}." if limit is not None else ""))
         if image.ndim == 3:
             sl.update_extent_overlay(self.viewer, layer, image, report)
         return report

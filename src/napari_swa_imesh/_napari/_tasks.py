@@ -85,6 +85,7 @@ class TaskPanel(QWidget):
         self.worker = None
         self.title = ""
         self.last_error: str | None = None
+        self.warnings: list[str] = []    # warnings the running (or last) computation raised
         self.progress_bar = QProgressBar()
         self.progress_bar.setTextVisible(True)
         self.status = QLabel("")
@@ -137,12 +138,15 @@ class TaskPanel(QWidget):
         worker = create_worker(_relay, steps, _progress={"total": total, "desc": title},
                                _ignore_errors=True, _start_thread=False)
         self.worker, self.title, self.last_error = worker, title, None
+        self.warnings = []
         self.progress_bar.setRange(0, total)
         self.progress_bar.setValue(0)
         self.progress_bar.setFormat(f"{title}: %v/%m")
         self.status.setText(f"{title}: starting")
         self.cancel_button.setEnabled(True)
         worker.yielded.connect(self._on_yielded)
+        # napari also shows them as notifications; kept here so widgets can say them too
+        worker.warned.connect(self._on_warned)
         worker.returned.connect(lambda result: self._on_returned(result, on_result))
         worker.errored.connect(self._on_errored)
         worker.aborted.connect(lambda: self._on_aborted(on_cancel))
@@ -173,6 +177,11 @@ class TaskPanel(QWidget):
                 pbar.update(int(done) - pbar.n)
             pbar.set_description(f"{self.title}: {message}")
         self.reported.emit(int(done), int(total), str(message))
+
+    def _on_warned(self, show_warning_args: tuple) -> None:
+        message = str(show_warning_args[0])
+        if message not in self.warnings:
+            self.warnings.append(message)
 
     def _on_returned(self, result, on_result) -> None:
         try:

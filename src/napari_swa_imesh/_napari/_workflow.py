@@ -29,7 +29,8 @@ class WorkflowWidget(QWidget):
 
     The tabs are the plugin's four widgets; this one only passes choices along: the
     samples layer to the RES and classify tabs, the chosen scale to the samples checks and
-    the classifier, the classification to the mesher.
+    the classifier, the classify tab's scale to the samples checks, the classification to
+    the mesher.
     """
 
     def __init__(self, napari_viewer: "napari.viewer.Viewer", parent: QWidget | None = None):
@@ -50,8 +51,14 @@ class WorkflowWidget(QWidget):
         self.samples.samples_layer_changed.connect(self._on_samples_layer)
         self.res.scale_chosen.connect(self.classify.set_scale)
         self.res.scale_chosen.connect(self.samples.set_scale)
+        self.classify.scale_spin.valueChanged.connect(self._on_classify_scale)
         self.classify.labels_ready.connect(self.mesh.select_labels)
         self._on_samples_layer(self.samples.samples_layer())
+
+    def _on_classify_scale(self, scale: int) -> None:
+        # the samples tab flags boxes at the scale the next run will use
+        if scale >= 0:
+            self.samples.set_scale(scale)
 
     def _on_samples_layer(self, layer) -> None:
         if layer is None:
