@@ -274,3 +274,108 @@ def test_no_check_skips_the_checks(tmp_path, capsys):
     assert "check" not in report["seconds"] or report["seconds"]["check"] == 0.0
     code = main(["mesh", str(tmp_path / "lab.npy"), "-o", str(tmp_path / "m2.vtu")])
     assert code == 0 and "conforming ok" in capsys.readouterr().out
+
+
+# --------------------------------------------------- "no silent wrong result" cases
+
+
+def test_too_large_for_memory_is_refused_before_meshing(tmp_path, capsys, monkeypatch):
+    from napari_swa_imesh.mesh import _cli, _imesh
+
+    np.save(tmp_path / "labels.npy", blob_3d())
+    monkeypatch.setattr(_cli, "available_memory", lambda: 1000)
+    monkeypatch.setattr(_cli, "current_rss", lambda: 0)
+    monkeypatch.setattr(_imesh, "_mesh_labels", lambda *a, **k: pytest.fail("meshed"))
+    code, stdout, stderr = run(capsys, "mesh", tmp_path / "labels.npy", "-o",
+                               tmp_path / "m.vtu")
+    assert code == 2 and stdout == ""
+    assert len(stderr.strip().splitlines()) == 1
+    assert re.search(r"needs .*about [0-9.]+ [MG]B of memory by the estimate, but 1000 bytes "
+                     r"is available; crop .*--memory-limit", stderr), stderr
+    assert not (tmp_path / "m.vtu").exists()
+
+
+def test_memory_limit_option_and_estimate_in_json(tmp_path, capsys):
+    np.save(tmp_path / "labels.npy", blob_3d())
+    code, stdout, stderr = run(capsys, "mesh", tmp_path / "labels.npy", "-o",
+                               tmp_path / "m.vtu", "--json", "--memory-limit", "64G")
+    assert code == 0, stderr
+    estimate = one_json(stdout)["memory_estimate_bytes"]
+    assert isinstance(estimate, int) and estimate > 0
+    code, _, stderr = run(capsys, "mesh", tmp_path / "labels.npy", "-o", tmp_path / "n.vtu",
+                          "--memory-limit", "1M")
+    assert code == 2 and "allowed by --memory-limit" in stderr
+    code, _, stderr = run(capsys, "mesh", tmp_path / "labels.npy", "-o", tmp_path / "n.vtu",
+                          "--memory-limit", "lots")
+    assert code == 2 and "--memory-limit takes auto, off, or a size" in stderr
+    code, _, _ = run(capsys, "mesh", tmp_path / "labels.npy", "-o", tmp_path / "n.vtu",
+                     "--memory-limit", "off")
+    assert code == 0
+
+
+def test_a_1024_cube_is_refused_from_its_header_without_reading(tmp_path, capsys, monkeypatch):
+    from napari_swa_imesh import io
+    from napari_swa_imesh.mesh import _cli
+
+    path = tmp_path / "big.npy"
+    np.lib.format.open_memmap(path, mode="w+", dtype=np.uint8, shape=(1024,) * 3).flush()
+    monkeypatch.setattr(_cli, "available_memory", lambda: 2 * 2**30)
+    monkeypatch.setattr(io, "read_image", lambda *a, **k: pytest.fail("read the pixels"))
+    code, _, stderr = run(capsys, "mesh", path, "-o", tmp_path / "m.vtu")
+    assert code == 2
+    assert "1024x1024x1024 uint8" in stderr and "needs at least about" in stderr
+
+
+def test_memory_error_is_one_line_with_what_to_do(tmp_path, capsys, monkeypatch):
+    from napari_swa_imesh.mesh import _imesh
+
+    def boom(*args, **kwargs):
+        raise MemoryError("Unable to allocate 8.00 GiB for an array with shape "
+                          "(1073741824,) and data type int64")
+
+    np.save(tmp_path / "labels.npy", blob_3d())
+    monkeypatch.setattr(_imesh, "_mesh_labels", boom)
+    code, stdout, stderr = run(capsys, "mesh", tmp_path / "labels.npy", "-o",
+                               tmp_path / "m.vtu")
+    assert code == 2 and stdout == ""
+    assert stderr.strip() == (
+        "swa-imesh mesh: error: ran out of memory (an allocation of 8.00 GiB failed); crop "
+        "the image, coarsen (downsample) it, or work on a sub-volume, or run on a machine "
+        "with more memory.")
+
+
+def test_memory_limit_of_the_process_is_respected(tmp_path):
+    """Under ulimit -v the run is refused by the estimate (exit 2), never a traceback."""
+    import os
+    import subprocess
+    import sys
+
+    rng = np.random.default_rng(0)
+    np.save(tmp_path / "noise.npy", rng.integers(0, 4, (64, 64, 64)).astype(np.uint8))
+    script = ("import resource, sys; from napari_swa_imesh.cli import main; "
+              "import napari_swa_imesh.mesh._imesh, napari_swa_imesh.io; "
+              "resource.setrlimit(resource.RLIMIT_AS, (int(sys.argv[1]), int(sys.argv[1]))); "
+              "sys.exit(main(sys.argv[2:]))")
+    # the address space taken after importing, plus 300 MB: too little for 64^3 noise
+    probe = subprocess.run([sys.executable, "-c",
+                            "import napari_swa_imesh.cli, napari_swa_imesh.mesh._imesh, "
+                            "napari_swa_imesh.io; print(open('/proc/self/status').read())"],
+                           capture_output=True, text=True, env=os.environ.copy())
+    vm = next(int(line.split()[1]) * 1024 for line in probe.stdout.splitlines()
+              if line.startswith("VmSize:"))
+    proc = subprocess.run([sys.executable, "-c", script, str(vm + 300 * 2**20), "mesh",
+                           str(tmp_path / "noise.npy"), "-o", str(tmp_path / "m.vtu")],
+                          capture_output=True, text=True, env=os.environ.copy())
+    assert proc.returncode == 2, proc.stderr
+    assert "Traceback" not in proc.stderr
+    assert len(proc.stderr.strip().splitlines()) == 1
+    assert "of memory by the estimate" in proc.stderr, proc.stderr
+
+
+def test_spacing_that_overflows_or_underflows_exit_2(tmp_path, capsys):
+    np.save(tmp_path / "labels.npy", blob_3d())
+    for value in ("1e-300", "1e300"):
+        code, _, stderr = run(capsys, "mesh", tmp_path / "labels.npy", "-o",
+                              tmp_path / "m.vtu", "--spacing", value)
+        assert code == 2 and "other units" in stderr and "np.float64" not in stderr
+        assert not (tmp_path / "m.vtu").exists()

@@ -148,10 +148,32 @@ def build_tree(labels, *, top_level: int | None = None) -> RegionTree:
     1
     """
     lab = as_labels(labels, min_ndim=1)
+    if top_level is not None and int(top_level) < 0:
+        raise ValueError(f"top_level must be >= 0; got {top_level}.")
+    return _build_tree(lab, top_level=top_level)
+
+
+def _signed_labels(lab: np.ndarray) -> np.ndarray:
+    """Labels (from ``as_labels``) in a signed dtype with room for the two markers.
+
+    ``PAD_LABEL`` (-1) and the dtype's minimum (a mixed block) are never labels, so any
+    signed dtype works as it is; unsigned labels are re-read as the signed type of the
+    same width when they fit (a view, no copy), else widened once.
+    """
+    if lab.dtype.kind == "i":
+        return lab
+    signed = np.dtype(f"i{lab.dtype.itemsize}")
+    if lab.size and lab.max() > np.iinfo(signed).max:
+        return lab.astype(np.dtype(f"i{min(8, 2 * lab.dtype.itemsize)}"))
+    return lab.view(signed)
+
+
+def _build_tree(lab: np.ndarray, *, top_level: int | None = None) -> RegionTree:
+    """The worker behind :func:`build_tree`; `lab` comes from ``as_labels`` (trusted)."""
+    shape = tuple(lab.shape)
+    lab = _signed_labels(lab)
     d = lab.ndim
     top = default_top_level(lab.shape) if top_level is None else int(top_level)
-    if top < 0:
-        raise ValueError(f"top_level must be >= 0; got {top_level}.")
     padded = pad_to_multiple(lab, 1 << top, PAD_LABEL)
     mixed = np.iinfo(padded.dtype).min  # marks a block that is not homogeneous
 
@@ -184,7 +206,7 @@ def build_tree(labels, *, top_level: int | None = None) -> RegionTree:
         origin=np.concatenate(origins) if origins else np.zeros((0, d), np.int64),
         level=np.concatenate(levels) if levels else np.zeros(0, np.int8),
         label=np.concatenate(labs) if labs else np.zeros(0, np.int64),
-        shape=tuple(lab.shape),
+        shape=shape,
         padded_shape=tuple(padded.shape),
         top_level=top,
     )

@@ -10,7 +10,7 @@ from collections.abc import Sequence
 
 import numpy as np
 
-__all__ = ["as_image", "as_labels", "normalize_spacing", "label_dtype"]
+__all__ = ["SPACING_RANGE", "as_image", "as_labels", "normalize_spacing", "label_dtype"]
 
 
 def as_image(
@@ -73,10 +73,11 @@ def as_image(
 def as_labels(
     labels, *, name: str = "labels", min_ndim: int = 1, max_ndim: int | None = None
 ) -> np.ndarray:
-    """Return `labels` as a non-negative integer array.
+    """Return `labels` as a non-negative integer array, without copying integer input.
 
-    Float arrays are accepted when every value is a whole number (label images
-    saved as float are common); anything else is an error.
+    Integer arrays come back as they are (same object's data, same dtype: a uint8 volume
+    stays one byte per voxel), booleans as a uint8 view; whole-valued floats (label images
+    saved as float are common) are converted once. Anything else is an error.
 
     Parameters
     ----------
@@ -89,36 +90,97 @@ def as_labels(
 
     Returns
     -------
-    ndarray of int32 or int64
-        The smallest signed dtype of the two that holds every label.
+    ndarray of int or uint
+        Integer input itself (read it, do not write to it), a uint8 view of boolean input,
+        or an int32 (int64 when needed) copy of whole-valued float input. Every value lies
+        in ``0 .. 2**63 - 1``, so it fits int64 exactly.
+
+    Raises
+    ------
+    TypeError
+        For non-numeric arrays.
+    ValueError
+        For wrong dimensionality, empty arrays, fractional, NaN or negative values, and
+        values above ``2**63 - 1``.
+
+    Examples
+    --------
+    >>> lab = np.array([[0, 1], [2, 2]], np.uint8)
+    >>> as_labels(lab) is lab
+    True
+    >>> as_labels(np.array([[1.0, 2.0]])).dtype
+    dtype('int32')
     """
     arr = np.asarray(labels)
     if arr.ndim < min_ndim or (max_ndim is not None and arr.ndim > max_ndim):
-        want = f"{min_ndim}-D to {max_ndim}-D" if max_ndim else f"at least {min_ndim}-D"
+        want = f"{min_ndim}-D" if max_ndim == min_ndim else (
+            f"{min_ndim}-D to {max_ndim}-D" if max_ndim else f"at least {min_ndim}-D")
         raise ValueError(
-            f"{name} must be {want}; got {arr.ndim}-D with shape {arr.shape}. "
+            f"{name} must be {want}; got {arr.ndim}-D with shape {_plain(arr.shape)}. "
             "Squeeze singleton axes or pass a single plane/volume."
         )
     if arr.size == 0:
-        raise ValueError(f"{name} is empty (shape {arr.shape}); give a label image with pixels.")
+        raise ValueError(
+            f"{name} is empty (shape {_plain(arr.shape)}); give a label image with pixels.")
     if arr.dtype.kind == "b":
-        arr = arr.astype(np.int32)
-    elif arr.dtype.kind == "f":
+        return arr.view(np.uint8)
+    if arr.dtype.kind == "f":
         if not np.isfinite(arr).all() or not np.array_equal(arr, np.round(arr)):
             raise ValueError(
                 f"{name} has non-integer values (dtype {arr.dtype}); a label image holds "
                 "whole numbers 0..K. Segment or round the image first."
             )
     elif arr.dtype.kind not in "iu":
-        raise TypeError(f"{name} must be an integer array; got dtype {arr.dtype}.")
-    if arr.min() < 0:
+        raise TypeError(
+            f"{name} must be an integer array; got dtype {arr.dtype}. Give whole-number "
+            "material ids 0..K."
+        )
+    lo, hi = arr.min(), arr.max()
+    if lo < 0:
         raise ValueError(
-            f"{name} has negative values (min {arr.min()}); labels must be 0 (background) "
+            f"{name} has negative values (min {_plain(lo)}); labels must be 0 (background) "
             "or positive material ids. Shift or relabel them first."
         )
-    top = arr.max()
-    dtype = np.int32 if top < np.iinfo(np.int32).max else np.int64
-    return arr.astype(dtype, copy=True)
+    # int64 holds every material id exactly (the tree, the mesh and the file formats);
+    # compare as Python numbers: uint64 against an int64 bound is not exact in numpy
+    if _plain(hi) > _INT64_MAX:
+        raise ValueError(
+            f"{name} has values up to {_plain(hi)}, above {_INT64_MAX} (2**63 - 1), the "
+            "largest material id that is kept exactly; relabel them to 0..K first (e.g. "
+            "skimage.segmentation.relabel_sequential)."
+        )
+    if arr.dtype.kind == "f":
+        return arr.astype(np.int32 if hi < np.iinfo(np.int32).max else np.int64)
+    return arr
+
+
+_INT64_MAX = int(np.iinfo(np.int64).max)
+
+
+def _plain(value):
+    """`value` (a numpy scalar, or a tuple of them) as plain Python numbers for messages.
+
+    f-strings print numpy 2 scalars inside containers as ``np.float64(0.5)``; a command
+    line user should read ``0.5``.
+
+    Examples
+    --------
+    >>> _plain((np.float64(0.5), np.int64(3)))
+    (0.5, 3)
+    """
+    if isinstance(value, (tuple, list)):
+        return type(value)(_plain(v) for v in value)
+    if isinstance(value, np.ndarray):
+        return _plain(value.tolist())
+    if isinstance(value, np.generic):
+        return value.item()
+    return value
+
+
+SPACING_RANGE = (1e-30, 1e30)
+"""Accepted spacing values. Metrics multiply up to six lengths (squared areas, products
+of edge lengths), so a value outside this range could overflow to inf or underflow to 0
+in float64 (range about 1e-308 .. 1e308) and give NaN qualities."""
 
 
 def normalize_spacing(spacing: float | Sequence[float] | None, ndim: int) -> tuple[float, ...]:
@@ -127,9 +189,17 @@ def normalize_spacing(spacing: float | Sequence[float] | None, ndim: int) -> tup
     Parameters
     ----------
     spacing : float or sequence of float or None
-        A scalar (isotropic), one value per axis, or None for 1.0.
+        A scalar (isotropic), one value per axis, or None for 1.0. Every value must lie
+        in :data:`SPACING_RANGE` (1e-30 .. 1e30), so the aspect ratio is at most 1e60 and
+        products of lengths stay finite and non-zero.
     ndim : int
         Number of image axes.
+
+    Raises
+    ------
+    ValueError
+        For the wrong number of values, values that are not positive and finite, or
+        values outside :data:`SPACING_RANGE`.
 
     Examples
     --------
@@ -138,15 +208,27 @@ def normalize_spacing(spacing: float | Sequence[float] | None, ndim: int) -> tup
     """
     if spacing is None:
         return (1.0,) * ndim
-    values = np.atleast_1d(np.asarray(spacing, dtype=float))
-    if values.ndim != 1 or values.size not in (1, ndim):
+    try:
+        values = np.atleast_1d(np.asarray(spacing, dtype=float))
+    except (TypeError, ValueError):
+        values = None
+    if values is None or values.ndim != 1 or values.size not in (1, ndim):
         raise ValueError(
-            f"spacing must be one number or {ndim} numbers (one per axis); got {spacing!r}."
+            f"spacing must be one number or {ndim} numbers (one per axis); got "
+            f"{_plain_text(spacing)}."
         )
+    shown = ", ".join(f"{v:g}" for v in values)
     if values.size == 1:
         values = np.repeat(values, ndim)
     if not (np.isfinite(values).all() and (values > 0).all()):
-        raise ValueError(f"spacing values must be positive and finite; got {tuple(values)}.")
+        raise ValueError(f"spacing values must be positive and finite; got {shown}.")
+    lo, hi = SPACING_RANGE
+    if not ((values >= lo) & (values <= hi)).all():
+        raise ValueError(
+            f"spacing values must lie between {lo:g} and {hi:g} so that lengths, areas and "
+            f"volumes stay finite; got {shown}. Express the spacing in other units (e.g. "
+            "micrometres instead of metres)."
+        )
     return tuple(float(v) for v in values)
 
 
@@ -160,3 +242,11 @@ def label_dtype(labels) -> np.dtype:
     """
     top = max((int(v) for v in labels), default=0)
     return np.dtype(np.int32 if top <= np.iinfo(np.int32).max else np.int64)
+
+
+def _plain_text(value) -> str:
+    """A spacing-like argument as plain text: numbers joined by commas, else its str."""
+    value = _plain(value)
+    if isinstance(value, (tuple, list)):
+        return ", ".join(str(v) for v in value) if value else "nothing"
+    return str(value)

@@ -7,6 +7,7 @@ stderr with exit status 2 (never a traceback).
 from __future__ import annotations
 
 import argparse
+import re
 import sys
 import warnings
 
@@ -44,6 +45,14 @@ def main(argv: list[str] | None = None) -> int:
         warnings.showwarning = show
         try:
             return int(args.func(args) or 0)
+        except MemoryError as exc:
+            # numpy says "Unable to allocate 8.00 GiB for an array with shape ..."
+            size = re.search(r"allocate ([0-9.]+ [KMGTP]?i?B)", str(exc))
+            what = f" (an allocation of {size.group(1)} failed)" if size else ""
+            print(f"{prefix}: error: ran out of memory{what}; crop the image, coarsen "
+                  "(downsample) it, or work on a sub-volume, or run on a machine with more "
+                  "memory.", file=sys.stderr)
+            return 2
         except (ValueError, TypeError, OSError, KeyError) as exc:
             msg = exc.args[0] if isinstance(exc, KeyError) and exc.args else exc
             print(f"{prefix}: error: {msg}", file=sys.stderr)

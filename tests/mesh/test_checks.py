@@ -135,3 +135,17 @@ def test_chunked_passes_give_the_same_answer(monkeypatch):
     chunked = [check_mesh(m, lab, exclude=(0,)) for m in (mesh, broken)]
     assert chunked == whole
     assert whole[0]["all_passed"] and not whole[1]["conforming"]
+
+
+@pytest.mark.parametrize("bad", [np.nan, np.inf])
+def test_nan_or_inf_quality_fails_the_checks(good, bad):
+    # spacing that over- or underflowed used to give quality inf and NaN angles while
+    # every check said ok
+    mesh, lab = good
+    quality = mesh.quality.copy()
+    quality[0] = bad
+    broken = _broken(mesh, cell_data={**mesh.cell_data, "quality": quality})
+    checks = check_mesh(broken, lab)
+    assert not checks["finite"] and checks["n_nonfinite_values"] == 1
+    assert not checks["all_passed"]
+    assert check_mesh(mesh, lab)["finite"]

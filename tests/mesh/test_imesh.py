@@ -120,3 +120,55 @@ def test_whole_valued_floats_and_bools_are_accepted():
     lab = np.array([[1.0, 2.0], [2.0, 2.0]])
     assert check_mesh(mesh_labels(lab), lab.astype(int))["all_passed"]
     assert mesh_labels(np.eye(4, dtype=bool)).n_cells > 0
+
+
+# --------------------------------------------------- "no silent wrong result" cases
+
+
+@pytest.mark.parametrize("spacing", [1e-300, 1e300, (1.0, 1e-300, 1.0), (1e300, 1.0, 1.0)])
+def test_spacing_that_overflows_or_underflows_is_refused(spacing):
+    lab = blobs((6, 5, 7), 3, seed=2, sigma=1.0)
+    with pytest.raises(ValueError, match="between 1e-30 and 1e[+]30.*other units"):
+        mesh_labels(lab, spacing=spacing)
+
+
+@pytest.mark.parametrize("spacing", [1e-30, 1e30, (1e-30, 1e30, 1.0)])
+def test_spacing_at_the_ends_of_the_range_gives_finite_quality(spacing):
+    lab = blobs((6, 5, 7), 3, seed=2, sigma=1.0)
+    mesh = mesh_labels(lab, spacing=spacing)
+    for name, values in mesh.cell_data.items():
+        if values.dtype.kind == "f":
+            assert np.isfinite(values).all(), name
+    assert check_mesh(mesh, lab)["all_passed"]
+
+
+def test_uint64_labels_above_int64_are_refused_not_called_negative():
+    lab = np.ones((4, 4), np.uint64)
+    lab[1, 1] = 2**64 - 1
+    with pytest.raises(ValueError, match="above 9223372036854775807") as info:
+        mesh_labels(lab)
+    assert "negative" not in str(info.value)
+
+
+@pytest.mark.parametrize("dtype", [np.uint8, np.int8, np.uint16, np.uint64, np.int64, bool])
+def test_labels_mesh_the_same_in_every_integer_dtype(dtype):
+    lab = (blobs((6, 5, 7), 2, seed=2, sigma=1.0) > 0) if dtype is bool else \
+        blobs((6, 5, 7), 3, seed=2, sigma=1.0)
+    ref = mesh_labels(lab.astype(np.int64))
+    mesh = mesh_labels(lab.astype(dtype))
+    np.testing.assert_array_equal(mesh.cells, ref.cells)
+    np.testing.assert_array_equal(mesh.material, ref.material)
+
+
+def test_labels_are_not_copied_before_meshing():
+    from napari_swa_imesh._tree import _signed_labels, build_tree
+
+    lab = blobs((8, 8, 8), 3, seed=2, sigma=1.0).astype(np.uint8)
+    work = _signed_labels(lab)
+    assert work.dtype == np.int8 and np.shares_memory(work, lab)
+    # the top bit in use: one wider copy, and the same tree
+    high = lab.astype(np.uint8) + np.uint8(200)
+    assert _signed_labels(high).dtype == np.int16
+    a, b = build_tree(high), build_tree(high.astype(np.int64))
+    np.testing.assert_array_equal(a.label, b.label)
+    np.testing.assert_array_equal(a.origin, b.origin)

@@ -7,7 +7,8 @@
 * quality: :func:`radius_edge_ratio`, :func:`min_angle`, :func:`dihedral_angles`,
   :func:`signed_volumes`, :data:`QUALITY_METRICS`, and the method's proven bounds,
   :func:`quality_table`;
-* export: :func:`write_mesh`, :func:`read_mesh`, :func:`to_meshio`.
+* export: :func:`write_mesh`, :func:`read_mesh`, :func:`to_meshio`;
+* memory: :func:`estimate_mesh_memory`, :func:`count_boundary_voxels`.
 """
 
 from ._balance import balance_tree
@@ -15,6 +16,7 @@ from ._bounds import format_quality_table, quality_table
 from ._checks import check_mesh, rasterize_materials
 from ._export import read_mesh, to_meshio, write_mesh
 from ._imesh import mesh_labels, mesh_tree
+from ._memory import count_boundary_voxels, estimate_mesh_memory
 from ._quality import (
     QUALITY_METRICS,
     dihedral_angles,
@@ -29,5 +31,5 @@ __all__ = [
     "Mesh", "balance_tree", "mesh_labels", "mesh_tree", "check_mesh", "rasterize_materials",
     "QUALITY_METRICS", "dihedral_angles", "max_angle", "min_angle", "radius_edge_ratio",
     "signed_volumes", "quality_table", "format_quality_table", "read_mesh", "to_meshio",
-    "write_mesh",
+    "write_mesh", "estimate_mesh_memory", "count_boundary_voxels",
 ]

@@ -12,7 +12,7 @@ import math
 
 import numpy as np
 
-from .._tree import build_tree
+from .._tree import _build_tree
 from .._validation import as_labels
 from ._quality import _det, signed_volumes
 from ._types import Mesh
@@ -223,11 +223,15 @@ def check_mesh(mesh: Mesh, labels, *, exclude=()) -> dict:
         (element volumes add up to the included pixels times the voxel volume),
         ``inside_one_leaf`` (every element inside one maximal homogeneous block of the
         labels), ``labels_recovered`` (rasterising element materials at pixel centres gives
-        the labels back, excluded pixels uncovered) and ``all_passed``; and the numbers
+        the labels back, excluded pixels uncovered), ``finite`` (every point coordinate
+        and every float value in ``cell_data``, such as the quality and the angles, is a
+        number: NaN or inf means the spacing over- or underflowed) and ``all_passed``;
+        and the numbers
         behind them (``n_facets_shared_3plus``, ``n_misoriented_facets``,
         ``n_boundary_facets_off_box``, ``n_unmatched_facets``, ``min_volume``,
         ``volume_error``, ``n_outside_leaf``, ``n_pixels_wrong`` (missed or wrongly
-        covered pixels plus covering elements of a wrong material), ``n_unused_points``).
+        covered pixels plus covering elements of a wrong material), ``n_unused_points``,
+        ``n_nonfinite_values``).
 
     Notes
     -----
@@ -243,11 +247,16 @@ def check_mesh(mesh: Mesh, labels, *, exclude=()) -> dict:
     True
     """
     lab = as_labels(labels, min_ndim=2, max_ndim=3)
+    exclude_arr = np.asarray(list(exclude) if not np.isscalar(exclude) else [exclude], dtype=np.int64)
+    return _check_mesh(mesh, lab, exclude_arr)
+
+
+def _check_mesh(mesh: Mesh, lab: np.ndarray, exclude_arr: np.ndarray) -> dict:
+    """The worker behind :func:`check_mesh`: `lab` from ``as_labels``, exclusions int64."""
     d = lab.ndim
     if mesh.ndim != d or mesh.cells.ndim != 2 or mesh.cells.shape[1] != d + 1:
         raise ValueError(f"a {d}-D label image needs a {d}-D mesh of {d + 1}-vertex cells; got points "
                          f"{mesh.points.shape} and cells {mesh.cells.shape}.")
-    exclude_arr = np.asarray(list(exclude) if not np.isscalar(exclude) else [exclude], dtype=np.int64)
     included = ~np.isin(lab, exclude_arr)
     points = _index_points(mesh)
     # int32 ids halve the memory of the facet arrays (4 per tetrahedron)
@@ -302,7 +311,7 @@ def check_mesh(mesh: Mesh, labels, *, exclude=()) -> dict:
     out["conforming"] = shared_3plus == 0 and misoriented == 0 and unmatched == 0
 
     # every element inside one maximal homogeneous block of the labels
-    tree = build_tree(lab)
+    tree = _build_tree(lab)
     leaf_map = tree.to_image(values=np.arange(len(tree)))
     outside = 0
     for start in range(0, len(cells), _CELLS_PER_CHUNK):
@@ -326,6 +335,15 @@ def check_mesh(mesh: Mesh, labels, *, exclude=()) -> dict:
     out["n_pixels_wrong"] = missed + covered_excluded + n_wrong_hits
     out["labels_recovered"] = out["n_pixels_wrong"] == 0
 
+    # a NaN compares false everywhere above, so it must fail on its own
+    bad = int(np.count_nonzero(~np.isfinite(np.asarray(mesh.points, dtype=float))))
+    for values in (mesh.cell_data or {}).values():
+        values = np.asarray(values)
+        if values.dtype.kind in "fc":
+            bad += int(np.count_nonzero(~np.isfinite(values)))
+    out["n_nonfinite_values"] = bad
+    out["finite"] = bad == 0
+
     out["all_passed"] = all(out[k] for k in ("conforming", "positive_volume", "volume_sum",
-                                             "inside_one_leaf", "labels_recovered"))
+                                             "inside_one_leaf", "labels_recovered", "finite"))
     return out

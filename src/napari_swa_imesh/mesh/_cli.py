@@ -9,11 +9,22 @@ when the mesh was written but one of its checks failed (a bug to report, not bad
 from __future__ import annotations
 
 import argparse
+
+import numpy as np
 import sys
 from pathlib import Path
 
 from .._cli_util import StepTimer, print_json
+from .._validation import normalize_spacing
 from ._export import MESH_SUFFIXES
+from ._memory import (
+    available_memory,
+    count_boundary_voxels,
+    current_rss,
+    estimate_mesh_memory,
+    format_bytes,
+    parse_memory_size,
+)
 
 __all__ = ["add_commands", "parse_material_names"]
 
@@ -45,6 +56,12 @@ def add_commands(subparsers) -> None:
     p.add_argument("--no-check", action="store_true",
                    help="skip the conformity/volume/label checks (they take about 10 us per "
                         "element, minutes for tens of millions of tetrahedra)")
+    p.add_argument("--memory-limit", default="auto", metavar="BYTES|auto|off",
+                   help="refuse to start when the estimated peak memory of the run "
+                        "(labels, tree, balance, elements, checks, writing) exceeds this: "
+                        "auto (default) = the memory available now (MemAvailable, a cgroup "
+                        "limit, ulimit -v), a size such as 8G or 500M, or off to skip the "
+                        "estimate; the estimate is reported as memory_estimate_bytes in --json")
     p.add_argument("--json", action="store_true", help="print one JSON object on stdout")
     p.set_defaults(func=_run_mesh)
 
@@ -91,14 +108,23 @@ def parse_material_names(items) -> dict[int, str]:
 def _run_mesh(args: argparse.Namespace) -> int:
     import numpy as np
 
-    from .._validation import as_labels, normalize_spacing
     from ..io import image_suffix, read_image
     from ._export import mesh_output_paths, write_mesh
+    from ._imesh import _mesh_arguments
 
     timer = StepTimer()
     # fail before the (possibly long) meshing on a bad suffix or an existing file
     mesh_output_paths(args.output, force=args.force)
     names = parse_material_names(args.material_names)
+    limit = parse_memory_size(args.memory_limit)
+    if args.spacing:
+        normalize_spacing(args.spacing, len(args.spacing))  # a bad value fails before reading
+    # from the file's header: refuse a volume whose labels and grids alone cannot fit
+    peek = _peek_shape_dtype(args.labels)
+    if peek is not None and len(peek[0]) in (2, 3) and limit != 0:
+        _check_memory(args, estimate_mesh_memory(peek[0], peek[1], n_boundary=0,
+                                                 max_label=0, check=not args.no_check),
+                      limit, peek[0], peek[1], at_least=True)
     with timer("read"):
         image, file_spacing = read_image(args.labels)
     if image_suffix(args.labels) in (".png", ".jpg", ".jpeg") and image.ndim == 3:
@@ -106,26 +132,37 @@ def _run_mesh(args: argparse.Namespace) -> int:
             f"{Path(args.labels).name} is a colour picture (shape {image.shape}); a label "
             "image has one value per pixel. Save the labels as a grey PNG, .tif or .npy."
         )
-    labels = as_labels(image, name=f"labels in {Path(args.labels).name}", min_ndim=2, max_ndim=3)
-    spacing = normalize_spacing(args.spacing if args.spacing else file_spacing, labels.ndim)
+    # the door: labels keep their dtype (no copy), spacing and exclusions checked once
+    labels, spacing, exclude = _mesh_arguments(
+        image, method=args.method, exclude=tuple(args.exclude),
+        spacing=args.spacing if args.spacing else file_spacing,
+        name=f"labels in {Path(args.labels).name}")
+    del image
+    with timer("estimate"):
+        estimate = estimate_mesh_memory(labels.shape, labels.dtype,
+                                        n_boundary=count_boundary_voxels(labels),
+                                        max_label=int(labels.max()), check=not args.no_check)
+    if limit != 0:
+        _check_memory(args, estimate, limit, labels.shape, labels.dtype)
 
-    from ._checks import check_mesh
-    from ._imesh import mesh_labels
+    from ._checks import _check_mesh
+    from ._imesh import _mesh_labels
 
     with timer("mesh"):
-        mesh = mesh_labels(labels, method=args.method, exclude=tuple(args.exclude),
-                           spacing=spacing, material_names=names)
+        mesh = _mesh_labels(labels, method=args.method, exclude=exclude, spacing=spacing,
+                            material_names=names)
     if args.no_check:
         checks = {"skipped": True}
     else:
         with timer("check"):
-            checks = check_mesh(mesh, labels, exclude=tuple(args.exclude))
+            checks = _check_mesh(mesh, labels, exclude)
         checks = {k: (bool(v) if isinstance(v, (bool, np.bool_)) else v)
                   for k, v in checks.items()}
     with timer("write"):
         written = write_mesh(mesh, args.output, force=args.force)
 
     report = _mesh_report(args, mesh, checks, written, timer.seconds)
+    report["memory_estimate_bytes"] = estimate
     if args.json:
         print_json(report)
     else:
@@ -139,6 +176,59 @@ def _run_mesh(args: argparse.Namespace) -> int:
               f"({failed}); {advice}.", file=sys.stderr)
         return 1
     return 0
+
+
+def _check_memory(args, estimate: int, limit: int | None, shape, dtype, *,
+                  at_least: bool = False) -> None:
+    """Refuse (ValueError, exit 2) when the estimated peak does not fit the limit.
+
+    With ``limit=None`` (auto) the part not yet resident must fit the available memory.
+    """
+    if limit is None:
+        free = available_memory()
+        if free is None:
+            return
+        room = free + current_rss()
+        source = "available"
+    else:
+        room, source = limit, "allowed by --memory-limit"
+    if estimate <= room:
+        return
+    size = "x".join(str(n) for n in shape)
+    raise ValueError(
+        f"meshing {Path(args.labels).name} ({size} {np.dtype(dtype).name}) needs "
+        f"{'at least ' if at_least else ''}about {format_bytes(estimate)} of memory by the "
+        f"estimate, but {format_bytes(room)} is {source}; crop the volume, coarsen "
+        "(downsample) the labels, or mesh a sub-volume"
+        f"{'' if args.exclude else ' (add --exclude 0 if background dominates)'}"
+        f"{'' if args.no_check else ', or skip the checks with --no-check'}; "
+        "--memory-limit overrides the estimate."
+    )
+
+
+def _peek_shape_dtype(path):
+    """(shape, dtype) from a .npy, .tif or NIfTI header without reading the pixels, or None."""
+    from ..io import image_suffix
+
+    suffix = image_suffix(path)
+    try:
+        if suffix == ".npy":
+            arr = np.load(path, mmap_mode="r", allow_pickle=False)
+            return tuple(arr.shape), arr.dtype
+        if suffix in (".tif", ".tiff"):
+            import tifffile
+
+            with tifffile.TiffFile(path) as tif:
+                series = tif.series[0]
+                return tuple(series.shape), np.dtype(series.dtype)
+        if suffix in (".nii", ".nii.gz"):
+            import nibabel as nib
+
+            img = nib.load(str(path))
+            return tuple(img.shape), np.dtype(img.get_data_dtype())
+    except Exception:  # the reader proper reports unreadable files
+        return None
+    return None
 
 
 def _mesh_report(args, mesh, checks, written, seconds) -> dict:
@@ -183,6 +273,7 @@ def _mesh_report(args, mesh, checks, written, seconds) -> dict:
         "mesh_steps": dict(info.get("seconds", {})),
         "check": seconds.get("check", 0.0),
         "write": seconds.get("write", 0.0),
+        "estimate": seconds.get("estimate", 0.0),
     }
     return report
 

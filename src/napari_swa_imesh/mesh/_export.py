@@ -356,7 +356,7 @@ def _write_files(mesh: Mesh, suffix: str, temps: list[str], targets: list[Path])
     try:
         _write_format(mesh, m, suffix, temps, targets)
     except (meshio.WriteError, KeyError) as exc:  # meshio's own failures, as one clear line
-        raise ValueError(f"meshio could not write {targets[0].name}: {exc!r}") from exc
+        raise ValueError(f"meshio could not write {targets[0].name}: {exc}") from exc
 
 
 def _write_format(mesh: Mesh, m, suffix: str, temps: list[str], targets: list[Path]) -> None:

@@ -25,7 +25,7 @@ import time
 
 import numpy as np
 
-from .._tree import RegionTree, build_tree
+from .._tree import RegionTree, _build_tree
 from .._validation import as_labels, normalize_spacing
 from . import _templates_luts as luts
 from ._balance import balance_tree, count_balanced_leaves
@@ -92,26 +92,43 @@ def mesh_labels(labels, *, method: str = "template", exclude=(), spacing=None,
     >>> float(m.quality.max().round(4))
     0.7071
     """
-    lab = as_labels(labels, min_ndim=2, max_ndim=3)
+    lab, spacing_t, exclude_arr = _mesh_arguments(labels, method=method, exclude=exclude,
+                                                   spacing=spacing)
+    return _mesh_labels(lab, method=method, exclude=exclude_arr, spacing=spacing_t,
+                        material_names=material_names)
+
+
+def _mesh_arguments(labels, *, method, exclude, spacing, name: str = "labels"):
+    """The door of :func:`mesh_labels`: (labels, spacing tuple, exclude array), checked.
+
+    The labels keep their dtype (no copy for integer input). The command line calls
+    this with the file's name, then :func:`_mesh_labels`.
+    """
+    lab = as_labels(labels, name=name, min_ndim=2, max_ndim=3)
     if method not in METHODS:
-        raise ValueError(f"method must be one of {METHODS}; got {method!r}.")
+        raise ValueError(f"method must be one of {', '.join(METHODS)}; got {method!r}.")
     spacing_t = normalize_spacing(spacing, lab.ndim)
     exclude_arr = np.unique(np.asarray(list(exclude) if not np.isscalar(exclude) else [exclude]))
     if exclude_arr.size and exclude_arr.dtype.kind not in "iu":
         raise TypeError(f"exclude must hold integer material ids; got {exclude!r}.")
-    if np.isin(lab, exclude_arr).all():
+    if exclude_arr.size and np.isin(lab, exclude_arr).all():
         raise ValueError(
             f"every pixel is excluded (labels present: {np.unique(lab).tolist()}, "
             f"exclude={exclude_arr.tolist()}); nothing is left to mesh. Exclude fewer materials."
         )
+    return lab, spacing_t, exclude_arr.astype(np.int64)
+
+
+def _mesh_labels(lab: np.ndarray, *, method: str, exclude: np.ndarray, spacing: tuple,
+                 material_names: dict | None = None) -> Mesh:
+    """The worker behind :func:`mesh_labels`; arguments come from :func:`_mesh_arguments`."""
     names = {int(k): str(v) for k, v in (material_names or {}).items()}
     t0 = time.perf_counter()
-    tree = build_tree(lab)
+    tree = _build_tree(lab)
     seconds = {"tree": time.perf_counter() - t0}
-    mesh = mesh_tree(tree, method=method, exclude=exclude_arr, spacing=spacing_t,
+    return mesh_tree(tree, method=method, exclude=exclude, spacing=spacing,
                      material_names=names, _seconds=seconds,
                      _labels=lab if method == "delaunay" else None)
-    return mesh
 
 
 def mesh_tree(tree: RegionTree, *, method: str = "template", exclude=(), spacing=None,
