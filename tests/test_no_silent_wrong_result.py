@@ -96,21 +96,24 @@ def test_case2_unbalanced_boxes_do_not_swallow_a_material():
     assert max(result.scales) <= window_scale((10, 10))
 
 
-def test_case2_box_too_small_for_the_asked_scale_is_refused(tmp_path, capsys):
+def test_case2_box_too_small_for_the_asked_scale(tmp_path, capsys):
     image, truth = three_regions((64, 86))
     np.save(tmp_path / "img.npy", image)
     (tmp_path / "s.json").write_text(json.dumps({"boxes": [
         {"label": 1, "start": [0, 0], "stop": [64, 25]},
         {"label": 2, "start": [20, 34], "stop": [28, 42]}]}))
+    # recommended: the scale is a maximum; levels no box can train are dropped, said aloud
+    code, out, err = run(capsys, "segment", tmp_path / "img.npy", "--samples",
+                         tmp_path / "s.json", "--method", "recommended", "--scale", 4,
+                         "-o", tmp_path / "l.npy", "--json")
+    assert code == 0 and "warning:" in err and "box #1" in err and "17 px" in err
+    assert max(json.loads(out)["scales"]) <= window_scale((8, 8))
+    # reference: tiles of the asked scale or nothing
     before = folder_state(tmp_path)
     code, _, err = run(capsys, "segment", tmp_path / "img.npy", "--samples",
-                       tmp_path / "s.json", "--method", "recommended", "--scale", 4,
-                       "-o", tmp_path / "l.npy")
-    assert code == 2 and "box #1" in err and "enlarge" in err and "17 px" in err
-    assert folder_state(tmp_path) == before
-    code, _, err = run(capsys, "segment", tmp_path / "img.npy", "--samples",
-                       tmp_path / "s.json", "--scale", 3, "-o", tmp_path / "l.npy")
+                       tmp_path / "s.json", "--scale", 3, "-o", tmp_path / "l2.npy")
     assert code == 2 and "box #1" in err and "fewer than the 5" in err
+    assert folder_state(tmp_path) == before
 
 
 def test_case2_automatic_scale_is_capped_with_a_warning(tmp_path, capsys):
@@ -362,7 +365,7 @@ def test_property_every_accepted_label_reads_back_exactly(tmp_path, data, suffix
 FAILING_CALLS = [
     ["segment", "img.npy", "--samples", "s.json", "-o", "out.npy", "--res-plot", "r.xyz"],
     ["segment", "img.npy", "--samples", "s.json", "-o", "out.xyz"],
-    ["segment", "img.npy", "--samples", "s.json", "-o", "out.png", "--tiles"],
+    ["segment", "img.npy", "--samples", "big.json", "-o", "out.png"],
     ["segment", "img.npy", "--samples", "missing.json", "-o", "out.npy"],
     ["segment", "img.npy", "--samples", "bad.json", "-o", "out.npy", "--force"],
     ["segment", "flat.npy", "--samples", "s.json", "-o", "out.npy"],
@@ -388,6 +391,7 @@ def workdir(tmp_path):
     np.save(tmp_path / "flat.npy", np.zeros_like(image))
     np.save(tmp_path / "existing.npy", truth.astype(np.uint8))
     save_samples(band_samples(truth), tmp_path / "s.json")
+    save_samples(band_samples(truth, labels={1: 1, 2: 70000, 3: 3}), tmp_path / "big.json")
     (tmp_path / "bad.json").write_text('{"boxes": [{"label": 1, "start": [0.5, 0]}]}')
     (tmp_path / "junk.npz").write_bytes(b"\x93NUMPY" + bytes(range(200)))
     return tmp_path

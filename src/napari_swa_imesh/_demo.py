@@ -36,7 +36,7 @@ def add_command(subparsers) -> None:
 def run_demo(args) -> int:
     from .io import check_writable
     from .data import texture_mosaic, texture_training
-    from .io import write_labels
+    from .io import write_figure, write_labels
     from .segmentation._cli import write_signatures_csv
     from .segmentation._metrics import evaluate
     from .segmentation._recommended import plot_res_scales
@@ -62,7 +62,8 @@ def run_demo(args) -> int:
     fitted = segment(train, samples)                 # scale: the suggested RES
     result = segment(mosaic, model=fitted.model)
     seconds["segment"] = time.perf_counter() - t
-    plot_res_scales(fitted.res, result.scales).savefig(out / "res.png", dpi=110)
+    write_figure(plot_res_scales(fitted.res, result.scales), out / "res.png", force=args.force,
+                 dpi=110)
     fitted.model.save(out / "model.npz", force=args.force)
     write_labels(out / "labels.tif", result.labels, force=args.force)
     write_signatures_csv(result.signatures, out / "signatures.csv", force=args.force)

@@ -62,7 +62,9 @@ def test_mosaic_workflow(mosaic_viewer, qtbot, tmp_path, notifications):
     dice = dice_scores(labels.data, truth.data)
     assert all(dice[k] > MIN_DICE[k] for k in MIN_DICE), dice
     assert flow.classify.dice == pytest.approx(dice)
-    assert labels.metadata[SEGMENTATION_KEY]["scale"] == 5
+    # GM needs more tiles than features (5) per material; the 32-px tiles of the boxes are
+    # fewer, so the library lowers the chosen RES by one and says so
+    assert labels.metadata[SEGMENTATION_KEY]["scale"] == 4
     assert "eps_l" in flow.classify.scores.text() and "Dice" in flow.classify.scores.text()
     assert flow.classify.signature_table.rowCount() == 2
 

@@ -90,16 +90,16 @@ def test_tile_resolution_labels_overlay_the_image(phantom_viewer, qtbot):
     flow = WorkflowWidget(viewer)
     samples = flow.samples
     samples.truth_combo.select(truth)
-    samples.scale_spin.setValue(2)
+    samples.scale_spin.setValue(1)          # CSF blocks of 4^3 voxels: 8 tiles each at j=1
     samples.samples_from_truth()
     wait_idle(qtbot, samples)
     flow.classify.method_combo.setCurrentText(METHOD_REFERENCE)   # one tile scale
-    flow.classify.scale_spin.setValue(2)
+    flow.classify.scale_spin.setValue(1)
     flow.classify.output_combo.setCurrentText(OUTPUT_TILES)
     flow.classify.classify()
     wait_idle(qtbot, flow.classify)
     tiles = viewer.layers[f"{image.name} SWA labels"]
-    s = 4
+    s = 2
     assert tiles.data.shape == tuple(n // s for n in PHANTOM_SHAPE)
     np.testing.assert_allclose(tiles.scale, np.array(image.scale) * s)
     rng = np.random.default_rng(0)
@@ -109,7 +109,7 @@ def test_tile_resolution_labels_overlay_the_image(phantom_viewer, qtbot):
         np.testing.assert_allclose(tiles.data_to_world(t), centre)
         # the outer corner of the tile is the outer corner of its first voxel
         np.testing.assert_allclose(tiles.data_to_world(t - 0.5), image.data_to_world(t * s - 0.5))
-    full = upsample_tiles(tiles.data, 2, PHANTOM_SHAPE)
+    full = upsample_tiles(tiles.data, 1, PHANTOM_SHAPE)
     np.testing.assert_array_equal(full, flow.classify.result.labels)
 
     # a mesh of the tile labels covers exactly the image's voxels in world coordinates

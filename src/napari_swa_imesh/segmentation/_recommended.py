@@ -460,9 +460,8 @@ class RecommendedModel:
         limit = samples.window_limit(top)
         if limit is not None:
             # box sizes are the user's, not the image's: a level no box of some material
-            # can train is never used, and the user hears which box to enlarge
-            if self.max_scale is not None:
-                raise ValueError(limit[1] + ".")
+            # can train is never used (the scale is a maximum), and the user hears which
+            # box to enlarge
             warnings.warn(f"{limit[1]}; using scales up to {limit[0]}.", UserWarning,
                           stacklevel=2)
             top = limit[0]

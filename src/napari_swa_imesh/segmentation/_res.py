@@ -32,7 +32,7 @@ import numpy as np
 
 from .._validation import as_image
 from ._moments import MOMENT_NAMES, moment_pyramid
-from ._samples import Samples
+from ._samples import Samples, check_contrast
 
 __all__ = ["ResStatistics", "res_statistics", "suggest_res", "plot_res", "MOMENT_NAMES",
            "box_tile_moments"]
@@ -133,6 +133,7 @@ def res_statistics(image, samples: Samples, *, max_scale: int | None = None,
     """
     img = as_image(image)
     samples.check(img.shape)
+    check_contrast(img, samples)
     d = img.ndim
     if max_scale is None:
         biggest = max(max(b.shape) for b in samples.boxes)
