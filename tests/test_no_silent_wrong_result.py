@@ -409,3 +409,15 @@ def test_property_failing_commands_leave_the_folder_byte_identical(workdir, caps
     assert len(lines) == 1 and "Traceback" not in err
     assert "np.float64(" not in err and "force=True" not in err
     assert folder_state(workdir) == before
+
+
+@pytest.mark.parametrize("shape", [(1, 1, 1), (2, 1, 1), (1, 3, 4), (3, 1), (1, 1)])
+@pytest.mark.parametrize("suffix", [".tif", ".nii.gz", ".npy"])
+def test_case5_singleton_axes_read_back(tmp_path, shape, suffix):
+    # found by the round-trip property: ImageJ TIFFs dropped axes of length 1
+    labels = np.arange(np.prod(shape), dtype=np.uint8).reshape(shape) + 1
+    write_labels(tmp_path / f"l{suffix}", labels, spacing=(2.0,) * len(shape))
+    got, spacing = read_image(tmp_path / f"l{suffix}")
+    assert got.shape == shape and np.array_equal(got, labels)
+    if suffix != ".npy":
+        assert spacing == (2.0,) * len(shape)

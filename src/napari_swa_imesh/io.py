@@ -330,7 +330,10 @@ def write_labels_to(tmp, data: np.ndarray, *, spacing=None, origin=None) -> None
     elif suffix in (".tif", ".tiff"):
         import tifffile
 
-        imagej = data.ndim in (2, 3) and data.dtype in (np.uint8, np.uint16)
+        # ImageJ files drop axes of length 1 on reading; tifffile's own shaped
+        # description keeps every axis (and any integer type)
+        imagej = data.ndim in (2, 3) and data.dtype in (np.uint8, np.uint16) and min(
+            data.shape) > 1
         meta: dict = {}
         if data.ndim == 3:
             meta["spacing"] = sp[-3]
