@@ -1,0 +1,15 @@
+"""Step iv of the pipeline: transport on the mesh, effective properties of the image.
+
+* :func:`simulate` (and :func:`simulate_steps` for progress): steady diffusion with one
+  conductivity per material (number, diagonal or tensor), P1 or P2 elements assembled by
+  scikit-fem, solved by conjugate gradients with pyamg's algebraic multigrid; the
+  mixed-boundary effective conductivity per axis, checked against its Voigt-Reuss bounds;
+* :func:`conductivity_tensors`, :func:`parse_conductivity_args`: the conductivity table.
+"""
+
+from ._conductivity import conductivity_tensors, parse_conductivity_args
+from ._simulate import SimulationResult, simulate, simulate_steps
+from ._solve import SolverInfo
+
+__all__ = ["SimulationResult", "SolverInfo", "conductivity_tensors", "parse_conductivity_args",
+           "simulate", "simulate_steps"]

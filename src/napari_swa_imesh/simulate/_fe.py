@@ -1,0 +1,105 @@
+"""The bridge to scikit-fem: our meshes as its meshes, and the diffusion forms.
+
+scikit-fem does the element work (shape functions, quadrature, sparse assembly); what is
+ours is only how a :class:`~napari_swa_imesh.mesh.Mesh` becomes a scikit-fem mesh and
+which quadrature is exact for piecewise-constant coefficients.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from scipy import sparse
+
+from ..mesh import Mesh
+
+__all__ = ["fe_basis", "stiffness_matrix", "mass_matrix", "element_order", "cell_gradients", "vertex_values"]
+
+
+def _skfem():
+    import skfem                                  # imported late: heavy, and optional
+
+    return skfem
+
+
+def fe_basis(mesh: Mesh, order: int = 1):
+    """A scikit-fem ``Basis`` of P1 or P2 Lagrange elements on `mesh`.
+
+    The quadrature is exact for the stiffness of piecewise-constant coefficients
+    (degree ``2 * (order - 1)``: one point per element for P1), so the assembly costs no
+    more than it must. The first ``len(mesh.points)`` degrees of freedom are the vertices,
+    in the mesh's vertex order.
+    """
+    skfem = _skfem()
+    points = np.ascontiguousarray(mesh.points.T, dtype=np.float64)
+    cells = np.ascontiguousarray(mesh.cells.T)
+    if mesh.ndim == 2:
+        fem_mesh = skfem.MeshTri(points, cells, validate=False)
+        element = skfem.ElementTriP2() if order == 2 else skfem.ElementTriP1()
+    else:
+        fem_mesh = skfem.MeshTet(points, cells, validate=False)
+        element = skfem.ElementTetP2() if order == 2 else skfem.ElementTetP1()
+    return skfem.Basis(fem_mesh, element, intorder=2 * (order - 1))
+
+
+def stiffness_matrix(basis, tensors: np.ndarray, cell_material: np.ndarray,
+                     isotropic: bool) -> sparse.csr_matrix:
+    """Assemble ``K[i, j] = sum_e int_e (C_e grad phi_j) . grad phi_i``.
+
+    Parameters
+    ----------
+    basis : skfem.Basis
+    tensors : (n_materials, d, d) ndarray
+        Conductivity tensors in the mesh's axis order.
+    cell_material : (M,) ndarray of int
+        Row of `tensors` for each element.
+    isotropic : bool
+        Every tensor is a multiple of the identity (a cheaper form).
+    """
+    skfem = _skfem()
+    from skfem.helpers import dot, grad, mul
+
+    nqp = basis.X.shape[-1]
+    if isotropic:
+        k = tensors[:, 0, 0][cell_material]
+        field = np.broadcast_to(k[:, None], (k.size, nqp))
+
+        @skfem.BilinearForm
+        def form(u, v, w):
+            return w["c"] * dot(grad(u), grad(v))
+    else:
+        per_cell = np.moveaxis(tensors[cell_material], 0, -1)     # (d, d, M)
+        field = np.broadcast_to(per_cell[..., None], per_cell.shape + (nqp,))
+
+        @skfem.BilinearForm
+        def form(u, v, w):
+            return dot(mul(w["c"], grad(u)), grad(v))
+    return skfem.asm(form, basis, c=np.ascontiguousarray(field)).tocsr()
+
+
+def mass_matrix(basis, capacity_per_cell: np.ndarray) -> sparse.csr_matrix:
+    """Consistent mass ``M[i, j] = sum_e c_e int_e phi_i phi_j`` (exact quadrature)."""
+    skfem = _skfem()
+    exact = skfem.Basis(basis.mesh, basis.elem, intorder=2 * element_order(basis))
+    nqp = exact.X.shape[-1]
+    field = np.broadcast_to(capacity_per_cell[:, None], (capacity_per_cell.size, nqp))
+
+    @skfem.BilinearForm
+    def form(u, v, w):
+        return w["c"] * u * v
+    return skfem.asm(form, exact, c=np.ascontiguousarray(field)).tocsr()
+
+
+def element_order(basis) -> int:
+    """Polynomial degree of the basis' Lagrange element (1 or 2)."""
+    skfem = _skfem()
+    return 2 if isinstance(basis.elem, (skfem.ElementTriP2, skfem.ElementTetP2)) else 1
+
+
+def cell_gradients(basis, values: np.ndarray) -> np.ndarray:
+    """(M, d) gradient of the finite-element field `values`, averaged over each element."""
+    return basis.interpolate(values).grad.mean(axis=-1).T
+
+
+def vertex_values(values: np.ndarray, n_points: int) -> np.ndarray:
+    """The field at the mesh vertices (the first `n_points` degrees of freedom)."""
+    return np.ascontiguousarray(values[:n_points])

@@ -1,0 +1,126 @@
+"""Symmetric positive definite solves: conjugate gradients with algebraic multigrid.
+
+pyamg's smoothed aggregation is the preconditioner: its cost grows linearly with the
+unknowns, which is what lets a 128^3 volume (millions of unknowns) solve in seconds.
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass
+
+import numpy as np
+from scipy import sparse
+from scipy.sparse import csgraph
+
+__all__ = ["SolverInfo", "check_constrained", "solve_dirichlet", "solve_spd"]
+
+DEFAULT_TOLERANCE = 1e-10        # relative residual; k_eff converges like its square
+MAX_ITERATIONS = 2000
+
+
+@dataclass(frozen=True)
+class SolverInfo:
+    """What the linear solver did.
+
+    Attributes
+    ----------
+    unknowns : int
+        Size of the system solved (free degrees of freedom).
+    iterations : int
+        Conjugate-gradient iterations.
+    residual : float
+        Final relative residual ``|b - A x| / |b|``.
+    seconds : float
+        Set-up plus solve time.
+    """
+
+    unknowns: int
+    iterations: int
+    residual: float
+    seconds: float
+
+
+def check_constrained(matrix: sparse.csr_matrix, fixed: np.ndarray,
+                      cell_dofs: np.ndarray | None = None,
+                      cell_material: np.ndarray | None = None) -> None:
+    """Refuse a system with a connected part that touches no fixed value (singular).
+
+    Parameters
+    ----------
+    matrix : (n, n) sparse matrix
+        The stiffness; its pattern is the connectivity of the degrees of freedom.
+    fixed : (k,) ndarray of int
+        Degrees of freedom with a prescribed value.
+    cell_dofs, cell_material : ndarray, optional
+        Element-to-dof table and the material of each element, to name the materials of
+        a floating part in the message.
+    """
+    n_parts, part = csgraph.connected_components(matrix, directed=False)
+    if n_parts == 1 and fixed.size:
+        return
+    anchored = np.zeros(n_parts, dtype=bool)
+    anchored[part[fixed]] = True
+    if anchored.all():
+        return
+    floating = np.flatnonzero(~anchored[part])
+    what = ""
+    if cell_dofs is not None and cell_material is not None:
+        hit = np.isin(cell_dofs[:, 0], floating)
+        mats = np.unique(cell_material[hit])
+        what = f" (material {', '.join(map(str, mats))})"
+    raise ValueError(f"{floating.size} nodes{what} are not connected to any face with a "
+                     "fixed value, so their temperature is undetermined; include the "
+                     "material that separates them or give that region a condition.")
+
+
+def solve_spd(matrix: sparse.csr_matrix, rhs: np.ndarray, *, x0: np.ndarray | None = None,
+              tol: float = DEFAULT_TOLERANCE) -> tuple[np.ndarray, SolverInfo]:
+    """Solve ``matrix @ x = rhs`` for a symmetric positive definite `matrix`.
+
+    Raises
+    ------
+    ValueError
+        When the residual does not reach `tol` (a result that would be wrong is not
+        returned).
+    """
+    import pyamg
+
+    t0 = time.perf_counter()
+    norm_b = float(np.linalg.norm(rhs))
+    if norm_b == 0:
+        return np.zeros_like(rhs), SolverInfo(rhs.size, 0, 0.0, 0.0)
+    ml = pyamg.smoothed_aggregation_solver(matrix, symmetry="symmetric")
+    residuals: list[float] = []
+    x = ml.solve(rhs, x0=x0, tol=tol, accel="cg", maxiter=MAX_ITERATIONS,
+                 residuals=residuals)
+    residual = float(np.linalg.norm(rhs - matrix @ x)) / norm_b
+    info = SolverInfo(int(rhs.size), max(len(residuals) - 1, 0), residual,
+                      time.perf_counter() - t0)
+    if not np.isfinite(residual) or residual > 10 * tol:
+        raise ValueError(f"the linear solver stopped at relative residual {residual:.1e} "
+                         f"after {info.iterations} iterations (asked {tol:.0e}); check "
+                         "that the conductivities are not extreme (contrast above 1e8) "
+                         "or loosen the tolerance.")
+    return x, info
+
+
+def solve_dirichlet(matrix: sparse.csr_matrix, fixed: np.ndarray, values: np.ndarray,
+                    rhs: np.ndarray | None = None, *, tol: float = DEFAULT_TOLERANCE
+                    ) -> tuple[np.ndarray, SolverInfo]:
+    """Solve ``matrix @ u = rhs`` with ``u[fixed] = values`` (condensed, stays SPD).
+
+    Returns the full vector `u` (fixed entries included).
+    """
+    n = matrix.shape[0]
+    u = np.zeros(n)
+    u[fixed] = values
+    free = np.ones(n, dtype=bool)
+    free[fixed] = False
+    rows = matrix[free]
+    reduced = rows[:, free].tocsr()
+    b = -(rows[:, fixed] @ u[fixed])
+    if rhs is not None:
+        b = b + rhs[free]
+    u[free], info = solve_spd(reduced, b, tol=tol)
+    return u, info
