@@ -13,6 +13,7 @@ import warnings
 
 from .mesh._cli import add_commands as add_mesh_commands
 from .segmentation._cli import add_commands as add_segmentation_commands
+from .simulate._cli import add_commands as add_simulate_commands
 
 __all__ = ["main", "build_parser"]
 
@@ -25,6 +26,7 @@ def build_parser() -> argparse.ArgumentParser:
     sub = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
     add_segmentation_commands(sub)
     add_mesh_commands(sub)
+    add_simulate_commands(sub)
     from ._demo import add_command as add_demo_command
 
     add_demo_command(sub)

@@ -1,0 +1,111 @@
+"""``swa-imesh simulate``: effective conductivity of a label image or a mesh file."""
+
+from __future__ import annotations
+
+import argparse
+from pathlib import Path
+
+from .._cli_util import StepTimer, print_json
+from ..io import IMAGE_SUFFIXES, image_suffix
+from ._output import FIELD_SUFFIXES
+
+__all__ = ["add_commands"]
+
+
+def add_commands(subparsers) -> None:
+    """Register ``simulate`` on an argparse sub-parser group."""
+    p = subparsers.add_parser(
+        "simulate", help="effective conductivity of the image box (steady diffusion)",
+        description="Steady diffusion / heat conduction on the IMESH mesh of a label image "
+                    "(or on a mesh file with a material per element): for each axis, "
+                    "potential 0 and 1 on the two faces normal to it, the other faces "
+                    "insulated; k_eff = flux x length / area, checked against the Voigt "
+                    "and Reuss bounds. Axes: x = column, y = row, z = plane.")
+    p.add_argument("input", metavar="LABELS_OR_MESH",
+                   help=f"label image ({', '.join(IMAGE_SUFFIXES)}) or mesh "
+                        "(.vtu, .vtk, .msh, .xdmf, .inp, .node/.ele)")
+    p.add_argument("--conductivity", "-k", nargs="+", action="extend", required=True,
+                   metavar="MATERIAL=K",
+                   help="conductivity per material, by label or name: 1=1 2=10 bone=0.1; "
+                        "K1,K2[,K3] is a diagonal tensor in x, y(, z) order, d*d numbers "
+                        "a full tensor row by row")
+    p.add_argument("--spacing", type=float, nargs="+", default=None, metavar="S",
+                   help="voxel size per axis in array order (labels only); default: from "
+                        "the file, else 1")
+    p.add_argument("--exclude", type=int, nargs="+", action="extend", default=[],
+                   metavar="L", help="labels not to mesh (insulating voids; labels only)")
+    p.add_argument("--material-names", nargs="+", action="extend", default=[],
+                   metavar="ID=NAME", help="names for materials, usable in --conductivity")
+    p.add_argument("--order", type=int, default=1, metavar="1|2",
+                   help="element degree: 1 (linear, default) or 2 (quadratic, more "
+                        "accurate per unknown)")
+    p.add_argument("--axes", nargs="+", choices=("x", "y", "z"), default=None,
+                   help="axes to solve along (default: all)")
+    p.add_argument("--tol", type=float, default=1e-10,
+                   help="relative residual of the linear solve (default 1e-10)")
+    p.add_argument("-o", "--output", default=None, metavar="FIELD",
+                   help=f"write the mesh with potential and flux per axis "
+                        f"({' or '.join(FIELD_SUFFIXES)}, for ParaView)")
+    p.add_argument("--force", action="store_true", help="replace an existing output file")
+    p.add_argument("--json", action="store_true", help="print one JSON object on stdout")
+    p.set_defaults(func=_run_simulate)
+
+
+def _run_simulate(args: argparse.Namespace) -> int:
+    from .._validation import normalize_spacing
+    from ..io import read_image
+    from ..mesh import read_mesh
+    from ..mesh._cli import parse_material_names
+    from ._conductivity import parse_conductivity_args
+    from ._output import check_field_path, write_field
+    from ._simulate import ORDERS, simulate
+
+    # the door: every argument and the output path before any work
+    conductivity = parse_conductivity_args(args.conductivity)
+    names = parse_material_names(args.material_names)
+    if args.order not in ORDERS:
+        raise ValueError(f"--order must be 1 or 2, not {args.order}.")
+    if not 0 < args.tol < 1:
+        raise ValueError(f"--tol must lie between 0 and 1, not {args.tol:g}.")
+    if args.output:
+        check_field_path(args.output, force=args.force)
+    is_image = image_suffix(args.input) in IMAGE_SUFFIXES
+    if not is_image and (args.spacing or args.exclude):
+        raise ValueError("--spacing and --exclude apply to a label image; a mesh file "
+                         "already has its coordinates and materials.")
+    if args.spacing:
+        normalize_spacing(args.spacing, len(args.spacing))
+
+    timer = StepTimer()
+    with timer("read"):
+        if is_image:
+            source, file_spacing = read_image(args.input)
+            spacing = args.spacing or file_spacing
+        else:
+            source, spacing = read_mesh(args.input), None
+            if not source.info.get("has_material", True):
+                raise ValueError(f"{Path(args.input).name} has no material per element; "
+                                 "simulate needs one (mesh the labels with swa-imesh mesh).")
+    result = simulate(source, _keys(conductivity), spacing=spacing, order=args.order,
+                      axes=args.axes, tol=args.tol, exclude=tuple(args.exclude),
+                      material_names=names)
+    written = []
+    if args.output:
+        with timer("write"):
+            written = write_field(result, args.output, force=args.force)
+    seconds = {**timer.seconds, **result.seconds}
+    if args.json:
+        report = {"command": "simulate", "input": str(args.input), **result.summary(),
+                  "output": [str(p) for p in written]}
+        report["seconds"] = seconds
+        print_json(report)
+    else:
+        print(result.describe())
+        if written:
+            print(f"wrote {', '.join(map(str, written))}")
+    return 0
+
+
+def _keys(conductivity: dict) -> dict:
+    """Material labels as ints where the key is a number, names otherwise."""
+    return {int(k) if k.lstrip("-").isdigit() else k: v for k, v in conductivity.items()}

@@ -1,0 +1,103 @@
+"""``swa-imesh simulate`` as a user runs it: files in, k_eff and a ParaView file out."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+
+from napari_swa_imesh.cli import main
+from napari_swa_imesh.simulate import simulate
+
+
+@pytest.fixture
+def labels_file(tmp_path):
+    from scipy import ndimage
+
+    f = ndimage.gaussian_filter(np.random.default_rng(2).standard_normal((10, 12, 14)), 1.5)
+    labels = (np.digitize(f, np.quantile(f, [0.4, 0.7])) + 1).astype(np.uint8)
+    path = tmp_path / "labels.npy"
+    np.save(path, labels)
+    return path, labels
+
+
+def _run(capsys, *argv):
+    rc = main([str(a) for a in argv])
+    out, err = capsys.readouterr()
+    return rc, out, err
+
+
+def test_simulate_labels_prints_k_eff_and_writes_a_field_paraview_reads(labels_file, capsys):
+    import pyvista
+
+    path, labels = labels_file
+    out_path = path.parent / "field.vtu"
+    rc, out, err = _run(capsys, "simulate", path, "-k", "1=1", "2=10", "3=0.1", "--spacing",
+                        "2", "1", "1", "-o", out_path, "--json")
+    assert rc == 0, err
+    report = json.loads(out)
+    expected = simulate(labels, {1: 1.0, 2: 10.0, 3: 0.1}, spacing=(2, 1, 1))
+    assert report["k_eff"] == pytest.approx(expected.k_eff, rel=1e-9)
+    assert set(report) >= {"k_eff", "bounds", "dofs", "residual", "iterations", "seconds"}
+    grid = pyvista.read(out_path)
+    assert grid.n_cells == expected.mesh.n_cells
+    assert np.allclose(np.asarray(grid.point_data["potential_x"]), expected.potential["x"])
+    assert grid.cell_data["flux_z"].shape == (grid.n_cells, 3)
+    assert set(np.unique(grid.cell_data["material"])) == {1, 2, 3}
+    # x in the file is the column axis: the potential rises along it from 0 to 1
+    x = grid.points[:, 0]
+    u = np.asarray(grid.point_data["potential_x"])
+    assert np.allclose(u[x == x.min()], 0) and np.allclose(u[x == x.max()], 1)
+
+
+def test_simulate_a_mesh_file_gives_the_labels_result(labels_file, capsys, tmp_path):
+    path, labels = labels_file
+    mesh_path = tmp_path / "mesh.vtu"
+    assert _run(capsys, "mesh", path, "-o", mesh_path)[0] == 0
+    rc, out, err = _run(capsys, "simulate", mesh_path, "-k", "1=1", "2=10", "3=0.1",
+                        "--axes", "y", "--json")
+    assert rc == 0, err
+    expected = simulate(labels, {1: 1.0, 2: 10.0, 3: 0.1}, axes="y").k_eff["y"]
+    assert json.loads(out)["k_eff"]["y"] == pytest.approx(expected, rel=1e-9)
+    rc, out, err = _run(capsys, "simulate", path, "-k", "1=1", "2=10", "3=0.1",
+                        "--order", "2", "--axes", "y")
+    assert rc == 0 and "P2" in out and "k_eff y" in out
+
+
+@pytest.mark.parametrize("args, message", [
+    (["-k", "1=1", "2=10"], "material 3 has no conductivity"),
+    (["-k", "1=1", "2=0", "3=1"], "must be positive"),
+    (["-k", "1=1", "2=nan", "3=1"], "not finite"),
+    (["-k", "1=1", "2=1", "3=1", "steel=2"], "not in the mesh"),
+    (["-k", "1=1", "2=1", "3=1", "--order", "3"], "--order must be 1 or 2"),
+    (["-k", "1=1", "2=1", "3=1", "-o", "field.png"], "use .vtu or .xdmf"),
+    (["-k", "1=1", "2=1", "3=1", "-o", "existing.vtu"], "--force"),
+    (["-k", "1=", "2=1"], "MATERIAL=VALUE"),
+    (["-k", "1=1", "2=1", "3=1", "--spacing", "1", "-2", "1"], "spacing"),
+    (["-k", "3=1", "--exclude", "1", "2"], "not connected to any face"),
+])
+def test_bad_input_exits_2_with_one_line_and_writes_nothing(labels_file, capsys, args,
+                                                           message):
+    path, _ = labels_file
+    folder = path.parent
+    (folder / "existing.vtu").write_text("keep")
+    before = {p.name: p.read_bytes() for p in folder.iterdir()}
+    argv = ["simulate", path, *[a if not a.endswith((".png", ".vtu")) else folder / a
+                                for a in args]]
+    rc, out, err = _run(capsys, *argv)
+    assert rc == 2
+    assert err.count("\n") == 1 and err.startswith("swa-imesh simulate: error:")
+    import re
+
+    assert re.search(message, err), err
+    assert {p.name: p.read_bytes() for p in folder.iterdir()} == before
+
+
+def test_a_mesh_input_refuses_label_options(labels_file, capsys, tmp_path):
+    path, _ = labels_file
+    mesh_path = tmp_path / "m.vtu"
+    assert _run(capsys, "mesh", path, "-o", mesh_path)[0] == 0
+    rc, _, err = _run(capsys, "simulate", mesh_path, "-k", "1=1", "2=1", "3=1",
+                      "--spacing", "2")
+    assert rc == 2 and "label image" in err
