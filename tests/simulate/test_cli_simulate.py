@@ -75,7 +75,6 @@ def test_simulate_a_mesh_file_gives_the_labels_result(labels_file, capsys, tmp_p
     (["-k", "1=1", "2=1", "3=1", "-o", "existing.vtu"], "--force"),
     (["-k", "1=", "2=1"], "MATERIAL=VALUE"),
     (["-k", "1=1", "2=1", "3=1", "--spacing", "1", "-2", "1"], "spacing"),
-    (["-k", "3=1", "--exclude", "1", "2"], "not connected to any face"),
 ])
 def test_bad_input_exits_2_with_one_line_and_writes_nothing(labels_file, capsys, args,
                                                            message):
@@ -101,3 +100,14 @@ def test_a_mesh_input_refuses_label_options(labels_file, capsys, tmp_path):
     rc, _, err = _run(capsys, "simulate", mesh_path, "-k", "1=1", "2=1", "3=1",
                       "--spacing", "2")
     assert rc == 2 and "label image" in err
+
+
+def test_a_floating_region_exits_2(tmp_path, capsys):
+    labels = np.full((8, 8, 8), 2, dtype=np.uint8)
+    labels[2:6, 2:6, 2:6] = 1
+    labels[3:5, 3:5, 3:5] = 3                   # 3 floats inside the excluded 1
+    np.save(tmp_path / "island.npy", labels)
+    rc, _, err = _run(capsys, "simulate", tmp_path / "island.npy", "-k", "2=1", "3=5",
+                      "--exclude", "1", "-o", tmp_path / "f.vtu")
+    assert rc == 2 and "material 3" in err and "not connected to any face" in err
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["island.npy"]
