@@ -1,0 +1,242 @@
+"""Effective conductivity on IMESH meshes against voxel references computed here.
+
+Run:  python benchmarks/bench_simulate.py [--quick] [--skip-speed]
+
+1. Accuracy. Two images whose exact k_eff is not known in closed form:
+   - 2-D: 30 % random disks (conductivity 10) in a matrix (1), 96^2 pixels;
+   - 3-D: three phases from smoothed noise (1, 10, 0.1: contrast 100), 24^3 voxels.
+   The reference is bracketed in this run by two voxel discretisations of the same label
+   image, each refined 2x and 4x (every voxel split into r^d) and extrapolated
+   (Richardson, rate fitted from the three levels):
+   - harmonic two-point finite volumes (cell-centred; converges from below here),
+   - P1 on voxel simplices (2 triangles / 6 tetrahedra per voxel; a conforming method,
+     so its k_eff lies above the exact one).
+   Then, error against the mean of the two extrapolations, and unknowns, for: IMESH P1
+   and P2 (this package, default and --order 2), uniform voxel simplices P1, voxel
+   quadrilaterals/hexahedra Q1.
+2. Speed: a 128^3 three-phase volume, image to k_eff along x, the path
+   `swa-imesh simulate` runs: mesh, assembly, solve (iterations), and the whole command in
+   a fresh process with its peak memory.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+import numpy as np
+from scipy import ndimage, sparse
+
+from napari_swa_imesh.simulate import simulate
+from napari_swa_imesh.simulate._solve import solve_dirichlet
+
+K2D = {1: 1.0, 2: 10.0}
+K3D = {1: 1.0, 2: 10.0, 3: 0.1}
+
+
+def disks(n: int, fraction: float = 0.3, radius: float = 5.5, seed: int = 0) -> np.ndarray:
+    """Matrix 1 with random (overlapping) disks 2 until `fraction` of the pixels."""
+    rng = np.random.default_rng(seed)
+    labels = np.ones((n, n), dtype=np.uint8)
+    yy, xx = np.mgrid[:n, :n] + 0.5
+    while np.mean(labels == 2) < fraction:
+        cy, cx = rng.uniform(0, n, 2)
+        labels[(yy - cy) ** 2 + (xx - cx) ** 2 <= radius ** 2] = 2
+    return labels
+
+
+def three_phase(n: int, sigma: float = 2.0, seed: int = 1) -> np.ndarray:
+    f = ndimage.gaussian_filter(np.random.default_rng(seed).standard_normal((n,) * 3)
+                                .astype(np.float32), sigma)
+    return (np.digitize(f, np.quantile(f, [1 / 3, 2 / 3])) + 1).astype(np.uint8)
+
+
+def refine(labels: np.ndarray, r: int) -> np.ndarray:
+    for axis in range(labels.ndim):
+        labels = np.repeat(labels, r, axis=axis)
+    return labels
+
+
+def fv_keff(labels: np.ndarray, k: dict, axis: int) -> tuple[float, int]:
+    """Two-point flux finite volumes with harmonic face conductivities; unit voxels."""
+    cond = np.vectorize(k.get, otypes=[float])(labels)
+    n = labels.size
+    index = np.arange(n).reshape(labels.shape)
+    rows, cols, vals = [], [], []
+    diag = np.zeros(n)
+    rhs = np.zeros(n)
+    for a in range(labels.ndim):
+        lo = [slice(None)] * labels.ndim
+        hi = [slice(None)] * labels.ndim
+        lo[a], hi[a] = slice(None, -1), slice(1, None)
+        t = 2 * cond[tuple(lo)] * cond[tuple(hi)] / (cond[tuple(lo)] + cond[tuple(hi)])
+        i, j, t = index[tuple(lo)].ravel(), index[tuple(hi)].ravel(), t.ravel()
+        rows += [i, j]
+        cols += [j, i]
+        vals += [-t, -t]
+        np.add.at(diag, i, t)
+        np.add.at(diag, j, t)
+    first = [slice(None)] * labels.ndim
+    last = [slice(None)] * labels.ndim
+    first[axis], last[axis] = 0, -1
+    t0 = 2 * cond[tuple(first)].ravel()            # half a voxel to the face value
+    t1 = 2 * cond[tuple(last)].ravel()
+    np.add.at(diag, index[tuple(first)].ravel(), t0)
+    np.add.at(diag, index[tuple(last)].ravel(), t1)
+    rhs[index[tuple(last)].ravel()] += t1 * 1.0
+    matrix = sparse.csr_matrix((np.concatenate(vals), (np.concatenate(rows),
+                                                       np.concatenate(cols))), shape=(n, n))
+    matrix = matrix + sparse.diags(diag)
+    from napari_swa_imesh.simulate._solve import solve_spd
+
+    u, _ = solve_spd(matrix.tocsr(), rhs, tol=1e-11)
+    flux = np.sum(t1 * (1.0 - u[index[tuple(last)].ravel()]))
+    shape = np.array(labels.shape, dtype=float)
+    return float(flux * shape[axis] / np.prod(np.delete(shape, axis))), n
+
+
+def voxel_fe_keff(labels: np.ndarray, k: dict, axis: int, kind: str) -> tuple[float, int]:
+    """P1 on voxel simplices (kind="simplex") or Q1 on voxels (kind="box"); unit voxels."""
+    import skfem
+    from skfem.helpers import dot, grad
+
+    coords = [np.arange(s + 1, dtype=float) for s in labels.shape]
+    if labels.ndim == 2:
+        mesh = skfem.MeshQuad.init_tensor(*coords)
+        if kind == "simplex":
+            mesh = mesh.to_meshtri()
+        elem = skfem.ElementQuad1() if kind == "box" else skfem.ElementTriP1()
+    else:
+        mesh = skfem.MeshHex.init_tensor(*coords)
+        if kind == "simplex":
+            mesh = mesh.to_meshtet()
+        elem = skfem.ElementHex1() if kind == "box" else skfem.ElementTetP1()
+    centre = mesh.p[:, mesh.t].mean(axis=1)                         # (d, M)
+    voxel = tuple(np.floor(centre).astype(int))
+    kcell = np.vectorize(k.get, otypes=[float])(labels[voxel])
+    basis = skfem.Basis(mesh, elem, intorder=2 if kind == "box" else 0)
+    field = np.broadcast_to(kcell[:, None], (kcell.size, basis.X.shape[-1]))
+
+    @skfem.BilinearForm
+    def form(u, v, w):
+        return w["c"] * dot(grad(u), grad(v))
+
+    matrix = skfem.asm(form, basis, c=np.ascontiguousarray(field)).tocsr()
+    x = basis.doflocs[axis]
+    low = np.flatnonzero(x <= 1e-9)
+    high = np.flatnonzero(x >= labels.shape[axis] - 1e-9)
+    fixed = np.concatenate([low, high])
+    u, _ = solve_dirichlet(matrix, fixed, np.r_[np.zeros(low.size), np.ones(high.size)],
+                           tol=1e-11)
+    flux = (matrix @ u)[high].sum()
+    shape = np.array(labels.shape, dtype=float)
+    return float(flux * shape[axis] / np.prod(np.delete(shape, axis))), matrix.shape[0]
+
+
+def richardson(values: list[float]) -> tuple[float, float]:
+    """Extrapolate k(r) for r = 1, 2, 4 assuming k(r) = k* + C r^-p; return (k*, p)."""
+    a, b, c = values
+    if (a - b) * (b - c) <= 0:
+        return c, float("nan")
+    p = np.log2((a - b) / (b - c))
+    return c - (b - c) / (2 ** p - 1), float(p)
+
+
+def accuracy_case(name: str, labels: np.ndarray, k: dict, axis: int, quick: bool) -> None:
+    d = labels.ndim
+    axis_name = ("z", "y", "x")[-d:][axis]
+    print(f"\n## {name}: {'x'.join(map(str, labels.shape))}, k = {k}, along {axis_name}")
+    t0 = time.perf_counter()
+    levels = (1, 2) if quick else (1, 2, 4)
+    fv = [fv_keff(refine(labels, r), k, axis)[0] for r in levels]
+    tet_levels = levels if d == 2 else levels[:2] + ((4,) if not quick and d == 2 else ())
+    tet = [voxel_fe_keff(refine(labels, r), k, axis, "simplex")[0] for r in tet_levels]
+    if len(fv) == 3:
+        fv_star, fv_p = richardson(fv)
+    else:
+        fv_star, fv_p = fv[-1], float("nan")
+    tet_star, tet_p = richardson(tet) if len(tet) == 3 else (tet[-1], float("nan"))
+    reference = 0.5 * (fv_star + tet_star)
+    spread = abs(tet_star - fv_star) / reference
+    print(f"reference {reference:.6g} (finite volumes {', '.join(f'{v:.6g}' for v in fv)} -> "
+          f"{fv_star:.6g}, rate {fv_p:.2f}; voxel simplices "
+          f"{', '.join(f'{v:.6g}' for v in tet)} -> {tet_star:.6g}, rate {tet_p:.2f}; "
+          f"bracket +-{100 * spread / 2:.2f} %; {time.perf_counter() - t0:.0f} s)")
+    print(f"{'discretisation':34s} {'unknowns':>9s} {'k_eff':>10s} {'error %':>8s}")
+
+    def row(label, value, unknowns):
+        err = 100 * (value - reference) / reference
+        print(f"{label:34s} {unknowns:9d} {value:10.6g} {err:+8.2f}")
+
+    for order in (1, 2):
+        r = simulate(labels, k, order=order, axes=axis_name)
+        row(f"IMESH P{order}{' (default)' if order == 1 else ''}", r.k_eff[axis_name], r.dofs)
+    for r in (1, 2):
+        value, n = voxel_fe_keff(refine(labels, r), k, axis, "simplex")
+        row(f"voxel simplices P1, {r}x", value, n)
+    for r in (1, 2):
+        value, n = voxel_fe_keff(refine(labels, r), k, axis, "box")
+        row(f"voxel {'quads' if d == 2 else 'hexahedra'} Q1, {r}x", value, n)
+    for r in (1, 2):
+        value, n = fv_keff(refine(labels, r), k, axis)
+        row(f"finite volumes, {r}x", value, n)
+
+
+CHILD = (
+    "import json, resource, sys\n"
+    "from napari_swa_imesh.cli import main\n"
+    "rc = main(sys.argv[1:])\n"
+    "sys.stdout.flush()\n"
+    "print('PEAK ' + json.dumps({'rc': rc, 'peak': resource.getrusage("
+    "resource.RUSAGE_SELF).ru_maxrss * 1024}), file=sys.stderr)\n"
+)
+
+
+def speed(n: int) -> None:
+    print(f"\n## Speed: {n}^3 three-phase volume (k = {K3D}), image to k_eff along x")
+    labels = three_phase(n, sigma=3.0)
+    with tempfile.TemporaryDirectory() as tmp:
+        path = Path(tmp) / "labels.npy"
+        np.save(path, labels)
+        for order in (1, 2):
+            t0 = time.perf_counter()
+            proc = subprocess.run(
+                [sys.executable, "-c", CHILD, "simulate", str(path), "-k", "1=1", "2=10",
+                 "3=0.1", "--axes", "x", "--order", str(order), "--json"],
+                capture_output=True, text=True)
+            wall = time.perf_counter() - t0
+            peak = [ln for ln in proc.stderr.splitlines() if ln.startswith("PEAK ")]
+            if proc.returncode != 0 or not peak:
+                print(f"P{order}: failed: {proc.stderr[-500:]}")
+                continue
+            report = json.loads(proc.stdout)
+            s = report["seconds"]
+            print(f"P{order}: whole command {wall:.1f} s, peak {json.loads(peak[0][5:])['peak'] / 2**30:.2f} GB; "
+                  f"{report['elements']} elements, {report['dofs']} unknowns; mesh "
+                  f"{s['mesh']:.1f} s, assembly {s['assemble']:.1f} s, solve {s['solve']:.1f} s "
+                  f"({report['iterations']['x']} CG iterations, residual "
+                  f"{report['residual']:.1e}); k_eff x = {report['k_eff']['x']:.5g}")
+
+
+def main(argv=None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--quick", action="store_true", help="small sizes, fewer levels")
+    parser.add_argument("--skip-speed", action="store_true")
+    parser.add_argument("--size", type=int, default=128, help="edge of the speed volume")
+    args = parser.parse_args(argv)
+    n2, n3 = (48, 12) if args.quick else (96, 24)
+    accuracy_case("2-D disks, 30 %, contrast 10", disks(n2), K2D, axis=1, quick=args.quick)
+    accuracy_case("3-D three phases, contrast 100", three_phase(n3, sigma=1.5), K3D, axis=2,
+                  quick=args.quick)
+    if not args.skip_speed:
+        speed(64 if args.quick else args.size)
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
