@@ -111,3 +111,50 @@ def test_a_floating_region_exits_2(tmp_path, capsys):
                       "--exclude", "1", "-o", tmp_path / "f.vtu")
     assert rc == 2 and "material 3" in err and "not connected to any face" in err
     assert sorted(p.name for p in tmp_path.iterdir()) == ["island.npy"]
+
+
+def test_transient_run_writes_a_series_that_meshio_and_vtk_read(labels_file, capsys):
+    import meshio
+    import pyvista
+
+    path, labels = labels_file
+    out = path.parent / "series.xdmf"
+    rc, stdout, err = _run(capsys, "simulate", path, "-k", "1=1", "2=10", "3=0.1",
+                           "--transient", "5", "--steps", "6", "--save-every", "2",
+                           "--fixed", "xmin=1", "--capacity", "2=3", "-o", out, "--json")
+    assert rc == 0, err
+    report = json.loads(stdout)
+    assert report["times"] == pytest.approx([0, 5 / 3, 10 / 3, 5])
+    assert sorted(p.name for p in path.parent.iterdir()) == ["labels.npy", "series.h5",
+                                                            "series.xdmf"]
+    with meshio.xdmf.TimeSeriesReader(out) as reader:
+        points, cells = reader.read_points_cells()
+        assert reader.num_steps == 4
+        t, point_data, cell_data = reader.read_data(3)
+    assert t == pytest.approx(5.0)
+    u = point_data["u"]
+    assert np.allclose(u[points[:, 0] == points[:, 0].min()], 1.0)   # the fixed face
+    assert set(np.unique(cell_data["material"][0])) == {1, 2, 3}
+    vtk = pyvista.get_reader(str(out))
+    assert vtk.number_time_points == 4
+    vtk.set_active_time_point(3)
+    grid = vtk.read()
+    assert grid.n_points == len(points) and np.allclose(grid.point_data["u"], u)
+
+
+@pytest.mark.parametrize("args, message", [
+    (["--fixed", "xmin=1"], "add --transient"),
+    (["--transient", "1", "-o", "s.vtu"], "XDMF/HDF5"),
+    (["--transient", "1", "--fixed", "xmin"], "FACE=VALUE"),
+    (["--transient", "1", "--fixed", "wmin=1"], "unknown face 'wmin'"),
+    (["--transient", "1", "--capacity", "bone=2"], "MATERIAL=VALUE"),
+    (["--transient", "0"], "duration must be a positive"),
+    (["--transient", "1", "--axes", "x"], "--axes"),
+])
+def test_bad_transient_input_exits_2(labels_file, capsys, args, message):
+    path, _ = labels_file
+    argv = ["simulate", path, "-k", "1=1", "2=1", "3=1",
+            *[a if not a.endswith(".vtu") else path.parent / a for a in args]]
+    rc, _, err = _run(capsys, *argv)
+    assert rc == 2 and message in err and err.count("\n") == 1
+    assert sorted(p.name for p in path.parent.iterdir()) == ["labels.npy"]

@@ -4,12 +4,16 @@
   conductivity per material (number, diagonal or tensor), P1 or P2 elements assembled by
   scikit-fem, solved by conjugate gradients with pyamg's algebraic multigrid; the
   mixed-boundary effective conductivity per axis, checked against its Voigt-Reuss bounds;
+* :func:`simulate_transient` (and :func:`transient_steps`): implicit Euler on the same
+  assembly, a heat front from a face or a substance released from a material;
 * :func:`conductivity_tensors`, :func:`parse_conductivity_args`: the conductivity table.
 """
 
 from ._conductivity import conductivity_tensors, parse_conductivity_args
 from ._simulate import SimulationResult, simulate, simulate_steps
 from ._solve import SolverInfo
+from ._transient import TransientResult, simulate_transient, transient_steps
 
-__all__ = ["SimulationResult", "SolverInfo", "conductivity_tensors", "parse_conductivity_args",
-           "simulate", "simulate_steps"]
+__all__ = ["SimulationResult", "SolverInfo", "TransientResult", "conductivity_tensors",
+           "parse_conductivity_args", "simulate", "simulate_steps", "simulate_transient",
+           "transient_steps"]

@@ -5,6 +5,8 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
+import numpy as np
+
 from .._cli_util import StepTimer, print_json
 from ..io import IMAGE_SUFFIXES, image_suffix
 from ._output import FIELD_SUFFIXES
@@ -43,9 +45,24 @@ def add_commands(subparsers) -> None:
                    help="axes to solve along (default: all)")
     p.add_argument("--tol", type=float, default=1e-10,
                    help="relative residual of the linear solve (default 1e-10)")
+    t = p.add_argument_group(
+        "transient", "with --transient, solve c du/dt = div(k grad u) by implicit Euler "
+        "instead of k_eff; faces not fixed are insulated")
+    t.add_argument("--transient", type=float, default=None, metavar="DURATION",
+                   help="end time of a transient run")
+    t.add_argument("--steps", type=int, default=50, help="implicit Euler steps (default 50)")
+    t.add_argument("--fixed", nargs="+", action="extend", default=[], metavar="FACE=VALUE",
+                   help="fixed values on box faces: xmin=1 (faces xmin..zmax)")
+    t.add_argument("--initial", nargs="+", action="extend", default=[],
+                   metavar="MATERIAL=VALUE", help="initial value per material (default 0)")
+    t.add_argument("--capacity", nargs="+", action="extend", default=[],
+                   metavar="MATERIAL=C", help="capacity c per material (default 1)")
+    t.add_argument("--save-every", type=int, default=1, metavar="K",
+                   help="write every K-th step (and the last)")
     p.add_argument("-o", "--output", default=None, metavar="FIELD",
                    help=f"write the mesh with potential and flux per axis "
-                        f"({' or '.join(FIELD_SUFFIXES)}, for ParaView)")
+                        f"({' or '.join(FIELD_SUFFIXES)}, for ParaView); with --transient "
+                        "the time series (.xdmf with its .h5)")
     p.add_argument("--force", action="store_true", help="replace an existing output file")
     p.add_argument("--json", action="store_true", help="print one JSON object on stdout")
     p.set_defaults(func=_run_simulate)
@@ -57,7 +74,7 @@ def _run_simulate(args: argparse.Namespace) -> int:
     from ..mesh import read_mesh
     from ..mesh._cli import parse_material_names
     from ._conductivity import parse_conductivity_args
-    from ._output import check_field_path, write_field
+    from ._output import check_field_path, check_series_path, write_field, write_series
     from ._simulate import ORDERS, simulate
 
     # the door: every argument and the output path before any work
@@ -67,8 +84,11 @@ def _run_simulate(args: argparse.Namespace) -> int:
         raise ValueError(f"--order must be 1 or 2, not {args.order}.")
     if not 0 < args.tol < 1:
         raise ValueError(f"--tol must lie between 0 and 1, not {args.tol:g}.")
-    if args.output:
+    transient = _transient_options(args)
+    if args.output and transient is None:
         check_field_path(args.output, force=args.force)
+    elif args.output:
+        check_series_path(args.output, force=args.force)
     is_image = image_suffix(args.input) in IMAGE_SUFFIXES
     if not is_image and (args.spacing or args.exclude):
         raise ValueError("--spacing and --exclude apply to a label image; a mesh file "
@@ -86,13 +106,22 @@ def _run_simulate(args: argparse.Namespace) -> int:
             if not source.info.get("has_material", True):
                 raise ValueError(f"{Path(args.input).name} has no material per element; "
                                  "simulate needs one (mesh the labels with swa-imesh mesh).")
-    result = simulate(source, _keys(conductivity), spacing=spacing, order=args.order,
-                      axes=args.axes, tol=args.tol, exclude=tuple(args.exclude),
-                      material_names=names)
+    if transient is not None:
+        from ._transient import simulate_transient
+
+        result = simulate_transient(source, _keys(conductivity), spacing=spacing,
+                                    order=args.order, tol=args.tol,
+                                    exclude=tuple(args.exclude), material_names=names,
+                                    **transient)
+    else:
+        result = simulate(source, _keys(conductivity), spacing=spacing, order=args.order,
+                          axes=args.axes, tol=args.tol, exclude=tuple(args.exclude),
+                          material_names=names)
     written = []
     if args.output:
         with timer("write"):
-            written = write_field(result, args.output, force=args.force)
+            write = write_series if transient is not None else write_field
+            written = write(result, args.output, force=args.force)
     seconds = {**timer.seconds, **result.seconds}
     if args.json:
         report = {"command": "simulate", "input": str(args.input), **result.summary(),
@@ -104,6 +133,47 @@ def _run_simulate(args: argparse.Namespace) -> int:
         if written:
             print(f"wrote {', '.join(map(str, written))}")
     return 0
+
+
+def _transient_options(args) -> dict | None:
+    """The keyword arguments of simulate_transient, or None for a steady run."""
+    if args.transient is None:
+        given = [flag for flag, value in (("--fixed", args.fixed), ("--initial", args.initial),
+                                          ("--capacity", args.capacity)) if value]
+        if given:
+            raise ValueError(f"{given[0]} applies to a transient run; add --transient "
+                             "DURATION.")
+        return None
+    if args.axes:
+        raise ValueError("--axes chooses k_eff directions; a transient run takes --fixed "
+                         "faces instead.")
+    fixed = {}
+    for item in args.fixed:
+        face, sep, text = item.partition("=")
+        try:
+            fixed[face] = float(text) if sep else float("nan")
+        except ValueError:
+            fixed[face] = float("nan")
+        if not sep or not np.isfinite(fixed[face]):
+            raise ValueError(f"--fixed takes FACE=VALUE pairs such as xmin=1, not {item!r}.")
+    return {"duration": args.transient, "steps": args.steps, "fixed": fixed,
+            "initial": _numbers(args.initial, "--initial", 0.0),
+            "capacity": _numbers(args.capacity, "--capacity", 1.0),
+            "save_every": args.save_every}
+
+
+def _numbers(items: list[str], flag: str, default: float) -> dict | float:
+    if not items:
+        return default
+    out = {}
+    for item in items:
+        key, sep, text = item.partition("=")
+        try:
+            out[int(key)] = float(text)
+        except ValueError:
+            raise ValueError(f"{flag} takes MATERIAL=VALUE pairs with a material label, "
+                             f"such as 2=1.5, not {item!r}.") from None
+    return out
 
 
 def _keys(conductivity: dict) -> dict:

@@ -9,7 +9,8 @@ import numpy as np
 from ..io import atomic_write, check_writable
 from ..mesh import to_meshio
 
-__all__ = ["FIELD_SUFFIXES", "check_field_path", "write_field"]
+__all__ = ["FIELD_SUFFIXES", "check_field_path", "check_series_path", "write_field",
+           "write_series"]
 
 FIELD_SUFFIXES = (".vtu", ".xdmf")
 
@@ -61,4 +62,62 @@ def write_field(result, path, *, force: bool = False) -> list[Path]:
             meshio.write(temps[0], m, file_format="vtu")
         else:
             meshio.write(temps[0], m, file_format="xdmf", data_format="HDF")
+    return targets
+
+
+def check_series_path(path, *, force: bool = False) -> list[Path]:
+    """The files :func:`write_series` writes (``.xdmf`` and its ``.h5``), checked."""
+    p = Path(path)
+    if p.suffix.lower() != ".xdmf":
+        raise ValueError(f"a time series is written as XDMF/HDF5: name the output "
+                         f"{p.with_suffix('.xdmf').name!r} instead of {p.name!r}.")
+    return [check_writable(t, force=force) for t in (p, p.with_suffix(".h5"))]
+
+
+def write_series(result, path, *, force: bool = False, name: str = "u") -> list[Path]:
+    """Write a :class:`TransientResult` as one XDMF time series (ParaView reads it).
+
+    One HDF5 file beside the ``.xdmf`` holds the mesh once (x, y(, z) order, ``material``
+    per cell) and field `name` at the vertices for every saved time; the XDMF names it by
+    its file name only, so the pair can be moved together. (meshio's own time-series
+    writer puts the ``.h5`` in the working directory, not beside the ``.xdmf``.)
+    """
+    import h5py
+
+    targets = check_series_path(path, force=force)
+    m = to_meshio(result.mesh)
+    points, cells = m.points, m.cells[0].data
+    material = m.cell_data["material"][0]
+    h5_name = targets[1].name
+    topology = "Triangle" if cells.shape[1] == 3 else "Tetrahedron"
+    geometry = "XY" if points.shape[1] == 2 else "XYZ"
+
+    def item(dataset: str, array: np.ndarray) -> str:
+        kind = "Int" if array.dtype.kind in "iu" else "Float"
+        dims = " ".join(map(str, array.shape))
+        return (f'<DataItem Dimensions="{dims}" NumberType="{kind}" Precision="8" '
+                f'Format="HDF">{h5_name}:/{dataset}</DataItem>')
+
+    grids = []
+    with atomic_write(targets, force=force) as (xdmf_tmp, h5_tmp):
+        with h5py.File(h5_tmp, "w") as h5:
+            h5["points"] = points
+            h5["cells"] = cells.astype(np.int64)
+            h5["material"] = material.astype(np.int64)
+            for k, (time, values) in enumerate(zip(result.times, result.values)):
+                h5[f"{name}/{k}"] = np.asarray(values, dtype=np.float64)
+                grids.append(
+                    f'<Grid Name="step{k}" GridType="Uniform"><Time Value="{float(time)!r}"/>'
+                    f'<Topology TopologyType="{topology}" NumberOfElements="{len(cells)}">'
+                    f'{item("cells", cells.astype(np.int64))}</Topology>'
+                    f'<Geometry GeometryType="{geometry}">{item("points", points)}</Geometry>'
+                    f'<Attribute Name="material" AttributeType="Scalar" Center="Cell">'
+                    f'{item("material", material.astype(np.int64))}</Attribute>'
+                    f'<Attribute Name="{name}" AttributeType="Scalar" Center="Node">'
+                    f'{item(f"{name}/{k}", np.asarray(values, dtype=np.float64))}</Attribute>'
+                    f'</Grid>')
+        xdmf_tmp.write_text(
+            '<?xml version="1.0"?>\n<Xdmf Version="3.0"><Domain>'
+            '<Grid Name="series" GridType="Collection" CollectionType="Temporal">\n'
+            + "\n".join(grids) + "\n</Grid></Domain></Xdmf>\n")
     return targets

@@ -25,7 +25,8 @@ import numpy as np
 
 from ._solve import SolverInfo, solve_dirichlet
 
-__all__ = ["MixedResult", "box_bounds", "mixed_boundary", "voigt_reuss"]
+__all__ = ["MixedResult", "box_bounds", "face_dofs", "face_names", "mixed_boundary",
+           "voigt_reuss"]
 
 BOUND_SLACK = 1e-6               # relative; far above the solver's 1e-10 residual
 
@@ -67,6 +68,29 @@ def box_bounds(points: np.ndarray, shape=(), spacing=(), origin=None
     return points.min(axis=0), points.max(axis=0)
 
 
+def face_names(ndim: int) -> tuple[str, ...]:
+    """The box faces in the FE frame: ``xmin, xmax, ymin, ymax(, zmin, zmax)``."""
+    return tuple(f"{a}{end}" for a in "xyz"[:ndim] for end in ("min", "max"))
+
+
+def face_dofs(dof_coordinates: np.ndarray, lo: np.ndarray, hi: np.ndarray,
+              face: str) -> np.ndarray:
+    """Degrees of freedom on one face of the box (``"xmin"`` ... ``"zmax"``).
+
+    Mesh axes: x = column (last image axis), y = row, z = plane.
+    """
+    d = lo.size
+    if face not in face_names(d):
+        raise ValueError(f"unknown face {face!r}; the faces of a {d}-D box are "
+                         f"{', '.join(face_names(d))}.")
+    axis = d - 1 - "xyz".index(face[0])
+    eps = 1e-9 * (hi[axis] - lo[axis])
+    coord = dof_coordinates[axis]
+    if face.endswith("min"):
+        return np.flatnonzero(coord <= lo[axis] + eps)
+    return np.flatnonzero(coord >= hi[axis] - eps)
+
+
 def mixed_boundary(matrix, dof_coordinates: np.ndarray, axis: int, lo: np.ndarray,
                    hi: np.ndarray, *, tol: float, axis_name: str = "") -> MixedResult:
     """Solve the mixed-boundary protocol along `axis` and return k_eff.
@@ -100,7 +124,7 @@ def mixed_boundary(matrix, dof_coordinates: np.ndarray, axis: int, lo: np.ndarra
     flux_in = float(reaction[high].sum())
     flux_out = float(-reaction[low].sum())
     area = float(np.prod(np.delete(hi - lo, axis)))
-    return MixedResult(flux_in * length / area, u, flux_in, flux_out, info)
+    return MixedResult(float(flux_in * length / area), u, flux_in, flux_out, info)
 
 
 def voigt_reuss(tensors: np.ndarray, fractions: np.ndarray, axis: int

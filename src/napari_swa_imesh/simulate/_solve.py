@@ -13,7 +13,7 @@ import numpy as np
 from scipy import sparse
 from scipy.sparse import csgraph
 
-__all__ = ["SolverInfo", "check_constrained", "solve_dirichlet", "solve_spd"]
+__all__ = ["SPDSolver", "SolverInfo", "check_constrained", "solve_dirichlet", "solve_spd"]
 
 DEFAULT_TOLERANCE = 1e-10        # relative residual; k_eff converges like its square
 MAX_ITERATIONS = 2000
@@ -74,35 +74,58 @@ def check_constrained(matrix: sparse.csr_matrix, fixed: np.ndarray,
                      "material that separates them or give that region a condition.")
 
 
+class SPDSolver:
+    """Conjugate gradients preconditioned by one AMG hierarchy of `matrix`, reusable.
+
+    Build once, solve many right-hand sides (the time steps of a transient run share
+    one matrix).
+    """
+
+    def __init__(self, matrix: sparse.csr_matrix, *, tol: float = DEFAULT_TOLERANCE):
+        import pyamg
+
+        t0 = time.perf_counter()
+        self.matrix = matrix
+        self.tol = tol
+        self.hierarchy = pyamg.smoothed_aggregation_solver(matrix, symmetry="symmetric")
+        self.setup_seconds = time.perf_counter() - t0
+
+    def solve(self, rhs: np.ndarray, x0: np.ndarray | None = None
+              ) -> tuple[np.ndarray, SolverInfo]:
+        """Solve for one right-hand side.
+
+        Raises
+        ------
+        ValueError
+            When the residual does not reach the tolerance (a result that would be wrong
+            is not returned).
+        """
+        t0 = time.perf_counter()
+        norm_b = float(np.linalg.norm(rhs))
+        if norm_b == 0:
+            return np.zeros_like(rhs), SolverInfo(rhs.size, 0, 0.0, 0.0)
+        residuals: list[float] = []
+        x = self.hierarchy.solve(rhs, x0=x0, tol=self.tol, accel="cg",
+                                 maxiter=MAX_ITERATIONS, residuals=residuals)
+        residual = float(np.linalg.norm(rhs - self.matrix @ x)) / norm_b
+        info = SolverInfo(int(rhs.size), max(len(residuals) - 1, 0), residual,
+                          time.perf_counter() - t0)
+        if not np.isfinite(residual) or residual > 10 * self.tol:
+            raise ValueError(
+                f"the linear solver stopped at relative residual {residual:.1e} after "
+                f"{info.iterations} iterations (asked {self.tol:.0e}); check that the "
+                "conductivities are not extreme (contrast above 1e8) or loosen the "
+                "tolerance.")
+        return x, info
+
+
 def solve_spd(matrix: sparse.csr_matrix, rhs: np.ndarray, *, x0: np.ndarray | None = None,
               tol: float = DEFAULT_TOLERANCE) -> tuple[np.ndarray, SolverInfo]:
-    """Solve ``matrix @ x = rhs`` for a symmetric positive definite `matrix`.
-
-    Raises
-    ------
-    ValueError
-        When the residual does not reach `tol` (a result that would be wrong is not
-        returned).
-    """
-    import pyamg
-
-    t0 = time.perf_counter()
-    norm_b = float(np.linalg.norm(rhs))
-    if norm_b == 0:
-        return np.zeros_like(rhs), SolverInfo(rhs.size, 0, 0.0, 0.0)
-    ml = pyamg.smoothed_aggregation_solver(matrix, symmetry="symmetric")
-    residuals: list[float] = []
-    x = ml.solve(rhs, x0=x0, tol=tol, accel="cg", maxiter=MAX_ITERATIONS,
-                 residuals=residuals)
-    residual = float(np.linalg.norm(rhs - matrix @ x)) / norm_b
-    info = SolverInfo(int(rhs.size), max(len(residuals) - 1, 0), residual,
-                      time.perf_counter() - t0)
-    if not np.isfinite(residual) or residual > 10 * tol:
-        raise ValueError(f"the linear solver stopped at relative residual {residual:.1e} "
-                         f"after {info.iterations} iterations (asked {tol:.0e}); check "
-                         "that the conductivities are not extreme (contrast above 1e8) "
-                         "or loosen the tolerance.")
-    return x, info
+    """Solve ``matrix @ x = rhs`` for a symmetric positive definite `matrix` (one shot)."""
+    solver = SPDSolver(matrix, tol=tol)
+    x, info = solver.solve(rhs, x0)
+    return x, SolverInfo(info.unknowns, info.iterations, info.residual,
+                         info.seconds + solver.setup_seconds)
 
 
 def solve_dirichlet(matrix: sparse.csr_matrix, fixed: np.ndarray, values: np.ndarray,

@@ -1,0 +1,263 @@
+"""Transient diffusion: implicit Euler on the same assembly as the steady solve.
+
+    c du/dt - div(k grad u) = 0,
+
+``c`` the capacity per material (heat capacity rho*c_p, or porosity for a solute), ``k``
+the conductivity. Implicit Euler is unconditionally stable and, with the consistent mass
+matrix and insulated faces, conserves the total amount ``int c u`` to solver precision
+(tested); each step solves ``(M / dt + K) u_new = M u_old / dt`` with one AMG hierarchy
+built once for all steps.
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Mapping
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from ..mesh import Mesh, mesh_labels
+from ._conductivity import conductivity_tensors, is_isotropic
+from ._fe import fe_basis, mass_matrix, stiffness_matrix, vertex_values
+from ._protocols import box_bounds, face_dofs, face_names
+from ._solve import DEFAULT_TOLERANCE, SPDSolver, check_constrained, solve_spd
+
+__all__ = ["TransientResult", "simulate_transient", "transient_steps"]
+
+
+@dataclass
+class TransientResult:
+    """A time series of the field.
+
+    Attributes
+    ----------
+    times : (T,) ndarray
+        Saved times, 0 first.
+    values : (T, N) ndarray
+        The field at the mesh vertices at each saved time.
+    amount : dict of int to (T,) ndarray
+        ``int c u`` over each material at each saved time.
+    mesh : Mesh
+    order : int
+    dofs : int
+    iterations : (steps,) ndarray of int
+        Conjugate-gradient iterations per step.
+    seconds : dict of str to float
+    """
+
+    times: np.ndarray
+    values: np.ndarray
+    amount: dict[int, np.ndarray]
+    mesh: Mesh
+    order: int
+    dofs: int
+    iterations: np.ndarray
+    seconds: dict[str, float] = field(default_factory=dict)
+
+    def summary(self) -> dict:
+        """Plain-JSON summary."""
+        return {
+            "times": self.times.tolist(),
+            "amount": {str(m): a.tolist() for m, a in self.amount.items()},
+            "order": self.order, "dofs": self.dofs, "elements": self.mesh.n_cells,
+            "iterations": int(self.iterations.sum()),
+            "seconds": dict(self.seconds),
+        }
+
+    def describe(self) -> str:
+        total = sum(a for a in self.amount.values())
+        lines = [f"transient diffusion, P{self.order} on {self.mesh.n_cells} elements, "
+                 f"{self.dofs} unknowns, {self.iterations.size} implicit Euler steps to "
+                 f"t = {self.times[-1]:g} ({int(self.iterations.sum())} CG iterations)",
+                 f"total amount {total[0]:.6g} at t = 0, {total[-1]:.6g} at the end"]
+        return "\n".join(lines)
+
+
+def _per_material(value, materials, what: str, default: float | None) -> np.ndarray:
+    """A number or a {material: number} mapping as one value per material."""
+    if value is None:
+        value = default
+    if isinstance(value, Mapping):
+        unknown = sorted(set(int(k) for k in value) - set(int(m) for m in materials))
+        if unknown:
+            raise ValueError(f"{what} names material {unknown[0]}, which is not in the mesh.")
+        out = np.array([value.get(int(m), default if default is not None else np.nan)
+                        for m in materials], dtype=np.float64)
+        if np.isnan(out).any():
+            missing = [int(m) for m, v in zip(materials, out) if np.isnan(v)]
+            raise ValueError(f"{what} of material {missing[0]} is not given.")
+    else:
+        out = np.full(len(materials), value, dtype=np.float64)
+    if not np.all(np.isfinite(out)):
+        raise ValueError(f"{what} must be finite.")
+    return out
+
+
+def transient_steps(mesh_or_labels, conductivity: Mapping, *, duration: float, steps: int,
+                    capacity=None, initial=0.0, fixed: Mapping[str, float] | None = None,
+                    spacing=None, order: int = 1, exclude=(), save_every: int = 1,
+                    material_names: Mapping[int, str] | None = None,
+                    tol: float = DEFAULT_TOLERANCE):
+    """Run :func:`simulate_transient` step by step, yielding ``(done, total, message)``."""
+    if order not in (1, 2):
+        raise ValueError(f"order must be 1 or 2 (P1 or P2 elements), not {order!r}.")
+    if not (np.isfinite(duration) and duration > 0):
+        raise ValueError(f"duration must be a positive time, not {duration!r}.")
+    if isinstance(steps, bool) or not isinstance(steps, (int, np.integer)) or steps < 1:
+        raise ValueError(f"steps must be a positive whole number, not {steps!r}.")
+    if isinstance(save_every, bool) or not isinstance(save_every, (int, np.integer)) \
+            or save_every < 1:
+        raise ValueError(f"save_every must be a positive whole number, not {save_every!r}.")
+    fixed = dict(fixed or {})
+    t0 = time.perf_counter()
+    if isinstance(mesh_or_labels, Mesh):
+        mesh = mesh_or_labels
+    else:
+        mesh = mesh_labels(mesh_or_labels, spacing=spacing, exclude=exclude,
+                           material_names=dict(material_names or {}))
+    for face, value in fixed.items():
+        if face not in face_names(mesh.ndim):
+            raise ValueError(f"unknown face {face!r}; the faces of a {mesh.ndim}-D box are "
+                             f"{', '.join(face_names(mesh.ndim))}.")
+        if not np.isfinite(value):
+            raise ValueError(f"the value fixed on {face} must be finite, not {value!r}.")
+    materials, cell_material = np.unique(mesh.material, return_inverse=True)
+    tensors = conductivity_tensors(conductivity, materials, mesh.ndim, mesh.material_names)
+    cap = _per_material(capacity, materials, "capacity", 1.0)
+    if np.any(cap <= 0):
+        raise ValueError("capacity must be positive for every material.")
+    start = _per_material(initial, materials, "initial value", None)
+    yield 1, steps + 2, f"assembling P{order} on {mesh.n_cells} elements"
+
+    basis = fe_basis(mesh, order)
+    stiffness = stiffness_matrix(basis, tensors, cell_material, is_isotropic(tensors))
+    mass = mass_matrix(basis, cap[cell_material])
+    dt = duration / steps
+    system = (mass / dt + stiffness).tocsr()
+    lo, hi = box_bounds(mesh.points, mesh.shape, mesh.spacing, getattr(mesh, "origin", None))
+    fixed_dofs = [face_dofs(basis.doflocs, lo, hi, f) for f in fixed]
+    dofs = np.concatenate(fixed_dofs) if fixed_dofs else np.zeros(0, dtype=np.intp)
+    values = np.concatenate([np.full(d.size, fixed[f]) for f, d in zip(fixed, fixed_dofs)]) \
+        if fixed_dofs else np.zeros(0)
+    if dofs.size:
+        check_constrained(stiffness, dofs, basis.element_dofs.T, mesh.material)
+    free = np.ones(system.shape[0], dtype=bool)
+    free[dofs] = False
+    reduced = system[free][:, free].tocsr()
+    coupling = system[free][:, ~free] if dofs.size else None
+    solver = SPDSolver(reduced, tol=tol)
+    seconds = {"mesh_and_assembly": time.perf_counter() - t0}
+
+    # initial field: the capacity-weighted L2 projection of the per-material values, which
+    # keeps the amount int c u of the piecewise-constant start exactly
+    rhs = _cell_load(basis, (cap * start)[cell_material], order)
+    u = solve_spd(mass, rhs, tol=1e-12)[0] if np.any(start) else np.zeros(system.shape[0])
+    u[dofs] = values
+    fixed_values = u[~free].copy()
+    cell_amount = _amount_per_cell_fn(basis, order, cap[cell_material])
+
+    times, saved, amounts, iterations = [0.0], [vertex_values(u, len(mesh.points))], \
+        [cell_amount(u)], []
+    t0 = time.perf_counter()
+    for k in range(1, steps + 1):
+        yield k + 1, steps + 2, f"step {k} of {steps}"
+        b = (mass @ u)[free] / dt
+        if coupling is not None:
+            b = b - coupling @ fixed_values
+        u_free, info = solver.solve(b, u[free])
+        u[free] = u_free
+        iterations.append(info.iterations)
+        if k % save_every == 0 or k == steps:
+            times.append(k * dt)
+            saved.append(vertex_values(u, len(mesh.points)))
+            amounts.append(cell_amount(u))
+    seconds["steps"] = time.perf_counter() - t0
+    yield steps + 2, steps + 2, "done"
+    per_cell = np.stack(amounts)                                      # (T, M)
+    amount = {int(m): per_cell[:, cell_material == i].sum(axis=1)
+              for i, m in enumerate(materials)}
+    return TransientResult(np.array(times), np.stack(saved), amount, mesh, order,
+                           int(system.shape[0]), np.array(iterations, dtype=int), seconds)
+
+
+def _cell_load(basis, per_cell: np.ndarray, order: int) -> np.ndarray:
+    """``b_i = int c_e phi_i`` for a piecewise-constant c (exact quadrature)."""
+    import skfem
+
+    exact = skfem.Basis(basis.mesh, basis.elem, intorder=order)
+    field = np.broadcast_to(per_cell[:, None], (per_cell.size, exact.X.shape[-1]))
+
+    @skfem.LinearForm
+    def form(v, w):
+        return w["c"] * v
+    return skfem.asm(form, exact, c=np.ascontiguousarray(field))
+
+
+def _amount_per_cell_fn(basis, order: int, capacity_per_cell: np.ndarray):
+    """A function u -> (M,) ``int_e c u`` (exact for P1 and P2)."""
+    import skfem
+
+    exact = skfem.Basis(basis.mesh, basis.elem, intorder=order)
+    weights = exact.dx                                               # (M, nqp)
+
+    def amount(u: np.ndarray) -> np.ndarray:
+        return capacity_per_cell * np.sum(np.asarray(exact.interpolate(u)) * weights, axis=1)
+    return amount
+
+
+def simulate_transient(mesh_or_labels, conductivity: Mapping, *, duration: float,
+                       steps: int, capacity=None, initial=0.0,
+                       fixed: Mapping[str, float] | None = None, spacing=None,
+                       order: int = 1, exclude=(), save_every: int = 1,
+                       material_names: Mapping[int, str] | None = None,
+                       tol: float = DEFAULT_TOLERANCE) -> TransientResult:
+    """Transient diffusion on the mesh by implicit Euler.
+
+    Parameters
+    ----------
+    mesh_or_labels : Mesh or (M, N[, P]) array_like of int
+    conductivity : mapping
+        As for :func:`simulate`.
+    duration : float
+        End time (the units of ``capacity * length^2 / conductivity``).
+    steps : int
+        Implicit Euler steps of ``duration / steps`` each.
+    capacity : float or mapping of int to float, optional
+        ``c`` per material (default 1).
+    initial : float or mapping of int to float
+        Initial value per material (a released substance: 1 in the source material,
+        0 elsewhere); projected onto the elements in L2, which keeps its amount.
+    fixed : mapping of str to float, optional
+        Faces of the box with a fixed value, e.g. ``{"xmin": 1.0}`` for a heat front
+        entering from x = min; every other face is insulated. Faces: ``xmin`` ...
+        ``zmax`` (x = column, y = row, z = plane).
+    spacing, order, exclude, material_names, tol
+        As for :func:`simulate`.
+    save_every : int
+        Keep every k-th step (and the last).
+
+    Returns
+    -------
+    TransientResult
+
+    Examples
+    --------
+    A front entering a uniform bar: after a long time the bar takes the face value.
+
+    >>> import numpy as np
+    >>> labels = np.ones((2, 8), dtype=np.uint8); labels[0, 0] = 2
+    >>> r = simulate_transient(labels, {1: 1.0, 2: 1.0}, duration=500.0, steps=20,
+    ...                        fixed={"xmin": 1.0})
+    >>> bool(np.allclose(r.values[-1], 1.0, atol=1e-3))
+    True
+    """
+    gen = transient_steps(mesh_or_labels, conductivity, duration=duration, steps=steps,
+                          capacity=capacity, initial=initial, fixed=fixed, spacing=spacing,
+                          order=order, exclude=exclude, save_every=save_every,
+                          material_names=material_names, tol=tol)
+    while True:
+        try:
+            next(gen)
+        except StopIteration as stop:
+            return stop.value
