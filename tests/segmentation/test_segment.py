@@ -150,3 +150,31 @@ def test_signatures_are_the_moments_of_the_classified_tiles(features):
     moments, counts = tile_moments(img, 2)
     expected = material_signatures(moments, counts, res.tile_labels, res.model.materials)
     assert res.signatures == expected
+
+
+@pytest.mark.parametrize("method", ["reference", "recommended"])
+def test_describe_is_the_one_summary(method):
+    img, truth, s = two_textures((64, 64))
+    res = segment(img, s, method=method)
+    text = res.describe()
+    assert text.splitlines()[0].startswith(f"{method} method: scale")
+    assert f"eps_l = {res.eps_l:.2f}%" in text
+    for m in res.model.materials:
+        assert f"  {m.name}: " in text
+    if method == "recommended":
+        per_scale = res.pixels_per_scale()
+        assert sum(per_scale.values()) == img.size and list(per_scale) == list(res.scales)[
+            :len(per_scale)]
+        assert "pixels labelled per scale" in text
+    res.notes.append("a note")
+    assert res.describe().endswith("warning: a note")
+    assert "a note" not in res.describe(notes=False)
+
+
+def test_validated_once_and_input_untouched_for_float32():
+    img, truth, s = two_textures((48, 40))
+    img32 = img.astype(np.float32)
+    before = img32.copy()
+    res = segment(img32, s)
+    np.testing.assert_array_equal(img32, before)
+    np.testing.assert_array_equal(res.labels, segment(img32.astype(np.float64), s).labels)

@@ -14,7 +14,7 @@ import numpy as np
 
 from napari_swa_imesh._validation import as_image
 
-from ._haar import _iter_haar_levels
+from ._haar import iter_haar_levels
 from ._tiles import block_spread, block_sum, block_view, tile_means, validate_mask, validate_scale
 
 __all__ = ["entropy_feature_names", "tile_entropy"]
@@ -84,7 +84,7 @@ def _slab_entropy(padded: np.ndarray, scale: int) -> np.ndarray:
     grid = tuple(side // 2**scale for side in padded.shape)
     out = np.empty(grid + (n_bands * scale + 1,), dtype=np.float64)
     approx = padded
-    for level, (approx, details) in enumerate(_iter_haar_levels(padded, scale), start=1):
+    for level, (approx, details) in enumerate(iter_haar_levels(padded, scale), start=1):
         # details (B, c_0, ...) -> per-tile mean over blocks of 2**(scale - level)
         entropy = _neg_abs_log(details)
         block = 2 ** (scale - level)
