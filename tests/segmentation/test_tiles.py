@@ -5,8 +5,12 @@ import pytest
 from scipy import ndimage as ndi
 
 from napari_swa_imesh.segmentation._bias import upsample_linear
-from napari_swa_imesh.segmentation._tiles import (block_mean, block_sum, majority_tiles,
-                                                  tile_counts)
+from napari_swa_imesh.segmentation._tiles import (
+    block_mean,
+    block_sum,
+    majority_tiles,
+    tile_counts,
+)
 
 
 # -- the implementations they replaced, kept here as references ---------------------------

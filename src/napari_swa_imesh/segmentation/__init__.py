@@ -33,7 +33,14 @@ from ._moments import moment_pyramid, tile_moments
 from ._mrf import potts_mean_field
 from ._recommended import RecommendedModel
 from ._res import MOMENT_NAMES, ResStatistics, plot_res, plot_res_scales, res_statistics
-from ._samples import Material, SampleBox, Samples, load_samples, samples_from_truth, save_samples
+from ._samples import (
+    Material,
+    SampleBox,
+    Samples,
+    load_samples,
+    samples_from_truth,
+    save_samples,
+)
 from ._segment import METHODS, SegmentationResult, segment, segment_steps, sieve_labels
 from ._signatures import material_signatures, write_signatures_csv
 from ._tiles import majority_tiles, tile_placement, upsample_tiles

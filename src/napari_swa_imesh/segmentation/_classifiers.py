@@ -121,12 +121,11 @@ class GaussianClassifier(_Standardised):
     def fit(self, X, y) -> "GaussianClassifier":
         X, y, classes, counts = _check_training(X, y)
         Z = self._fit_scaler(X)
-        p = Z.shape[1]
         self.classes_ = classes
         self.priors_ = (counts / counts.sum() if self.priors == "proportional"
                         else np.full(classes.size, 1.0 / classes.size))
         self.means_ = np.stack([Z[y == c].mean(axis=0) for c in classes])
-        covs, reg = [], []
+        covs = []
         for c in classes:
             zc = Z[y == c] - Z[y == c].mean(axis=0)
             cov = zc.T @ zc / zc.shape[0]

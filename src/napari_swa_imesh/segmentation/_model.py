@@ -8,11 +8,11 @@ from __future__ import annotations
 
 import numpy as np
 
-from .._validation import as_image, label_dtype
+from .._validation import label_dtype
 from ._classifiers import leave_one_out_error, make_classifier
 from ._features import feature_stack, n_features
 from ._model_base import SegmentationModel
-from ._samples import Samples, check_contrast
+from ._samples import Material, Samples
 from ._tiles import upsample_tiles
 
 __all__ = ["SWAModel", "training_tiles", "check_scale"]
@@ -112,14 +112,10 @@ class SWAModel(SegmentationModel):
         spacing : sequence of float, optional
             Recorded in the model.
         check_input : bool
-            False: `image` is a float64 array and `samples` were checked against it
-            (see :mod:`._model_base`).
+            False: `samples` were checked against the float `image` (see
+            :mod:`._model_base`).
         """
-        img = image
-        if check_input:
-            img = as_image(image)
-            samples.check(img.shape)
-            check_contrast(img, samples)
+        img = self.checked_training_image(image, samples, check_input)
         check_scale(self.scale, img.shape)
         n_features(self.feature_set, img.ndim, self.scale)  # validates the set name
         X, y, names = training_tiles(img, samples, self.scale, self.feature_set)

@@ -82,6 +82,17 @@ class SegmentationModel:
         check_contrast(img)
         return img
 
+    @staticmethod
+    def checked_training_image(image, samples, check_input: bool = True) -> np.ndarray:
+        """`image` checked for fitting on `samples` (no copy of float input): a real
+        single-channel image that holds every box and some contrast in them."""
+        if not check_input:
+            return image
+        img = as_image(image, copy=False)
+        samples.check(img.shape)
+        check_contrast(img, samples)
+        return img
+
     def _common_meta(self) -> dict:
         """The ``meta`` entries both models write."""
         return {"version": __version__, "ndim": self.ndim, "spacing": self.spacing,

@@ -34,13 +34,12 @@ import warnings
 import numpy as np
 from scipy import ndimage as ndi
 
-from .._validation import as_image
 from ._bias import estimate_bias_field, upsample_linear
 from ._classifiers import GaussianClassifier
 from ._model_base import SegmentationModel
 from ._mrf import argmax_first, potts_mean_field
 from ._res import res_statistics_unchecked
-from ._samples import Samples, check_contrast
+from ._samples import Material, Samples
 from ._tiles import majority_tiles
 from ._window_features import feature_levels, multiscale_features, window
 
@@ -168,14 +167,10 @@ class RecommendedModel(SegmentationModel):
             The suggested RES of the samples (used as the largest scale when `max_scale`
             is not set); computed here when not given.
         check_input : bool
-            False: `image` is a float array and `samples` were checked against it (see
+            False: `samples` were checked against the float `image` (see
             :mod:`._model_base`).
         """
-        img = image
-        if check_input:
-            img = as_image(image, copy=False)
-            samples.check(img.shape)
-            check_contrast(img, samples)
+        img = self.checked_training_image(image, samples, check_input)
         if res_scale is None and self.max_scale is None:
             res_scale = res_statistics_unchecked(img, samples).suggested_scale
         self.res_scale = res_scale
