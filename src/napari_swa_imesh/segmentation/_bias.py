@@ -61,4 +61,4 @@ def estimate_bias_field(image, labels, class_means: dict[int, float], *,
     den = ndi.gaussian_filter(den, sigma, mode="nearest")
     field = num / np.maximum(den, _TINY * max(float(den.max()), _NONE))
     field = np.where(field > 0, field, 1.0).astype(np.float32)
-    return upsample_linear(field, image.shape).astype(np.float32)
+    return upsample_linear(field, image.shape)          # float32 in, float32 out

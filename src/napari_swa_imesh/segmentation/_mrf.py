@@ -87,10 +87,13 @@ def _lead(a: np.ndarray) -> np.ndarray:
     """Best minus second-best value over the first axis (elementwise, a few classes)."""
     best = np.maximum(a[0], a[1])
     second = np.minimum(a[0], a[1])
+    low = np.empty_like(best)                 # one buffer: these are image-sized
     for k in range(2, a.shape[0]):
-        second = np.maximum(second, np.minimum(best, a[k]))
-        best = np.maximum(best, a[k])
-    return best - second
+        np.minimum(best, a[k], out=low)
+        np.maximum(second, low, out=second)
+        np.maximum(best, a[k], out=best)
+    best -= second
+    return best
 
 
 def _softmax_first(a: np.ndarray) -> np.ndarray:
@@ -103,8 +106,9 @@ def argmax_first(a: np.ndarray) -> np.ndarray:
     """argmax over the first axis by elementwise comparisons (fast for a few classes)."""
     best = a[0].copy()
     out = np.zeros(a.shape[1:], np.int8)
+    better = np.empty(a.shape[1:], bool)
     for k in range(1, a.shape[0]):
-        better = a[k] > best
+        np.greater(a[k], best, out=better)
         out[better] = k
         np.maximum(best, a[k], out=best)
     return out

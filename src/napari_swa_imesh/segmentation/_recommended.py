@@ -196,7 +196,7 @@ class RecommendedModel(SegmentationModel):
                           float(inside.std()) or float(np.std(img, dtype=np.float64)))
         base = self._standardised(img)
         work = base
-        field = None
+        field = bias_range = None
         rounds = BIAS_ROUNDS + 1 if self.bias_correction else 1
         first = None
         for r in range(rounds):
@@ -218,7 +218,8 @@ class RecommendedModel(SegmentationModel):
                     in_boxes[b.slices] = True
                 field /= np.float32(np.median(field[in_boxes]))
                 del in_boxes
-                work = self._standardised(img, field)
+                bias_range = [float(field.min()), float(field.max())]
+                work = self._standardised(img, field, out=field)    # the field is spent
         del base, work
         reduction = None
         if rounds > 1:
@@ -227,7 +228,7 @@ class RecommendedModel(SegmentationModel):
             if self.bias_correction == "auto" and reduction < AUTO_GAIN:
                 X, y, names, self.class_means = first
                 self._fit_levels(X, y, names)
-                field = None
+                field = bias_range = None
         if self.bias_correction == "auto":
             self.bias_correction = field is not None
         self._fisher(X, y, names)
@@ -242,7 +243,7 @@ class RecommendedModel(SegmentationModel):
                                    for c, reg in zip(clf.classes_, clf.regularized_) if reg}),
             "bias_correction": bool(self.bias_correction),
             "bias_variance_reduction": reduction,
-            "bias_range": None if field is None else [float(field.min()), float(field.max())],
+            "bias_range": bias_range,
             "notes": notes,
         }
         return self
@@ -323,12 +324,13 @@ class RecommendedModel(SegmentationModel):
         field = estimate_bias_field(base[sub], labels, self.class_means)
         return field if step == 1 else upsample_linear(field, base.shape)
 
-    def _standardised(self, img: np.ndarray, field: np.ndarray | None = None
-                      ) -> np.ndarray:
+    def _standardised(self, img: np.ndarray, field: np.ndarray | None = None,
+                      out: np.ndarray | None = None) -> np.ndarray:
         """float32 ``(img - offset) / scale`` (divided by `field` if given), computed in
-        float64 slab by slab: the one full-size array made from the image."""
+        float64 slab by slab: the one full-size array made from the image. `out` may be
+        `field` itself (each slab is read before it is written)."""
         offset, scale = self.intensity
-        out = np.empty(img.shape, np.float32)
+        out = np.empty(img.shape, np.float32) if out is None else out
         rows = max(1, _SLAB // max(1, int(np.prod(img.shape[1:]))))
         for i in range(0, img.shape[0], rows):
             x = img[i:i + rows].astype(np.float64)
@@ -345,8 +347,9 @@ class RecommendedModel(SegmentationModel):
         if self.bias_correction:
             base = work
             for _ in range(BIAS_ROUNDS):
-                work = base / self._bias_field(base, work)
-            del base
+                field = self._bias_field(base, work)
+                work = np.divide(base, field, out=field)        # the field is spent
+            del base, field
         feats, _ = multiscale_features(work, self.scale)
         del work
         flat = feats.reshape(-1, feats.shape[-1])
