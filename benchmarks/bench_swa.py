@@ -39,7 +39,7 @@ def mosaic_table(quick: bool) -> None:
         for layout in layouts:
             mosaic, truth = texture_mosaic(pair, layout=layout)
             print(f"\n{pair[0]}/{pair[1]}, {layout} (suggested RES of the training samples: "
-                  f"{segment(train, samples).scale})")
+                  f"{segment(train, samples).res.suggested_scale})")
             print("set  clf  " + " ".join(f"  j={j} " for j in scales) + "   best")
             for fs in sets:
                 for clf in classifiers:
@@ -49,8 +49,8 @@ def mosaic_table(quick: bool) -> None:
                             row.append(np.nan)
                             continue
                         try:
-                            fitted = segment(train, samples, scale=j, feature_set=fs,
-                                             classifier=clf)
+                            fitted = segment(train, samples, method="reference", scale=j,
+                                             feature_set=fs, classifier=clf)
                             res = segment(mosaic, model=fitted.model)
                             row.append(np.mean(list(dice_scores(res.labels, truth).values())))
                         except ValueError:
@@ -72,7 +72,7 @@ def phantom_table(quick: bool) -> None:
         for j in (0, 1, 2, 3):
             samples = samples_from_truth(truth, scale=j, per_material=6)
             t = time.perf_counter()
-            res = segment(image, samples, scale=j)
+            res = segment(image, samples, method="reference", scale=j)
             sec = time.perf_counter() - t
             d = dice_scores(res.labels, truth)
             print(f"{j:5d}  " + "  ".join(f"{d[k]:12.3f}" for k in (1, 2, 3)) + f"   {sec:7.2f}")

@@ -37,7 +37,8 @@ def test_res_segment_apply_evaluate(scene, capsys):
     res = json.loads(out)
     assert res["suggested_scale"] is not None and (scene / "res.png").stat().st_size > 0
     code, out, _ = run(capsys, "segment", scene / "img.npy", "--samples", scene / "s.json",
-                       "--scale", 2, "--model-out", scene / "m.npz", "--signatures",
+                       "--method", "reference", "--scale", 2, "--model-out", scene / "m.npz",
+                       "--signatures",
                        scene / "sig.csv", "--truth", scene / "truth.tif",
                        "-o", scene / "lab.tif", "--json")
     assert code == 0
@@ -59,6 +60,7 @@ def test_segment_default_scale_and_text_output(scene, capsys):
     code, out, _ = run(capsys, "segment", scene / "img.npy", "--samples", scene / "s.json",
                        "-o", scene / "lab.npy")
     assert code == 0 and "eps_l" in out and "labels written" in out
+    assert out.startswith("recommended method: scales") and "pixels labelled per scale" in out
 
 
 def test_samples_from_truth(scene, capsys):
@@ -81,8 +83,10 @@ def test_refuses_to_overwrite(scene, capsys):
     ("rgb", ["--samples", "s.json", "--scale", "2"], "RGB"),
     ("nan", ["--samples", "s.json", "--scale", "2"], "NaN"),
     ("img", ["--samples", "far.json", "--scale", "2"], "outside the image"),
-    ("img", ["--samples", "s.json", "--scale", "6"], "full tile"),
-    ("img", ["--samples", "s.json", "--features", "F12"], "F1"),
+    ("img", ["--samples", "s.json", "--method", "reference", "--scale", "6"], "full tile"),
+    ("img", ["--samples", "s.json", "--method", "reference", "--features", "F12"], "F1"),
+    ("img", ["--samples", "s.json", "--features", "F1"], "add --method reference"),
+    ("img", ["--samples", "s.json", "--scale", "9"], "max_scale must be 0..8"),
     ("missing", ["--samples", "s.json"], "no image file"),
     ("vol", ["--samples", "s.json", "--scale", "1"], "axes"),
 ])

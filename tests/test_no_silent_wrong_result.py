@@ -111,7 +111,8 @@ def test_case2_box_too_small_for_the_asked_scale(tmp_path, capsys):
     # reference: tiles of the asked scale or nothing
     before = folder_state(tmp_path)
     code, _, err = run(capsys, "segment", tmp_path / "img.npy", "--samples",
-                       tmp_path / "s.json", "--scale", 3, "-o", tmp_path / "l2.npy")
+                       tmp_path / "s.json", "--method", "reference", "--scale", 3, "-o",
+                       tmp_path / "l2.npy")
     assert code == 2 and "box #1" in err and "fewer than the 5" in err
     assert folder_state(tmp_path) == before
 

@@ -37,11 +37,8 @@ def run_demo(args) -> int:
     from .io import check_writable
     from .data import texture_mosaic, texture_training
     from .io import write_figure, write_labels
-    from .segmentation._cli import write_signatures_csv
-    from .segmentation._metrics import evaluate
-    from .segmentation._recommended import plot_res_scales
-    from .segmentation._samples import save_samples
-    from .segmentation._segment import segment
+    from .segmentation import (evaluate, plot_res_scales, save_samples, segment,
+                               write_signatures_csv)
 
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
@@ -96,10 +93,7 @@ def run_demo(args) -> int:
         return 0
     print(f"texture mosaic ({args.layout}) of {', '.join(textures)}: trained on the photos' "
           f"top halves, tested on their bottom halves")
-    print(f"suggested RES: scale {fitted.res.suggested_scale}; {result.method} method using "
-          f"scales {', '.join(str(j) for j in result.scales)} (windows of up to "
-          f"{(1 << max(result.scales)) + 1} px); training error {fitted.eps_l:.2f}% "
-          f"({fitted.model.scores.get('eps_l_method', 'leave-one-out')})")
+    print(result.describe(notes=False))        # warnings were shown as they came
     print("Dice: " + ", ".join(f"{textures[m - 1]} {d:.3f}" for m, d in ev["dice"].items())
           + f"  (mean {ev['mean_dice']:.3f})")
     if "mesh" in summary:

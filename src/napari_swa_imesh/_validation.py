@@ -14,9 +14,10 @@ __all__ = ["SPACING_RANGE", "as_image", "as_labels", "normalize_spacing", "label
 
 
 def as_image(
-    image, *, name: str = "image", min_ndim: int = 2, max_ndim: int | None = None
+    image, *, name: str = "image", min_ndim: int = 2, max_ndim: int | None = None,
+    copy: bool = True,
 ) -> np.ndarray:
-    """Return `image` as a float64 array after checking it is a single-channel image.
+    """Return `image` as a float array after checking it is a single-channel image.
 
     Parameters
     ----------
@@ -26,11 +27,13 @@ def as_image(
         What to call it in error messages.
     min_ndim, max_ndim : int
         Accepted range of dimensionality.
+    copy : bool
+        True: a new float64 array. False: float32 and float64 input come back as they
+        are (no copy; read it, do not write to it), other numbers as float64.
 
     Returns
     -------
-    (M, N[, P, ...]) ndarray of float64
-        A new array (the input is never modified).
+    (M, N[, P, ...]) ndarray of float64 (or float32 with ``copy=False``)
 
     Raises
     ------
@@ -38,6 +41,12 @@ def as_image(
         For complex, boolean-free object or string arrays.
     ValueError
         For RGB(A) images, wrong dimensionality, empty arrays and NaN or infinite values.
+
+    Examples
+    --------
+    >>> img = np.zeros((2, 2), np.float32)
+    >>> as_image(img, copy=False) is img, as_image(img).dtype
+    (True, dtype('float64'))
     """
     arr = np.asarray(image)
     if arr.dtype.kind not in "biuf":
@@ -60,14 +69,16 @@ def as_image(
         )
     if arr.size == 0:
         raise ValueError(f"{name} is empty (shape {arr.shape}); give an image with pixels.")
-    out = arr.astype(np.float64, copy=True)
-    if not np.isfinite(out).all():
-        bad = int(np.count_nonzero(~np.isfinite(out)))
+    if copy or arr.dtype not in (np.float32, np.float64):
+        arr = arr.astype(np.float64, copy=True)
+    # min and max are NaN or infinite when any value is: two reductions, no mask array
+    if arr.dtype.kind == "f" and not (np.isfinite(arr.min()) and np.isfinite(arr.max())):
+        bad = int(np.count_nonzero(~np.isfinite(arr)))
         raise ValueError(
             f"{name} has {bad} NaN or infinite value(s); fill or mask them first "
             "(e.g. numpy.nan_to_num or replace them with a neighbouring value)."
         )
-    return out
+    return arr
 
 
 def as_labels(

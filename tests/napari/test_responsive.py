@@ -73,7 +73,8 @@ def test_event_loop_keeps_running_during_3d_classify_and_mesh(phantom_viewer, qt
     ticker = Ticker()
 
     frozen = _in_main_thread(ticker, lambda: segment(image.data, samples, scale=1,
-                                                     feature_set="F5", classifier="lvq"))
+                                                     method="reference", feature_set="F5",
+                                                     classifier="lvq"))
     flow.classify.scale_spin.setValue(1)
     flow.classify.feature_combo.setCurrentText("F5")
     flow.classify.classifier_combo.setCurrentText("LVQ")

@@ -101,3 +101,39 @@ def test_errors_are_clear():
         GaussianClassifier().fit(np.where(X > 3, np.nan, X), y)
     with pytest.raises(ValueError, match="unknown classifier"):
         make_classifier("svm")
+
+
+@pytest.mark.parametrize("dtype", [np.float64, np.float32])
+def test_log_likelihood_is_eq_2_30_by_hand(dtype):
+    X, y = two_blobs(seed=3)
+    clf = GaussianClassifier(shrinkage=0.0, priors="proportional").fit(X, y)
+    Q = np.random.default_rng(4).normal(0.5, 2.0, (50, 3))
+    want = []
+    for c in clf.classes_:
+        Xc = X[y == c]
+        C = np.cov(Xc.T, bias=True)
+        r = Q - Xc.mean(0)
+        want.append(np.log(len(Xc) / len(X)) - 0.5 * np.linalg.slogdet(C)[1]
+                    - 0.5 * np.einsum("ij,ij->i", r, np.linalg.solve(C, r.T).T))
+    # the constant -p/2 log(2 pi) is common to all classes and left out; standardisation
+    # shifts every class by the same log|det scale|
+    got = clf.log_likelihood(Q, dtype=dtype)
+    assert got.shape == (2, 50) and got.dtype == dtype
+    shift = np.log(clf.scale_).sum()
+    np.testing.assert_allclose(got - shift, np.array(want),
+                               rtol=1e-5 if dtype == np.float32 else 1e-9, atol=1e-4)
+    np.testing.assert_array_equal(clf.predict(Q), clf.classes_[np.argmax(got, axis=0)])
+
+
+@pytest.mark.parametrize("name", ["gm", "md", "lvq"])
+def test_get_params_are_constructor_parameters_only(name):
+    X, y = two_blobs()
+    clf = make_classifier(name).fit(X, y)
+    params = clf.get_params()
+    assert not any(k.endswith("_") for k in params)
+    again = type(clf)(**params)                          # scikit-learn's round trip
+    assert again.get_params() == params
+    restored = type(clf)(**params).set_fitted(clf.fitted_arrays())
+    np.testing.assert_array_equal(restored.predict(X), clf.predict(X))
+    with pytest.raises(ValueError, match="has no parameter"):
+        clf.set_params(bogus=1)

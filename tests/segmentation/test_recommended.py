@@ -18,7 +18,7 @@ from napari_swa_imesh.segmentation import (
     segment_steps,
     upsample_tiles,
 )
-from napari_swa_imesh.segmentation._recommended import majority_tiles
+from napari_swa_imesh.segmentation._tiles import majority_tiles
 
 
 def edge_image(shape=(48, 61), *, contrast="intensity", edge=None, seed=0):
@@ -57,7 +57,7 @@ def test_features_match_brute_force_windows():
 
 @pytest.mark.parametrize("level", [0, 1, 2])
 def test_haar_energy_matches_brute_force(level):
-    from napari_swa_imesh.segmentation._recommended import _haar_energy
+    from napari_swa_imesh.segmentation._window_features import haar_energy
 
     rng = np.random.default_rng(level)
     row = rng.normal(0, 1, 13)
@@ -66,7 +66,7 @@ def test_haar_energy_matches_brute_force(level):
     block = [mirrored[i + s:i + 2 * s].mean() for i in range(-s, 14)]   # block(i) at i + s
     detail = [block[i + s] - block[i] for i in range(14)]               # at i - 1/2
     want = [(detail[i] ** 2 + detail[i + 1] ** 2) / 2 for i in range(13)]
-    np.testing.assert_allclose(_haar_energy(row[None].astype(np.float32), level)[0], want,
+    np.testing.assert_allclose(haar_energy(row[None].astype(np.float32), level)[0], want,
                                atol=1e-5)
 
 
@@ -131,12 +131,19 @@ def test_reference_results_unchanged():
     img, truth, s, _ = edge_image((40, 52), contrast="texture")
     direct = SWAModel(scale=2, feature_set="F1", classifier="gm").fit(img, s)
     expected = upsample_tiles(direct.predict_tiles(img), 2, img.shape)
-    for kwargs in ({"scale": 2}, {"scale": 2, "feature_set": "F1", "classifier": "gm"},
-                   {"scale": 2, "method": "reference"}):
-        res = segment(img, s, **kwargs)
+    np.testing.assert_array_equal(direct.predict(img), expected)
+    for kwargs in ({"scale": 2}, {"scale": 2, "feature_set": "F1", "classifier": "gm"}):
+        res = segment(img, s, method="reference", **kwargs)
         assert res.method == "reference" and isinstance(res.model, SWAModel)
         np.testing.assert_array_equal(res.labels, expected)
         assert res.eps_l == direct.scores["eps_l"]
+
+
+def test_scale_alone_keeps_the_recommended_method():
+    # the method is explicit: a scale is the recommended model's largest scale
+    img, truth, s, _ = edge_image((40, 52), contrast="texture")
+    res = segment(img, s, scale=2)
+    assert res.method == "recommended" and max(res.scales) <= 2
 
 
 def test_segment_steps_keeps_its_signature_and_progress():
@@ -171,7 +178,7 @@ def test_model_round_trip(tmp_path):
     again = segment(img, model=loaded)
     np.testing.assert_array_equal(again.labels, segment(img, model=fitted.model).labels)
     # reference files still load as reference models
-    ref = segment(img, s, scale=2).model.save(tmp_path / "ref.npz")
+    ref = segment(img, s, method="reference", scale=2).model.save(tmp_path / "ref.npz")
     assert isinstance(load_model(ref), SWAModel)
 
 
@@ -192,8 +199,10 @@ def test_bias_robustness_on_a_small_phantom():
 # -- errors ---------------------------------------------------------------------------------
 def test_error_paths(tmp_path):
     img, truth, s, _ = edge_image()
-    with pytest.raises(ValueError, match="belong to the reference method"):
+    with pytest.raises(ValueError, match="feature_set belong to the reference method"):
         segment(img, s, method="recommended", feature_set="F2")
+    with pytest.raises(ValueError, match="classifier belong to the reference method"):
+        segment(img, s, classifier="md")
     with pytest.raises(ValueError, match="unknown method"):
         segment(img, s, method="best")
     fitted = segment(img, s).model
@@ -235,14 +244,17 @@ def test_cli_method_rule_and_res_plot(tmp_path, capsys):
               "--model-out", tmp_path / "m.npz")
     assert out["method"] == "recommended" and out["model"]["coarse_scale"] == out["scale"]
     assert (tmp_path / "res.png").stat().st_size > 0
-    assert run("-o", tmp_path / "b.npy", "--scale", 2)["method"] == "reference"
-    assert run("-o", tmp_path / "c.npy", "--classifier", "md")["method"] == "reference"
+    assert run("-o", tmp_path / "b.npy", "--scale", 2)["method"] == "recommended"
+    assert run("-o", tmp_path / "c.npy", "--classifier", "md", "--method", "reference"
+               )["method"] == "reference"
     assert run("-o", tmp_path / "d.npy", "--scale", 3, "--method", "recommended"
                )["method"] == "recommended"
     applied = main([str(a) for a in ["segment", tmp_path / "img.npy", "--model",
                                      tmp_path / "m.npz", "-o", tmp_path / "e.npy", "--json"]])
     assert applied == 0
     assert json.loads(capsys.readouterr().out)["method"] == "recommended"
-    code = main([str(a) for a in base + ["-o", tmp_path / "f.npy", "--method", "recommended",
-                                         "--features", "F2"]])
-    assert code == 2 and "reference method" in capsys.readouterr().err
+    for extra in (["--method", "recommended", "--features", "F2"], ["--classifier", "md"]):
+        code = main([str(a) for a in base + ["-o", tmp_path / "f.npy"] + extra])
+        err = capsys.readouterr().err
+        assert code == 2 and "belong to the reference method" in err
+        assert err.count("\n") == 1 and not (tmp_path / "f.npy").exists()

@@ -53,7 +53,7 @@ def test_unreadable_samples_file(tmp_path):
     p.write_text("{not json")
     with pytest.raises(ValueError, match="not valid JSON"):
         load_samples(p)
-    with pytest.raises(FileNotFoundError):
+    with pytest.raises(FileNotFoundError, match="no samples file"):
         load_samples(tmp_path / "missing.json")
 
 

@@ -35,7 +35,7 @@ def two_textures(shape=(70, 45), seed=0):
 def test_segment_recovers_two_textures_at_input_shape(shape):
     img, truth, s = two_textures(shape)
     before = img.copy()
-    res = segment(img, s, scale=2)
+    res = segment(img, s, method="reference", scale=2)
     np.testing.assert_array_equal(img, before)
     assert res.labels.shape == img.shape
     assert res.tile_labels.shape == tuple(-(-n // 4) for n in shape)
@@ -57,7 +57,7 @@ def test_default_scale_is_the_suggested_res():
 
 def test_progress_steps_and_result():
     img, truth, s = two_textures()
-    gen = segment_steps(img, s, scale=1)
+    gen = segment_steps(img, s, method="reference", scale=1)
     steps = []
     while True:
         try:
@@ -73,14 +73,15 @@ def test_progress_steps_and_result():
                                                  ("F7", "gm")])
 def test_model_save_load_applies_identically(tmp_path, features, classifier):
     img, truth, s = two_textures((64, 64))
-    res = segment(img, s, scale=2, feature_set=features, classifier=classifier)
+    res = segment(img, s, method="reference", scale=2, feature_set=features,
+                  classifier=classifier)
     p = res.model.save(tmp_path / "m.npz")
     model = load_model(p)
     assert model.scale == 2 and model.feature_set == features
     assert [m.name for m in model.materials] == ["quiet", "rough"]
     other, _, _ = two_textures((64, 64), seed=5)
     np.testing.assert_array_equal(model.predict_tiles(other), res.model.predict_tiles(other))
-    with pytest.raises(FileExistsError):
+    with pytest.raises(FileExistsError, match="force"):
         res.model.save(p)
     with pytest.raises(ValueError, match="fitted on 2-D"):
         model.predict_tiles(np.zeros((8, 8, 8)))
@@ -88,7 +89,7 @@ def test_model_save_load_applies_identically(tmp_path, features, classifier):
 
 def test_model_file_is_not_a_pickle(tmp_path):
     img, truth, s = two_textures((64, 64))
-    p = segment(img, s, scale=2).model.save(tmp_path / "m.npz")
+    p = segment(img, s, method="reference", scale=2).model.save(tmp_path / "m.npz")
     with np.load(p, allow_pickle=False) as data:
         assert "meta" in data.files
 
@@ -115,33 +116,65 @@ def test_sieve_against_brute_force():
 
 def test_errors_are_clear():
     img, truth, s = two_textures((64, 64))
+    ref = {"method": "reference"}
     with pytest.raises(ValueError, match="full tile"):
-        segment(img, s, scale=6)
+        segment(img, s, scale=6, **ref)
     with pytest.raises(ValueError, match="F1"):
-        segment(img, s, scale=2, feature_set="F9")
+        segment(img, s, scale=2, feature_set="F9", **ref)
     with pytest.raises(ValueError, match="either sample boxes"):
         segment(img)
-    with pytest.raises(ValueError, match="NaN"):
-        bad = img.copy()
-        bad[0, 0] = np.nan
-        segment(bad, s, scale=2)
-    with pytest.raises(ValueError, match="RGB"):
-        segment(np.zeros((64, 64, 3), np.uint8), s, scale=2)
-    with pytest.raises(ValueError, match="outside"):
-        segment(img[:30], s, scale=2)
+    for method in ("reference", "recommended"):
+        with pytest.raises(ValueError, match="NaN"):
+            bad = img.copy()
+            bad[0, 0] = np.nan
+            segment(bad, s, scale=2, method=method)
+        with pytest.raises(ValueError, match="RGB"):
+            segment(np.zeros((64, 64, 3), np.uint8), s, scale=2, method=method)
+        with pytest.raises(ValueError, match="outside"):
+            segment(img[:30], s, scale=2, method=method)
     with pytest.raises(ValueError, match="not fitted"):
         SWAModel(scale=1).predict_tiles(img)
     with pytest.raises(ValueError, match="choose 0"):
+        segment(img, s, scale=9, **ref)
+    with pytest.raises(ValueError, match="max_scale must be 0..8"):
         segment(img, s, scale=9)
 
 
 @pytest.mark.parametrize("features", ["F1", "F2", "F5"])
 def test_signatures_are_the_moments_of_the_classified_tiles(features):
     from napari_swa_imesh.segmentation import tile_moments
-    from napari_swa_imesh.segmentation._segment import material_signatures
+    from napari_swa_imesh.segmentation import material_signatures
 
     img, truth, s = two_textures((64, 64))
-    res = segment(img, s, scale=2, feature_set=features)
+    res = segment(img, s, method="reference", scale=2, feature_set=features)
     moments, counts = tile_moments(img, 2)
-    expected = material_signatures(moments, counts, res.tile_labels, res.model)
+    expected = material_signatures(moments, counts, res.tile_labels, res.model.materials)
     assert res.signatures == expected
+
+
+@pytest.mark.parametrize("method", ["reference", "recommended"])
+def test_describe_is_the_one_summary(method):
+    img, truth, s = two_textures((64, 64))
+    res = segment(img, s, method=method)
+    text = res.describe()
+    assert text.splitlines()[0].startswith(f"{method} method: scale")
+    assert f"eps_l = {res.eps_l:.2f}%" in text
+    for m in res.model.materials:
+        assert f"  {m.name}: " in text
+    if method == "recommended":
+        per_scale = res.pixels_per_scale()
+        assert sum(per_scale.values()) == img.size and list(per_scale) == list(res.scales)[
+            :len(per_scale)]
+        assert "pixels labelled per scale" in text
+    res.notes.append("a note")
+    assert res.describe().endswith("warning: a note")
+    assert "a note" not in res.describe(notes=False)
+
+
+def test_validated_once_and_input_untouched_for_float32():
+    img, truth, s = two_textures((48, 40))
+    img32 = img.astype(np.float32)
+    before = img32.copy()
+    res = segment(img32, s)
+    np.testing.assert_array_equal(img32, before)
+    np.testing.assert_array_equal(res.labels, segment(img32.astype(np.float64), s).labels)

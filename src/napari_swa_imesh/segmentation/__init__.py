@@ -5,7 +5,7 @@ The pipeline of the reference's chapter 2, as functions on arrays:
 * features: :func:`moment_pyramid`, :func:`tile_moments`, :func:`tile_entropy`,
   :func:`tile_correlation_lengths`, :func:`feature_stack` (sets F1..F7);
 * samples: :class:`Samples` (JSON sample boxes), :func:`samples_from_truth`;
-* RES: :func:`res_statistics`, :func:`plot_res`;
+* RES: :func:`res_statistics`, :func:`plot_res`, :func:`plot_res_scales`;
 * classification: :func:`segment` (method "recommended" by default, or "reference"),
   :class:`RecommendedModel` (multi-scale per-pixel statistics, boundary refinement, MRF,
   bias correction), :class:`SWAModel` (the reference: GM, MD, LVQ on tiles),
@@ -14,6 +14,7 @@ The pipeline of the reference's chapter 2, as functions on arrays:
   :func:`evaluate`.
 """
 
+from ._bias import estimate_bias_field
 from ._classifiers import (
     CLASSIFIERS,
     GaussianClassifier,
@@ -26,36 +27,35 @@ from ._entropy import entropy_feature_names, tile_entropy
 from ._features import FEATURE_SETS, feature_stack, n_features
 from ._haar import haar_analysis, haar_synthesis
 from ._metrics import confusion_matrix, dice_scores, evaluate, jaccard_scores
-from ._model import SWAModel, load_model
+from ._model import SWAModel
+from ._model_io import load_model
 from ._moments import moment_pyramid, tile_moments
-from ._recommended import (
-    RecommendedModel,
-    estimate_bias_field,
-    multiscale_feature_names,
-    multiscale_features,
-    potts_mean_field,
+from ._mrf import potts_mean_field
+from ._recommended import RecommendedModel
+from ._res import MOMENT_NAMES, ResStatistics, plot_res, plot_res_scales, res_statistics
+from ._samples import (
+    Material,
+    SampleBox,
+    Samples,
+    load_samples,
+    samples_from_truth,
+    save_samples,
 )
-from ._res import MOMENT_NAMES, ResStatistics, plot_res, res_statistics
-from ._samples import Material, SampleBox, Samples, load_samples, samples_from_truth, save_samples
-from ._segment import (
-    METHODS,
-    SegmentationResult,
-    segment,
-    segment_steps,
-    sieve_labels,
-    tile_placement,
-    upsample_tiles,
-)
+from ._segment import METHODS, SegmentationResult, segment, segment_steps, sieve_labels
+from ._signatures import material_signatures, write_signatures_csv
+from ._tiles import majority_tiles, tile_placement, upsample_tiles
+from ._window_features import multiscale_feature_names, multiscale_features
 
 __all__ = [
     "CLASSIFIERS", "FEATURE_SETS", "MOMENT_NAMES",
     "GaussianClassifier", "LVQClassifier", "MinimumDistanceClassifier", "leave_one_out_error",
     "Material", "SampleBox", "Samples", "load_samples", "save_samples", "samples_from_truth",
-    "ResStatistics", "res_statistics", "plot_res",
+    "ResStatistics", "res_statistics", "plot_res", "plot_res_scales",
     "SWAModel", "load_model", "SegmentationResult", "segment", "segment_steps", "METHODS",
     "RecommendedModel", "estimate_bias_field", "multiscale_feature_names",
     "multiscale_features", "potts_mean_field",
-    "sieve_labels", "tile_placement", "upsample_tiles",
+    "sieve_labels", "tile_placement", "upsample_tiles", "majority_tiles",
+    "material_signatures", "write_signatures_csv",
     "confusion_matrix", "dice_scores", "evaluate", "jaccard_scores",
     "entropy_feature_names", "feature_stack", "haar_analysis", "haar_synthesis",
     "moment_pyramid", "n_features", "tile_correlation_lengths", "tile_entropy",

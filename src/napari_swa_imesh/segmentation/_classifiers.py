@@ -17,7 +17,7 @@ __all__ = ["GaussianClassifier", "MinimumDistanceClassifier", "LVQClassifier",
            "make_classifier", "leave_one_out_error", "CLASSIFIERS"]
 
 CLASSIFIERS = ("gm", "md", "lvq")
-_CHUNK = 1 << 20  # rows per prediction batch: bounds the temporary memory
+_CHUNK = 1 << 19  # rows per prediction batch: bounds the temporary memory (tens of MB)
 
 
 class _Standardised:
@@ -44,14 +44,33 @@ class _Standardised:
             out[i:i + _CHUNK] = self.classes_[self._predict_index(self._scaled(X[i:i + _CHUNK]))]
         return out
 
-    def get_params(self) -> dict[str, np.ndarray]:
-        """Arrays that describe the fitted classifier (saved by :func:`save_model`)."""
+    def get_params(self) -> dict:
+        """Constructor parameters (scikit-learn's convention: no fitted state)."""
+        return {k: v for k, v in vars(self).items()
+                if not k.endswith("_") and not k.startswith("_")}
+
+    def set_params(self, **params):
+        """Set constructor parameters; returns the classifier."""
+        for k, v in params.items():
+            if k not in self.get_params():
+                raise ValueError(f"{type(self).__name__} has no parameter {k!r}; it has "
+                                 f"{', '.join(self.get_params()) or 'none'}.")
+            setattr(self, k, v)
+        return self
+
+    def fitted_arrays(self) -> dict[str, np.ndarray]:
+        """The fitted state as plain arrays (what a model file stores)."""
         return {k: v for k, v in vars(self).items() if k.endswith("_")}
 
-    def set_params(self, params: dict[str, np.ndarray]):
-        for k, v in params.items():
+    def set_fitted(self, arrays: dict[str, np.ndarray]):
+        """Restore the fitted state from :meth:`fitted_arrays`; returns the classifier."""
+        for k, v in arrays.items():
             setattr(self, k, np.asarray(v))
+        self._restore()
         return self
+
+    def _restore(self) -> None:
+        """Rebuild derived state after :meth:`set_fitted` (nothing by default)."""
 
 
 def _check_training(X, y):
@@ -102,12 +121,11 @@ class GaussianClassifier(_Standardised):
     def fit(self, X, y) -> "GaussianClassifier":
         X, y, classes, counts = _check_training(X, y)
         Z = self._fit_scaler(X)
-        p = Z.shape[1]
         self.classes_ = classes
         self.priors_ = (counts / counts.sum() if self.priors == "proportional"
                         else np.full(classes.size, 1.0 / classes.size))
         self.means_ = np.stack([Z[y == c].mean(axis=0) for c in classes])
-        covs, reg = [], []
+        covs = []
         for c in classes:
             zc = Z[y == c] - Z[y == c].mean(axis=0)
             cov = zc.T @ zc / zc.shape[0]
@@ -121,25 +139,60 @@ class GaussianClassifier(_Standardised):
         self.cholesky_ = np.linalg.cholesky(self.covariances_)
         self.logdet_ = 2 * np.log(np.diagonal(self.cholesky_, axis1=1, axis2=2)).sum(axis=1)
 
-    def discriminants(self, Z: np.ndarray) -> np.ndarray:
-        """g_i of eq. 2.30 for standardised rows `Z`: shape (n, n_classes); smaller wins."""
-        from scipy.linalg import solve_triangular
-
-        g = np.empty((Z.shape[0], self.classes_.size))
-        for i in range(self.classes_.size):
-            w = solve_triangular(self.cholesky_[i], (Z - self.means_[i]).T, lower=True,
-                                 check_finite=False)
-            g[:, i] = 0.5 * np.einsum("ij,ij->j", w, w) + 0.5 * self.logdet_[i] \
-                - np.log(self.priors_[i])
-        return g
-
-    def _predict_index(self, Z):
-        return np.argmin(self.discriminants(Z), axis=1)
-
-    def set_params(self, params):
-        super().set_params(params)
+    def _restore(self) -> None:
         self._factor()
-        return self
+
+    def log_likelihood(self, X, *, dtype=np.float64, out: np.ndarray | None = None
+                       ) -> np.ndarray:
+        """Log-likelihood plus log prior of every class for every row (eq. 2.30).
+
+        ``log p_i - 0.5 log det S_i - 0.5 (z - m_i)' S_i^-1 (z - m_i)`` with z the
+        standardised row: eq. 2.30's discriminant with the sign turned, without the
+        constant ``-p/2 log 2 pi`` that all classes share. The largest value wins.
+
+        Parameters
+        ----------
+        X : (n, p) array_like of float
+            Feature rows (raw units; standardised here). Read in batches, never copied
+            whole, so a column-slice view of a larger array costs nothing.
+        dtype : {numpy.float64, numpy.float32}
+            Precision of the computation; float32 halves memory and time for per-pixel
+            use (the inverse Cholesky factors are precomputed, one small matrix product
+            per class and batch).
+        out : (K, n) ndarray of `dtype`, optional
+            Written in place and returned.
+
+        Returns
+        -------
+        (K, n) ndarray of `dtype`
+            Class-first (rows in :attr:`classes_` order): a reduction over K classes is
+            then K elementwise passes, fast in numpy.
+
+        Examples
+        --------
+        >>> clf = GaussianClassifier().fit([[0.0], [0.2], [1.0], [1.2]], [1, 1, 2, 2])
+        >>> clf.log_likelihood([[0.1], [1.1]]).argmax(axis=0).tolist()
+        [0, 1]
+        """
+        X = np.asarray(X)
+        inv = np.linalg.inv(self.cholesky_).astype(dtype)                 # (K, p, p)
+        shift = np.einsum("kij,kj->ki", inv, self.means_).astype(dtype)   # (K, p)
+        const = (-0.5 * self.logdet_ + np.log(self.priors_)).astype(dtype)
+        offset = self.offset_.astype(dtype)
+        scale = (1.0 / self.scale_).astype(dtype)
+        if out is None:
+            out = np.empty((self.classes_.size, X.shape[0]), dtype)
+        for i in range(0, X.shape[0], _CHUNK):
+            z = (X[i:i + _CHUNK] - offset) * scale                       # (b, p)
+            for c in range(self.classes_.size):
+                w = z @ inv[c].T - shift[c]
+                out[c, i:i + _CHUNK] = const[c] - 0.5 * np.einsum("ij,ij->i", w, w)
+        return out
+
+    def predict(self, X) -> np.ndarray:
+        """The most likely class of every row of `X` (ties: the first class)."""
+        X = np.asarray(X, dtype=np.float64)
+        return self.classes_[np.argmax(self.log_likelihood(X), axis=0)]
 
     def leave_one_out(self, X, y) -> np.ndarray:
         """Exact leave-one-out predictions: each tile classified by a GM fitted without it.
@@ -151,7 +204,7 @@ class GaussianClassifier(_Standardised):
         """
         X, y, classes, counts = _check_training(X, y)
         Z = self._scaled(X)
-        g = self.discriminants(Z)
+        g = -self.log_likelihood(X).T                 # (n, K) discriminants g_i, eq. 2.30
         for i, c in enumerate(classes):
             rows = np.flatnonzero(y == c)
             n = rows.size
@@ -203,13 +256,8 @@ class MinimumDistanceClassifier(_Standardised):
         self._tree = cKDTree(self.prototypes_)
         return self
 
-    def set_params(self, params):
-        super().set_params(params)
+    def _restore(self) -> None:
         self._tree = cKDTree(self.prototypes_)
-        return self
-
-    def get_params(self):
-        return {k: v for k, v in super().get_params().items()}
 
     def _predict_index(self, Z):
         _, idx = self._tree.query(Z, k=1, workers=-1)
@@ -276,10 +324,8 @@ class LVQClassifier(_Standardised):
         self._tree = cKDTree(P)
         return self
 
-    def set_params(self, params):
-        super().set_params(params)
+    def _restore(self) -> None:
         self._tree = cKDTree(self.prototypes_)
-        return self
 
     def _predict_index(self, Z):
         _, idx = self._tree.query(Z, k=1, workers=-1)

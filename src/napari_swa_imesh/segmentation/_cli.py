@@ -3,14 +3,14 @@
 from __future__ import annotations
 
 import argparse
-import csv
-import io as _io
 from pathlib import Path
 
 import numpy as np
 
 from .._cli_util import StepTimer, print_json
 from ..io import check_writable
+# re-exported for the classify widget until it imports them from the library
+from ._signatures import signatures_csv_text, write_signatures_csv  # noqa: F401
 
 __all__ = ["add_commands"]
 
@@ -34,23 +34,22 @@ def add_commands(subparsers) -> None:
         "segment", help="classify the image into a full-resolution label image",
         description="Segment an image with SWA, fitted on sample boxes (or a saved model). "
                     "Default: the recommended method (multi-scale per-pixel statistics, "
-                    "coarse-to-fine at boundaries, MRF, bias correction). --scale, "
-                    "--features or --classifier select the reference method (tiles at one "
-                    "scale) unless --method says otherwise.")
+                    "coarse-to-fine at boundaries, MRF, bias correction); --method reference "
+                    "for the reference's tiles at one scale, feature set and classifier.")
     p.add_argument("image")
     src = p.add_mutually_exclusive_group(required=True)
     src.add_argument("--samples", help="samples JSON to fit a classifier on")
     src.add_argument("--model", help="a saved model (.npz) to apply")
-    p.add_argument("--method", default=None, choices=["recommended", "reference"],
-                   help="default: reference if --scale/--features/--classifier is given, "
-                        "else recommended")
+    p.add_argument("--method", default="recommended", choices=["recommended", "reference"],
+                   help="default: recommended (a saved model brings its own)")
     p.add_argument("--scale", type=int, default=None,
-                   help="reference: tile scale j (tiles of 2^j px); recommended: largest "
-                        "scale considered; default: the suggested RES")
+                   help="recommended: the largest scale considered (windows of 2^j + 1 px); "
+                        "reference: the tile scale j (tiles of 2^j px); default: the "
+                        "suggested RES")
     p.add_argument("--features", default=None,
-                   help="reference feature set F1..F7 (default F1)")
+                   help="reference method only: feature set F1..F7 (default F1)")
     p.add_argument("--classifier", default=None, choices=["gm", "md", "lvq"],
-                   help="reference classifier (default gm)")
+                   help="reference method only: classifier (default gm)")
     p.add_argument("--sieve", type=int, default=0,
                    help="remove components smaller than N tiles (reference) or pixels "
                         "(recommended)")
@@ -158,16 +157,24 @@ def _check_segment_args(args: argparse.Namespace) -> None:
         raise ValueError(f"--sieve must be 0 or more; got {args.sieve}.")
     if args.scale is not None and args.scale < 0:
         raise ValueError(f"--scale must be 0 or more; got {args.scale}.")
+    given = [f for f, v in (("--features", args.features), ("--classifier", args.classifier))
+             if v is not None]
+    if given and (args.model or args.method != "reference"):
+        raise ValueError(
+            f"{' and '.join(given)} belong to the reference method; "
+            + ("a saved model brings its own, drop them." if args.model else
+               "add --method reference or drop them."))
 
 
 def _run_segment(args: argparse.Namespace) -> int:
     from ..io import atomic_write, check_label_format, label_array, read_image, \
         write_labels_to
     from ._metrics import evaluate
-    from ._model import load_model
-    from ._model_io import write_model_to
+    from ._model_io import load_model, write_model_to
+    from ._res import plot_res_scales, res_statistics
     from ._samples import load_samples
-    from ._segment import segment_steps, tile_placement
+    from ._segment import segment_steps
+    from ._tiles import tile_placement
 
     timer = StepTimer()
     _check_segment_args(args)
@@ -202,9 +209,7 @@ def _run_segment(args: argparse.Namespace) -> int:
         check_label_format(args.output, labels)
         figure = None
         if args.res_plot:
-            from ._recommended import plot_res_scales
-            from ._res import res_statistics
-
+            # a reference run at a given --scale computes no RES; the others reuse theirs
             stats = result.res if result.res is not None else res_statistics(image, samples)
             figure = plot_res_scales(stats, result.scales or (result.scale,))
         outputs = [p for p in (args.output, args.model_out, args.signatures, args.res_plot)
@@ -228,45 +233,12 @@ def _run_segment(args: argparse.Namespace) -> int:
     if args.json:
         print_json(summary)
     else:
-        if result.method == "recommended":
-            print(f"recommended method: scales {', '.join(map(str, result.scales))} (windows "
-                  f"of {', '.join(str((1 << j) + 1 if j else 1) for j in result.scales)} px), "
-                  f"suggested RES {result.model.res_scale}; eps_l = {result.eps_l:.2f}% "
-                  f"({summary['eps_l_method']})")
-        else:
-            print(f"scale {result.scale} (tiles of {1 << result.scale} px), "
-                  f"{result.model.feature_set} + {result.model.classifier_name.upper()}: "
-                  f"eps_l = {result.eps_l:.2f}% ({summary['eps_l_method']}), "
-                  f"eps_m = {result.eps_m:.3f}")
-        for row in result.signatures:
-            if row["tiles"]:
-                print(f"  {row['name']}: {row['tiles']} tiles, mean {row['mean_mean']:.4g} "
-                      f"(+-{row['mean_std']:.3g}), variance {row['variance_mean']:.4g}")
-            else:
-                print(f"  {row['name']}: no tile classified as it")
+        print(result.describe(notes=False))          # the warnings went to stderr
         if truth is not None:
             print("  Dice: " + ", ".join(f"{k}: {v:.3f}" for k, v in summary["dice"].items())
                   + f"  (mean {summary['mean_dice']:.3f})")
         print(f"labels written to {args.output}")
     return 0
-
-
-def signatures_csv_text(signatures: list[dict]) -> str:
-    """The material-signature table (one row per material) as CSV text."""
-    buf = _io.StringIO()
-    writer = csv.DictWriter(buf, fieldnames=list(signatures[0]))
-    writer.writeheader()
-    writer.writerows(signatures)
-    return buf.getvalue()
-
-
-def write_signatures_csv(signatures: list[dict], path, *, force: bool = False) -> Path:
-    """Write the material-signature table (one row per material) as CSV."""
-    from ..io import atomic_write
-
-    with atomic_write([path], force=force) as (tmp,):
-        tmp.write_text(signatures_csv_text(signatures))
-    return Path(path)
 
 
 def _run_samples_from_truth(args: argparse.Namespace) -> int:

@@ -37,14 +37,8 @@ from scipy import fft as sfft
 
 from napari_swa_imesh._validation import as_image
 
-from ._moments import (
-    _ZERO_STD_RTOL,
-    _interleaved,
-    _spread,
-    _tile_means,
-    _validate_mask,
-    _validate_scale,
-)
+from ._moments import ZERO_STD_RTOL
+from ._tiles import block_spread, block_sum, block_view, tile_means, validate_mask, validate_scale
 
 __all__ = ["tile_correlation_lengths"]
 
@@ -61,7 +55,7 @@ def _lag_sums(data: np.ndarray, tile: int, axis: int, max_lag: int) -> np.ndarra
     `data` has sides multiple of `tile`; returns shape (t_0, ..., t_{d-1}, max_lag + 1).
     """
     ndim = data.ndim
-    view = _interleaved(data, tile)  # (t_0, s, t_1, s, ...)
+    view = block_view(data, tile)  # (t_0, s, t_1, s, ...)
     line_axis = 2 * axis + 1
     # Zero padding to s + max_lag keeps lags 0..max_lag free of circular wrap-around.
     length = sfft.next_fast_len(tile + max_lag, real=True)
@@ -170,9 +164,8 @@ def _tile_autocorrelation(x: np.ndarray, valid: np.ndarray | None, scale: int
     if valid_padded is None:
         counts = np.full(grid, tile**ndim, dtype=np.int64)
     else:
-        counts = _interleaved(valid_padded, tile).sum(
-            axis=tuple(range(1, 2 * ndim, 2)), dtype=np.int64)
-    means = _tile_means(padded, counts, scale, valid_padded)
+        counts = block_sum(valid_padded, tile, dtype=np.int64)
+    means = tile_means(padded, counts, scale, valid_padded)
 
     lag_sums = np.empty(grid + (ndim, max_lag + 1))
     pair_counts = np.empty(grid + (ndim, max_lag + 1))
@@ -184,7 +177,7 @@ def _tile_autocorrelation(x: np.ndarray, valid: np.ndarray | None, scale: int
         pixels = slice(first * tile, (first + rows) * tile)
         tiles = slice(first, first + rows)
         centred = padded[pixels].copy()
-        _interleaved(centred, tile)[...] -= _spread(means[tiles])
+        block_view(centred, tile)[...] -= block_spread(means[tiles])
         if valid_padded is not None:
             weight = valid_padded[pixels].astype(np.float64)
             centred *= weight
@@ -197,11 +190,11 @@ def _tile_autocorrelation(x: np.ndarray, valid: np.ndarray | None, scale: int
     covariance = lag_sums / np.where(usable, pair_counts, 1.0)
     variance = covariance[..., :1]  # the same for every axis: all valid pixels of the tile
     rho = covariance / np.where(variance > 0, variance, 1.0)
-    flat = np.sqrt(np.maximum(variance[..., 0, 0], 0.0)) <= _ZERO_STD_RTOL * np.abs(means)
+    flat = np.sqrt(np.maximum(variance[..., 0, 0], 0.0)) <= ZERO_STD_RTOL * np.abs(means)
     return rho, usable, flat, counts
 
 
-def _tile_correlation_worker(x: np.ndarray, valid: np.ndarray | None, scale: int) -> np.ndarray:
+def tile_correlation_worker(x: np.ndarray, valid: np.ndarray | None, scale: int) -> np.ndarray:
     """`tile_correlation_lengths` on checked float64 input (not modified)."""
     rho, usable, flat, counts = _tile_autocorrelation(x, valid, scale)
     lengths = _fit_exponential(rho, usable, 2**scale)  # (t..., d)
@@ -243,12 +236,12 @@ def tile_correlation_lengths(image, scale: int, *, mask=None) -> np.ndarray:
     [0.0, 0.0]
     """
     x = as_image(image)
-    valid = _validate_mask(mask, x.shape)
-    scale = _validate_scale(scale, x.shape)
+    valid = validate_mask(mask, x.shape)
+    scale = validate_scale(scale, x.shape)
     if scale < 2:
         raise ValueError(
             f"tile_correlation_lengths needs scale >= 2 (tiles of 4 or more pixels per "
             f"axis, so that lags 0..2 can be fitted); got scale={scale}. Use a larger scale "
             "or a feature set without Z (F1, F2, F5)."
         )
-    return _tile_correlation_worker(x, valid, scale)
+    return tile_correlation_worker(x, valid, scale)

@@ -14,8 +14,8 @@ import numpy as np
 
 from napari_swa_imesh._validation import as_image
 
-from ._haar import _iter_haar_levels
-from ._moments import _interleaved, _spread, _tile_counts, _tile_means, _validate_mask, _validate_scale
+from ._haar import iter_haar_levels
+from ._tiles import block_spread, block_sum, block_view, tile_means, validate_mask, validate_scale
 
 __all__ = ["entropy_feature_names", "tile_entropy"]
 
@@ -69,12 +69,11 @@ def _prepare_padded(x: np.ndarray, valid: np.ndarray | None, scale: int
     if valid is None:
         return padded, None
     valid_padded = np.pad(valid, pad, mode="symmetric")
-    counts = _interleaved(valid_padded, block).sum(
-        axis=tuple(range(1, 2 * x.ndim, 2)), dtype=np.int64)
-    means = _tile_means(padded, counts, scale, valid_padded)
+    counts = block_sum(valid_padded, block, dtype=np.int64)
+    means = tile_means(padded, counts, scale, valid_padded)
     filled = np.where(valid_padded, padded, 0.0)
-    _interleaved(filled, block)[...] += np.where(
-        _interleaved(valid_padded, block), 0.0, _spread(means))
+    block_view(filled, block)[...] += np.where(
+        block_view(valid_padded, block), 0.0, block_spread(means))
     return filled, counts == 0
 
 
@@ -85,19 +84,18 @@ def _slab_entropy(padded: np.ndarray, scale: int) -> np.ndarray:
     grid = tuple(side // 2**scale for side in padded.shape)
     out = np.empty(grid + (n_bands * scale + 1,), dtype=np.float64)
     approx = padded
-    for level, (approx, details) in enumerate(_iter_haar_levels(padded, scale), start=1):
+    for level, (approx, details) in enumerate(iter_haar_levels(padded, scale), start=1):
         # details (B, c_0, ...) -> per-tile mean over blocks of 2**(scale - level)
         entropy = _neg_abs_log(details)
         block = 2 ** (scale - level)
-        blocks = entropy.reshape((n_bands,) + _interleaved(entropy[0], block).shape)
-        per_tile = blocks.mean(axis=tuple(range(2, 2 * ndim + 1, 2)))  # (B, *grid)
+        per_tile = block_sum(entropy, (1,) + (block,) * ndim) / block**ndim  # (B, *grid)
         start = 1 + (level - 1) * n_bands
         out[..., start:start + n_bands] = np.moveaxis(per_tile, 0, -1)
     out[..., 0] = _neg_abs_log(approx)
     return out
 
 
-def _tile_entropy_worker(x: np.ndarray, valid: np.ndarray | None, scale: int) -> np.ndarray:
+def tile_entropy_worker(x: np.ndarray, valid: np.ndarray | None, scale: int) -> np.ndarray:
     """`tile_entropy` on checked float64 input (not modified)."""
     padded, empty = _prepare_padded(x, valid, scale)
     tile = 2**scale
@@ -149,7 +147,7 @@ def tile_entropy(image, scale: int, *, mask=None) -> np.ndarray:
     [[[-7.32, -2.718, -2.718, -2.718]]]
     """
     x = as_image(image)
-    valid = _validate_mask(mask, x.shape)
-    scale = _validate_scale(scale, x.shape)
-    return _tile_entropy_worker(x, valid, scale)
+    valid = validate_mask(mask, x.shape)
+    scale = validate_scale(scale, x.shape)
+    return tile_entropy_worker(x, valid, scale)
 

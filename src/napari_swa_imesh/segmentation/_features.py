@@ -13,15 +13,10 @@ import numpy as np
 
 from napari_swa_imesh._validation import as_image
 
-from ._correlation import _tile_correlation_worker
-from ._entropy import _tile_entropy_worker, entropy_feature_names
-from ._moments import (
-    MOMENT_NAMES,
-    _tile_counts,
-    _tile_moments_worker,
-    _validate_mask,
-    _validate_scale,
-)
+from ._correlation import tile_correlation_worker
+from ._entropy import entropy_feature_names, tile_entropy_worker
+from ._moments import MOMENT_NAMES, tile_moments_worker
+from ._tiles import tile_counts, validate_mask, validate_scale
 
 __all__ = ["FEATURE_SETS", "feature_names", "feature_stack", "n_features"]
 
@@ -123,8 +118,8 @@ def feature_stack(
     [2.5, 4.25]
     """
     x = as_image(image)
-    valid = _validate_mask(mask, x.shape)
-    scale = _validate_scale(scale, x.shape)
+    valid = validate_mask(mask, x.shape)
+    scale = validate_scale(scale, x.shape)
     key = _normalize_feature_set(feature_set)
     groups = FEATURE_SETS[key]
     if "Z" in groups and scale < 2:
@@ -135,12 +130,12 @@ def feature_stack(
         )
     parts: dict[str, np.ndarray] = {}
     if "H" in groups:
-        parts["H"] = _tile_entropy_worker(x, valid, scale)
+        parts["H"] = tile_entropy_worker(x, valid, scale)
     if "Z" in groups:
-        parts["Z"] = _tile_correlation_worker(x, valid, scale)
+        parts["Z"] = tile_correlation_worker(x, valid, scale)
     if "M" in groups:
-        parts["M"], counts = _tile_moments_worker(x, valid, scale)
+        parts["M"], counts = tile_moments_worker(x, valid, scale)
     else:
-        counts = _tile_counts(x.shape, scale, valid)
+        counts = tile_counts(x.shape, scale, valid)
     features = np.concatenate([parts[group] for group in groups], axis=-1)
     return features, counts, feature_names(key, x.ndim, scale)

@@ -73,7 +73,7 @@ def _haar_one_level(approx: np.ndarray) -> np.ndarray:
     return bands.reshape((2**ndim,) + coarse)
 
 
-def _iter_haar_levels(image: np.ndarray, levels: int) -> Iterator[tuple[np.ndarray, np.ndarray]]:
+def iter_haar_levels(image: np.ndarray, levels: int) -> Iterator[tuple[np.ndarray, np.ndarray]]:
     """Yield ``(approx_k, details_k)`` for k = 1..levels (float64, sides already checked)."""
     approx = image
     for _ in range(levels):
@@ -127,7 +127,7 @@ def haar_analysis(image, levels: int) -> tuple[np.ndarray, list[np.ndarray]]:
         )
     approx = arr.astype(np.float64, copy=True)
     details: list[np.ndarray] = []
-    for approx, level_details in _iter_haar_levels(approx, levels):
+    for approx, level_details in iter_haar_levels(approx, levels):
         details.append(level_details)
     return approx, details
 

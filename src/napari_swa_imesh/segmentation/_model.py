@@ -1,34 +1,21 @@
-"""A fitted SWA classifier at one scale and feature set, and its file format.
+"""The reference's model: a classifier of tiles at one scale and feature set (ch. 2).
 
-File format (``.npz``, no pickles): every fitted classifier array under its own name,
-plus ``meta``, a JSON string with ``format`` ("swa-imesh-model"), ``version`` (of this
-package), ``scale``, ``feature_set``, ``feature_names``, ``classifier``, ``ndim``,
-``materials`` (label, name, colour), ``spacing`` (units of the training image) and the
-training scores (``eps_l``, ``eps_m``, tiles per material). Load it with
-:func:`load_model`; it applies to any image of the same dimensionality.
-
-A ``method`` entry in ``meta`` says which model wrote the file: absent or "reference" for
-:class:`SWAModel`, "recommended" for
-:class:`~napari_swa_imesh.segmentation._recommended.RecommendedModel` (its arrays are
-``level{j}_*``, one Gaussian classifier per scale). Older files have no ``method`` and
-load as before.
+Its file layout (``param_*`` arrays, ``classifier_options``) is described with the format in
+:mod:`._model_io`.
 """
 
 from __future__ import annotations
 
-from pathlib import Path
-
 import numpy as np
 
-from .._validation import as_image, label_dtype
-from ..io import atomic_write
-from ._classifiers import LVQClassifier, leave_one_out_error, make_classifier
+from .._validation import label_dtype
+from ._classifiers import leave_one_out_error, make_classifier
 from ._features import feature_stack, n_features
-from ._model_io import MODEL_FORMAT, check_model_path, read_model_file, write_model_to
-from ._samples import Material, Samples, check_contrast
+from ._model_base import SegmentationModel
+from ._samples import Material, Samples
+from ._tiles import upsample_tiles
 
-__all__ = ["SWAModel", "load_model", "training_tiles", "MODEL_FORMAT"]
-
+__all__ = ["SWAModel", "training_tiles", "check_scale"]
 
 
 def training_tiles(image: np.ndarray, samples: Samples, scale: int, feature_set: str
@@ -79,13 +66,14 @@ def training_tiles(image: np.ndarray, samples: Samples, scale: int, feature_set:
     return X, np.concatenate(labels), list(names)
 
 
-class SWAModel:
+class SWAModel(SegmentationModel):
     """Classifier of tiles at one scale, fitted on sample boxes.
 
     Parameters
     ----------
     scale : int
-        Tile scale j (tiles of 2^j pixels per axis).
+        Tile scale j: tiles of 2^j pixels per axis, each gets one label (the full-resolution
+        labels repeat it). Sieving (``segment(..., sieve=n)``) then counts tiles.
     feature_set : {"F1", ..., "F7"}
         Feature set of Table 2.1 (F1 = moments, the reference's choice).
     classifier : {"gm", "md", "lvq"}
@@ -113,16 +101,22 @@ class SWAModel:
         self.spacing: tuple[float, ...] | None = None
         self.scores: dict = {}
 
-    @property
-    def labels(self) -> list[int]:
-        return [m.label for m in self.materials]
+    def fit(self, image, samples: Samples, *, spacing=None, check_input: bool = True
+            ) -> "SWAModel":
+        """Fit on the full tiles inside the sample boxes and score with leave-one-out.
 
-    def fit(self, image, samples: Samples, *, spacing=None) -> "SWAModel":
-        """Fit on the full tiles inside the sample boxes and score with leave-one-out."""
-        img = as_image(image)
-        samples.check(img.shape)
-        check_contrast(img, samples)
-        _check_scale(self.scale, img.shape)
+        Parameters
+        ----------
+        image : (M, N[, P]) array_like
+        samples : Samples
+        spacing : sequence of float, optional
+            Recorded in the model.
+        check_input : bool
+            False: `samples` were checked against the float `image` (see
+            :mod:`._model_base`).
+        """
+        img = self.checked_training_image(image, samples, check_input)
+        check_scale(self.scale, img.shape)
         n_features(self.feature_set, img.ndim, self.scale)  # validates the set name
         X, y, names = training_tiles(img, samples, self.scale, self.feature_set)
         self.classifier.fit(X, y)
@@ -141,27 +135,28 @@ class SWAModel:
         }
         return self
 
-    def predict_tiles(self, image) -> np.ndarray:
+    def predict(self, image, *, check_input: bool = True) -> np.ndarray:
+        """Full-resolution labels: every pixel takes its tile's label (the image's shape)."""
+        img = self.checked_image(image, check_input)
+        return upsample_tiles(self.predict_tiles(img, check_input=False), self.scale,
+                              img.shape)
+
+    def predict_tiles(self, image, *, check_input: bool = True) -> np.ndarray:
         """Label of every tile of `image` (tile grid from index 0; last tiles may be partial).
 
         Returns
         -------
         (ceil(M/2^j), ceil(N/2^j)[, ...]) ndarray of int32
         """
-        feats, _ = self.tile_features(image)
+        feats, _ = self.tile_features(image, check_input=check_input)
         return self.classify_features(feats)
 
-    def tile_features(self, image) -> tuple[np.ndarray, np.ndarray]:
+    def tile_features(self, image, *, check_input: bool = True
+                      ) -> tuple[np.ndarray, np.ndarray]:
         """The model's feature set on every tile of `image`: (features, valid pixel counts)."""
-        if not self.materials:
-            raise ValueError("this model is not fitted; call fit() or load a saved model.")
-        img = as_image(image)
-        if img.ndim != self.ndim:
-            raise ValueError(
-                f"the model was fitted on {self.ndim}-D images; got a {img.ndim}-D image."
-            )
-        check_contrast(img)
-        _check_scale(self.scale, img.shape)
+        img = self.checked_image(image, check_input)
+        img = np.asarray(img, np.float64)      # the feature workers compute in place
+        check_scale(self.scale, img.shape)
         feats, counts, _ = feature_stack(img, self.scale, self.feature_set)
         return feats, counts
 
@@ -178,74 +173,32 @@ class SWAModel:
         labels = self.classifier.predict(tiles).reshape(feats.shape[:-1])
         return labels.astype(label_dtype(self.labels))
 
-    # -- file format -------------------------------------------------------------------
-    def save(self, path, *, force: bool = False) -> Path:
-        """Write the model as NPZ + JSON metadata (no pickle); see the module docstring."""
-        check_model_path(path)
-        with atomic_write([path], force=force) as (tmp,):
-            write_model_to(tmp, *self.file_content())
-        return Path(path)
-
+    # -- file format ----------------------------------------------------------------------
     def file_content(self) -> tuple[dict, dict[str, np.ndarray]]:
         """The JSON ``meta`` and the arrays :meth:`save` writes."""
-        from .. import __version__
-
-        meta = {
-            "version": __version__, "scale": self.scale,
-            "feature_set": self.feature_set, "feature_names": self.feature_names,
-            "classifier": self.classifier_name, "ndim": self.ndim, "spacing": self.spacing,
-            "materials": [{"label": m.label, "name": m.name, "color": m.color}
-                          for m in self.materials],
-            "scores": self.scores,
-            "classifier_options": {k: v for k, v in vars(self.classifier).items()
-                                   if not k.endswith("_") and not k.startswith("_")},
-        }
-        arrays = {f"param_{k}": v for k, v in self.classifier.get_params().items()}
+        meta = {**self._common_meta(), "scale": self.scale,
+                "feature_set": self.feature_set, "feature_names": self.feature_names,
+                "classifier": self.classifier_name, "scores": self.scores,
+                "classifier_options": self.classifier.get_params()}
+        arrays = {f"param_{k}": v for k, v in self.classifier.fitted_arrays().items()}
         return meta, arrays
 
-
-def load_model(path):
-    """Read a model written by :meth:`SWAModel.save` or :meth:`RecommendedModel.save`.
-
-    Returns
-    -------
-    SWAModel or RecommendedModel
-        As the file's ``method`` says (files without one are reference models).
-    """
-    meta, arrays = read_model_file(path)
-    p = Path(path)
-    try:
-        return _model_from_file(meta, arrays, p)
-    except (KeyError, TypeError, ValueError, IndexError, AttributeError) as exc:
-        raise ValueError(f"{p} is a damaged or incomplete swa-imesh model file "
-                         f"({type(exc).__name__}: {exc}); save the model again.") from exc
+    @classmethod
+    def from_file_content(cls, meta: dict, arrays: dict[str, np.ndarray]) -> "SWAModel":
+        """Rebuild from the ``meta`` dict and arrays of a saved file."""
+        model = cls(scale=meta["scale"], feature_set=meta["feature_set"],
+                    classifier=meta["classifier"])
+        model.classifier.set_params(**meta.get("classifier_options", {}))
+        model.classifier.set_fitted({k[len("param_"):]: v for k, v in arrays.items()
+                                     if k.startswith("param_")})
+        model._restore_common(meta)
+        model.feature_names = list(meta["feature_names"])
+        model.scores = meta.get("scores", {})
+        return model
 
 
-def _model_from_file(meta: dict, arrays: dict, p: Path):
-    method = meta.get("method", "reference")
-    if method == "recommended":
-        from ._recommended import RecommendedModel
-
-        return RecommendedModel.from_saved(meta, arrays)
-    if method != "reference":
-        raise ValueError(f"{p} holds a model of method {method!r}, which this version does "
-                         "not know; update napari-swa-imesh.")
-    params = {k[len("param_"):]: v for k, v in arrays.items() if k.startswith("param_")}
-    model = SWAModel(scale=meta["scale"], feature_set=meta["feature_set"],
-                     classifier=meta["classifier"])
-    for k, v in meta.get("classifier_options", {}).items():
-        setattr(model.classifier, k, v)
-    model.classifier.set_params(params)
-    model.materials = [Material(int(m["label"]), m["name"], m.get("color"))
-                       for m in meta["materials"]]
-    model.feature_names = list(meta["feature_names"])
-    model.ndim = int(meta["ndim"])
-    model.spacing = tuple(meta["spacing"]) if meta.get("spacing") else None
-    model.scores = meta.get("scores", {})
-    return model
-
-
-def _check_scale(scale: int, shape: tuple[int, ...]) -> None:
+def check_scale(scale: int, shape: tuple[int, ...]) -> None:
+    """Raise ValueError unless tiles of 2^scale px fit an image of `shape`."""
     top = int(np.floor(np.log2(max(shape))))
     if not 0 <= scale <= top:
         raise ValueError(

@@ -1,9 +1,22 @@
-"""The model file: NPZ arrays plus one JSON ``meta`` entry, no pickles.
+"""The model file, and :func:`load_model` for both models.
 
-Both models (:class:`~._model.SWAModel`, :class:`~._recommended.RecommendedModel`) write
-through :func:`write_model_to` inside :func:`~napari_swa_imesh.io.atomic_write`, and
-every file is read through :func:`read_model_file`, which turns any damage (truncation,
-random bytes, a ``meta`` that is not an object) into one ValueError that says so.
+Format (``.npz``, no pickles): arrays under their own names plus ``meta``, a JSON string
+with ``format`` ("swa-imesh-model"), ``version`` (of this package), ``method``, ``scale``,
+``feature_set``, ``feature_names``, ``classifier``, ``ndim``, ``materials`` (label, name,
+colour), ``spacing`` (units of the training image) and the training ``scores``.
+
+* ``method`` absent or "reference": :class:`~._model.SWAModel`; the arrays are the fitted
+  classifier's (``param_*``) and ``classifier_options`` its constructor parameters.
+* ``method`` "recommended": :class:`~._recommended.RecommendedModel`; one Gaussian
+  classifier per scale j (arrays ``level{j}_*``), and its ``options``, ``class_means``,
+  ``level_error``, ``intensity`` (offset and scale of the standardisation) and
+  ``fisher`` ratios.
+
+Both are written by :meth:`~._model_base.SegmentationModel.save` (through
+:func:`~napari_swa_imesh.io.atomic_write`); every file is read by :func:`read_model_file`,
+which turns any damage (truncation, random bytes, a ``meta`` that is not an object) into
+one ValueError that says so. A saved model applies to any image of the same
+dimensionality.
 """
 
 from __future__ import annotations
@@ -14,22 +27,14 @@ from pathlib import Path
 
 import numpy as np
 
-__all__ = ["MODEL_FORMAT", "check_model_path", "write_model_to", "read_model_file"]
+from ._model import SWAModel
+from ._model_base import MODEL_FORMAT, check_model_path, write_model_to
+from ._recommended import RECOMMENDED_METHOD, RecommendedModel
 
-MODEL_FORMAT = "swa-imesh-model"
+__all__ = ["MODEL_FORMAT", "check_model_path", "write_model_to", "read_model_file",
+           "load_model", "MODELS"]
 
-
-def check_model_path(path) -> None:
-    """Raise ValueError unless `path` names a model file (``.npz``)."""
-    if Path(path).suffix.lower() != ".npz":
-        raise ValueError(f"model files end in .npz; got {Path(path).name}.")
-
-
-def write_model_to(tmp, meta: dict, arrays: dict[str, np.ndarray]) -> None:
-    """Write `meta` (JSON) and `arrays` to the temporary path `tmp`."""
-    meta = {"format": MODEL_FORMAT, **meta}
-    with open(tmp, "wb") as fh:
-        np.savez_compressed(fh, meta=np.array(json.dumps(meta)), **arrays)
+MODELS = {"reference": SWAModel, RECOMMENDED_METHOD: RecommendedModel}
 
 
 def read_model_file(path) -> tuple[dict, dict[str, np.ndarray]]:
@@ -60,3 +65,31 @@ def read_model_file(path) -> tuple[dict, dict[str, np.ndarray]]:
     if not isinstance(meta, dict) or meta.get("format") != MODEL_FORMAT:
         raise ValueError(bad + ".")
     return meta, arrays
+
+
+def load_model(path) -> SWAModel | RecommendedModel:
+    """Read a model written by ``save`` (either model) or ``swa-imesh segment --model-out``.
+
+    Returns
+    -------
+    SWAModel or RecommendedModel
+        As the file's ``method`` says (files without one are reference models).
+
+    Raises
+    ------
+    FileNotFoundError
+        No file at `path`.
+    ValueError
+        A damaged file, or a method this version does not know.
+    """
+    meta, arrays = read_model_file(path)
+    p = Path(path)
+    method = meta.get("method", "reference")
+    if method not in MODELS:
+        raise ValueError(f"{p} holds a model of method {method!r}, which this version does "
+                         "not know; update napari-swa-imesh.")
+    try:
+        return MODELS[method].from_file_content(meta, arrays)
+    except (KeyError, TypeError, ValueError, IndexError, AttributeError) as exc:
+        raise ValueError(f"{p} is a damaged or incomplete swa-imesh model file "
+                         f"({type(exc).__name__}: {exc}); save the model again.") from exc

@@ -46,117 +46,17 @@ import numpy as np
 
 from napari_swa_imesh._validation import as_image
 
+from ._tiles import block_spread, block_view, pad_to_even, pair_sum, validate_mask, validate_scale
+
 __all__ = ["MOMENT_NAMES", "moment_pyramid", "tile_moments"]
 
 MOMENT_NAMES = ("mean", "variance", "skewness", "kurtosis")
 
 # A tile's std below this fraction of |mean| is rounding noise of the mean itself
 # (a few ulps per level), not spread in the data.
-_ZERO_STD_RTOL = 1e-13
+ZERO_STD_RTOL = 1e-13
 # Pixels per slab of the scale-1 pass (2 MB of float64: stays in cache).
 _SLAB_PIXELS = 2**18
-
-
-# ---------------------------------------------------------------- door checks
-def _validate_scale(scale, shape: tuple[int, ...], name: str = "scale") -> int:
-    """Return `scale` as int after checking 0 <= scale <= floor(log2(max side))."""
-    top = int(max(shape)).bit_length() - 1
-    if isinstance(scale, (bool, np.bool_)) or not isinstance(scale, (int, np.integer)):
-        raise ValueError(
-            f"{name} must be an int in 0..{top} for an image of shape {shape}; "
-            f"got {scale!r} of type {type(scale).__name__}."
-        )
-    if not 0 <= scale <= top:
-        raise ValueError(
-            f"{name} must be an int in 0..{top} (floor(log2) of the largest side, "
-            f"{max(shape)}) for an image of shape {shape}; got {scale}. Tiles are "
-            f"2**{name} pixels per axis."
-        )
-    return int(scale)
-
-
-def _validate_mask(mask, shape: tuple[int, ...]) -> np.ndarray | None:
-    """Return `mask` as a new bool array of `shape` (True = valid), or None."""
-    if mask is None:
-        return None
-    arr = np.asarray(mask)
-    if arr.dtype.kind not in "biu":
-        raise TypeError(
-            f"mask must be a boolean (or 0/1 integer) array; got dtype {arr.dtype}. "
-            "Use e.g. `image > threshold` to build one."
-        )
-    if arr.shape != tuple(shape):
-        raise ValueError(
-            f"mask must have the image's shape {tuple(shape)}; got {arr.shape}. "
-            "Build the mask on the same grid as the image."
-        )
-    return arr != 0
-
-
-# ------------------------------------------------------------ block reductions
-def _pad_to_even(arr: np.ndarray, fill=0) -> np.ndarray:
-    """Pad every odd side by one element of `fill` at the end (no copy if all even)."""
-    pad = [(0, side % 2) for side in arr.shape]
-    if not any(after for _, after in pad):
-        return arr
-    return np.pad(arr, pad, mode="constant", constant_values=fill)
-
-
-def _pair_sum(arr: np.ndarray, dtype=None) -> np.ndarray:
-    """Sum 2 x ... x 2 blocks of an array with even sides.
-
-    Folding the last axis first is about 3x faster than ``reshape(...).sum(axes)``
-    on a C-ordered volume.
-    """
-    out = arr
-    for axis in range(arr.ndim - 1, -1, -1):
-        lead = (slice(None),) * axis
-        out = np.add(out[lead + (slice(0, None, 2),)], out[lead + (slice(1, None, 2),)], dtype=dtype)
-    return out
-
-
-def _interleaved(arr: np.ndarray, block: int) -> np.ndarray:
-    """View of shape (t_0, block, t_1, block, ...) of an array with sides multiple of `block`."""
-    shape: list[int] = []
-    for side in arr.shape:
-        shape += [side // block, block]
-    return arr.reshape(shape)
-
-
-def _spread(coarse: np.ndarray) -> np.ndarray:
-    """View of shape (t_0, 1, t_1, 1, ...) that broadcasts against `_interleaved`."""
-    shape: list[int] = []
-    for side in coarse.shape:
-        shape += [side, 1]
-    return coarse.reshape(shape)
-
-
-def _tile_counts(shape: tuple[int, ...], scale: int, valid: np.ndarray | None) -> np.ndarray:
-    """Valid pixels per tile at `scale`, shape ceil(shape / 2**scale), int64."""
-    block = 2**scale
-    if valid is None:
-        # Outer product of per-axis counts: only the last tile per axis is partial.
-        counts = np.ones((), dtype=np.int64)
-        for side in shape:
-            per_axis = np.minimum(block, side - block * np.arange(-(-side // block)))
-            counts = np.multiply.outer(counts, per_axis.astype(np.int64))
-        return counts
-    pad = [(0, (-side) % block) for side in shape]
-    padded = np.pad(valid, pad, mode="constant", constant_values=False)
-    axes = tuple(range(1, 2 * len(shape), 2))
-    return _interleaved(padded, block).sum(axis=axes, dtype=np.int64)
-
-
-def _tile_means(padded: np.ndarray, counts: np.ndarray, scale: int,
-                valid_padded: np.ndarray | None = None) -> np.ndarray:
-    """Mean over the valid pixels of each tile; `padded` has sides multiple of 2**scale.
-
-    Tiles without a valid pixel get 0 (callers decide what that means).
-    """
-    axes = tuple(range(1, 2 * padded.ndim, 2))
-    data = padded if valid_padded is None else np.where(valid_padded, padded, 0.0)
-    sums = _interleaved(data, 2**scale).sum(axis=axes)
-    return sums / np.maximum(counts, 1)
 
 
 # ------------------------------------------------------------------ the levels
@@ -181,19 +81,19 @@ def _first_level_slab(x: np.ndarray, valid: np.ndarray | None) -> tuple[np.ndarr
         n = np.full(tuple(side // 2 for side in x.shape), 2**x.ndim, dtype=np.int64)
     else:
         x *= valid
-        n = _pair_sum(valid.view(np.uint8), dtype=np.int64)
-    mean = _pair_sum(x)
+        n = pair_sum(valid.view(np.uint8), dtype=np.int64)
+    mean = pair_sum(x)
     mean /= np.maximum(n, 1)
-    _interleaved(x, 2)[...] -= _spread(mean)  # x now holds deviations from the tile mean
+    block_view(x, 2)[...] -= block_spread(mean)  # x now holds deviations from the tile mean
     if valid is not None:
         x *= valid
-    m1 = _pair_sum(x)  # zero but for the rounding of `mean`; carried to cancel it
+    m1 = pair_sum(x)  # zero but for the rounding of `mean`; carried to cancel it
     power = x * x
-    m2 = _pair_sum(power)
+    m2 = pair_sum(power)
     power *= x
-    m3 = _pair_sum(power)
+    m3 = pair_sum(power)
     power *= x
-    m4 = _pair_sum(power)
+    m4 = pair_sum(power)
     return mean, m1, m2, m3, m4, n
 
 
@@ -214,9 +114,10 @@ def _first_level(x: np.ndarray, valid: np.ndarray | None) -> tuple[np.ndarray, .
         if any(side % 2 for side in slab.shape):
             if slab_valid is None:
                 slab_valid = np.ones(slab.shape, dtype=bool)
-            slab, slab_valid = _pad_to_even(slab, 0.0), _pad_to_even(slab_valid, False)
+            slab = pad_to_even(np.asarray(slab, np.float64), 0.0)
+            slab_valid = pad_to_even(slab_valid, False)
         else:
-            slab = slab.copy()
+            slab = np.array(slab, np.float64)       # a copy: the slab pass works in place
         target = slice(first // 2, first // 2 + slab.shape[0] // 2)
         for array, part in zip(out, _first_level_slab(slab, slab_valid)):
             array[target] = part
@@ -228,8 +129,8 @@ def _iter_moment_levels(
 ) -> Iterator[tuple[np.ndarray, ...]]:
     """Yield ``(centre, M1, M2, M3, M4, n)`` per tile for scales 1..max_scale.
 
-    `x` is float64 and is not modified. Empty tiles have centre 0 and zero
-    power sums, so they drop out of every merge.
+    `x` is float32 or float64 (taken to float64 slab by slab) and is not modified.
+    Empty tiles have centre 0 and zero power sums, so they drop out of every merge.
     """
     if max_scale < 1:
         return
@@ -239,19 +140,19 @@ def _iter_moment_levels(
     for _ in range(2, max_scale + 1):
         # Children, padded with empty tiles (n = 0) to even sides.
         mean_c, m1_c, m2_c, m3_c, m4_c, n_c = (
-            _pad_to_even(a) for a in (mean, m1, m2, m3, m4, n))
+            pad_to_even(a) for a in (mean, m1, m2, m3, m4, n))
         weight_c = n_c.astype(np.float64)
-        n = _pair_sum(n_c)
-        mean = _pair_sum(weight_c * mean_c + m1_c)
+        n = pair_sum(n_c)
+        mean = pair_sum(weight_c * mean_c + m1_c)
         mean /= np.maximum(n, 1)
         # delta = child centre - parent centre, shape of the children grid
-        delta = (_interleaved(mean_c, 2) - _spread(mean)).reshape(mean_c.shape)
+        delta = (block_view(mean_c, 2) - block_spread(mean)).reshape(mean_c.shape)
         n_delta = weight_c * delta
-        m4 = _pair_sum(m4_c + delta * (4.0 * m3_c + delta * (
+        m4 = pair_sum(m4_c + delta * (4.0 * m3_c + delta * (
             6.0 * m2_c + delta * (4.0 * m1_c + n_delta))))
-        m3 = _pair_sum(m3_c + delta * (3.0 * m2_c + delta * (3.0 * m1_c + n_delta)))
-        m2 = _pair_sum(m2_c + delta * (2.0 * m1_c + n_delta))
-        m1 = _pair_sum(m1_c + n_delta)
+        m3 = pair_sum(m3_c + delta * (3.0 * m2_c + delta * (3.0 * m1_c + n_delta)))
+        m2 = pair_sum(m2_c + delta * (2.0 * m1_c + n_delta))
+        m1 = pair_sum(m1_c + n_delta)
         yield mean, m1, m2, m3, m4, n
 
 
@@ -272,7 +173,7 @@ def _finalize_into(moments: np.ndarray, mean: np.ndarray, m1: np.ndarray, m2: np
     mu4 -= c * (4.0 * s3 - c * (6.0 * s2 - 3.0 * c2))
     np.add(mean, c, out=moments[..., 0])
     moments[..., 1] = var
-    flat = np.sqrt(var) <= _ZERO_STD_RTOL * np.abs(moments[..., 0])
+    flat = np.sqrt(var) <= ZERO_STD_RTOL * np.abs(moments[..., 0])
     var[flat] = 1.0
     std = np.sqrt(var)
     mu3 /= var * std
@@ -337,16 +238,22 @@ def moment_pyramid(
     >>> moments[0, 1, 2:]  # constant tile: skewness 0, kurtosis 3 by convention
     array([0., 3.])
     """
-    x = as_image(image)
-    valid = _validate_mask(mask, x.shape)
-    max_scale = _validate_scale(max_scale, x.shape, name="max_scale")
+    x = as_image(image, copy=False)
+    valid = validate_mask(mask, x.shape)
+    max_scale = validate_scale(max_scale, x.shape, name="max_scale")
+    return moment_pyramid_unchecked(x, valid, max_scale)
+
+
+def moment_pyramid_unchecked(x: np.ndarray, valid: np.ndarray | None, max_scale: int
+                             ) -> list[tuple[np.ndarray, np.ndarray]]:
+    """:func:`moment_pyramid` of checked float input (not modified)."""
     pyramid = [_pixel_moments(x, valid)]
     for level in _iter_moment_levels(x, valid, max_scale):
         pyramid.append(_finalize(*level))
     return pyramid
 
 
-def _tile_moments_worker(x: np.ndarray, valid: np.ndarray | None,
+def tile_moments_worker(x: np.ndarray, valid: np.ndarray | None,
                          scale: int) -> tuple[np.ndarray, np.ndarray]:
     """`tile_moments` on checked input (not modified)."""
     if scale == 0:
@@ -385,7 +292,7 @@ def tile_moments(image, scale: int, *, mask=None) -> tuple[np.ndarray, np.ndarra
     >>> moments[0, 0, :2].tolist(), counts.tolist()  # mean, variance of 0..15
     ([7.5, 21.25], [[16]])
     """
-    x = as_image(image)
-    valid = _validate_mask(mask, x.shape)
-    scale = _validate_scale(scale, x.shape)
-    return _tile_moments_worker(x, valid, scale)
+    x = as_image(image, copy=False)
+    valid = validate_mask(mask, x.shape)
+    scale = validate_scale(scale, x.shape)
+    return tile_moments_worker(x, valid, scale)

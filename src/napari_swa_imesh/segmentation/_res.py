@@ -31,11 +31,18 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from .._validation import as_image
-from ._moments import MOMENT_NAMES, moment_pyramid
+from ._moments import MOMENT_NAMES, moment_pyramid_unchecked
 from ._samples import Samples, check_contrast
 
-__all__ = ["ResStatistics", "res_statistics", "suggest_res", "plot_res", "MOMENT_NAMES",
-           "box_tile_moments"]
+__all__ = ["ResStatistics", "res_statistics", "res_statistics_unchecked", "suggest_res",
+           "plot_res", "plot_res_scales", "MOMENT_NAMES", "box_tile_moments"]
+
+# Colours of the plot's marks (matplotlib's tab10 red and green, readable on light and dark
+# backgrounds); text, axes and background come from the caller or matplotlib's rcParams.
+RES_COLOR = "#d62728"
+USED_COLOR = "#2ca02c"
+BAND_COLOR = "#9aa7b8"
+
 
 @dataclass
 class ResStatistics:
@@ -102,9 +109,9 @@ def box_tile_moments(image: np.ndarray, samples: Samples, label: int, max_scale:
     d = image.ndim
     per_scale: list[list[np.ndarray]] = [[] for _ in range(max_scale + 1)]
     for box in samples.boxes_of(label):
-        crop = image[box.slices]
+        crop = np.asarray(image[box.slices], np.float64)        # a box: small
         top = min(max_scale, int(np.floor(np.log2(max(crop.shape)))))
-        pyramid = moment_pyramid(crop, max_scale=top)
+        pyramid = moment_pyramid_unchecked(crop, None, top)
         for j, (moments, counts) in enumerate(pyramid):
             full = counts == (1 << (j * d))
             if full.any():
@@ -131,9 +138,17 @@ def res_statistics(image, samples: Samples, *, max_scale: int | None = None,
     -------
     ResStatistics
     """
-    img = as_image(image)
+    img = as_image(image, copy=False)
     samples.check(img.shape)
     check_contrast(img, samples)
+    return res_statistics_unchecked(img, samples, max_scale=max_scale,
+                                    change_tol=change_tol, spread_tol=spread_tol)
+
+
+def res_statistics_unchecked(img: np.ndarray, samples: Samples, *,
+                             max_scale: int | None = None, change_tol: float = 0.1,
+                             spread_tol: float = 0.5) -> ResStatistics:
+    """:func:`res_statistics` of a float image and samples already checked against it."""
     d = img.ndim
     if max_scale is None:
         biggest = max(max(b.shape) for b in samples.boxes)
@@ -222,7 +237,7 @@ def suggest_res(stats: ResStatistics, *, change_tol: float = 0.1, spread_tol: fl
 
 
 def plot_res(stats: ResStatistics, *, figure=None, selected_scale: int | None = None,
-             dark: bool = False):
+             foreground=None, background=None, line_color=None, dark: bool = False):
     """Draw the reference's Figure 2.14 layout: rows are moments, columns materials.
 
     Each panel shows, against scale, the mean of the moment over the material's tiles
@@ -236,19 +251,28 @@ def plot_res(stats: ResStatistics, *, figure=None, selected_scale: int | None = 
         Figure to draw into (cleared first); a new one otherwise. No pyplot state is used,
         so this works inside a Qt canvas as well as on the command line.
     selected_scale : int, optional
+    foreground, background, line_color : matplotlib colour, optional
+        Text and axes, figure and panel background, the mean line. Default: matplotlib's
+        rcParams (``text.color``, ``axes.facecolor``, the first colour of the cycle), so a
+        style context or a themed canvas sets them.
     dark : bool
-        Light text on a dark background (the napari dark theme).
+        Shorthand for matplotlib's ``dark_background`` colours where the three above are
+        not given.
 
     Returns
     -------
     matplotlib.figure.Figure
     """
+    import matplotlib as mpl
     from matplotlib.figure import Figure
 
+    rc = mpl.rcParams
+    fg = foreground or ("white" if dark else rc["text.color"])
+    bg = background or ("black" if dark else rc["axes.facecolor"])
+    line = line_color or rc["axes.prop_cycle"].by_key().get("color", ["C0"])[0]
     k = len(stats.materials)
     fig = figure if figure is not None else Figure(figsize=(2.6 * max(k, 1) + 1, 8.5))
     fig.clear()
-    fg, bg = ("#e0e0e0", "#262930") if dark else ("#202020", "white")
     fig.set_facecolor(bg)
     axes = fig.subplots(4, max(k, 1), sharex=True, squeeze=False)
     x = stats.scales
@@ -257,14 +281,14 @@ def plot_res(stats: ResStatistics, *, figure=None, selected_scale: int | None = 
             ax = axes[r, c]
             ax.set_facecolor(bg)
             mu, sd = stats.mean[c, :, r], stats.std[c, :, r]
-            ax.fill_between(x, mu - sd, mu + sd, color="#9aa7b8", alpha=0.45, lw=0)
-            ax.plot(x, mu, "-o", color="#1f77b4" if not dark else "#6fb1ff", ms=3, lw=1.5)
+            ax.fill_between(x, mu - sd, mu + sd, color=BAND_COLOR, alpha=0.45, lw=0)
+            ax.plot(x, mu, "-o", color=line, ms=3, lw=1.5)
             ax.plot(x, stats.min[c, :, r], ":", color=fg, lw=1)
             ax.plot(x, stats.max[c, :, r], ":", color=fg, lw=1)
             if stats.suggested_scale is not None:
-                ax.axvline(stats.suggested_scale, color="#d62728", ls="--", lw=1)
+                ax.axvline(stats.suggested_scale, color=RES_COLOR, ls="--", lw=1)
             if selected_scale is not None:
-                ax.axvline(selected_scale, color="#2ca02c", ls="-", lw=1.2)
+                ax.axvline(selected_scale, color=USED_COLOR, ls="-", lw=1.2)
             ax.tick_params(colors=fg, labelsize=7)
             for spine in ax.spines.values():
                 spine.set_color(fg)
@@ -275,9 +299,44 @@ def plot_res(stats: ResStatistics, *, figure=None, selected_scale: int | None = 
             if r == 3:
                 ax.set_xlabel("scale j (tile 2^j px)", color=fg, fontsize=8)
             ax.set_xticks(x)
+    fig.suptitle(_res_title(stats), color=fg, fontsize=10)
+    fig.tight_layout()
+    return fig
+
+
+def _res_title(stats: ResStatistics, scales=None) -> str:
     title = "Tile-moment statistics against scale"
     if stats.suggested_scale is not None:
         title += f" (suggested RES: {stats.suggested_scale})"
-    fig.suptitle(title, color=fg, fontsize=10)
-    fig.tight_layout()
+    if scales is not None:
+        title += f"; scales used: {', '.join(map(str, scales))}"
+    return title
+
+
+def plot_res_scales(stats: ResStatistics, scales, *, figure=None, **colors):
+    """The RES plot (:func:`plot_res`) with the scales a segmentation used shaded.
+
+    The coarse scale is the solid line (``selected_scale``), the band from the finest
+    refinement scale to it is shaded green, and the suggested RES stays dashed red, so the
+    user sees where the classifier's scales sit on the statistics they came from.
+
+    Parameters
+    ----------
+    stats : ResStatistics
+    scales : sequence of int
+        E.g. ``result.scales`` (coarse first).
+    figure : matplotlib.figure.Figure, optional
+    **colors
+        ``foreground``, ``background``, ``line_color`` or ``dark``, as :func:`plot_res`.
+
+    Returns
+    -------
+    matplotlib.figure.Figure
+    """
+    scales = [int(j) for j in scales]
+    fig = plot_res(stats, figure=figure, selected_scale=max(scales), **colors)
+    for ax in fig.axes:
+        ax.axvspan(min(scales) - 0.25, max(scales) + 0.25, color=USED_COLOR, alpha=0.12,
+                   lw=0)
+    fig.suptitle(_res_title(stats, scales), fontsize=10, color=fig._suptitle.get_color())
     return fig

@@ -1,19 +1,19 @@
 """The SWA pipeline: samples -> RES -> features -> classifier -> labels.
 
-Two methods share it (``method=``):
+Two methods share it (``method=``, each model documents its own options):
 
-* ``"recommended"`` (the default): per-pixel multi-scale SWA statistics, coarse-to-fine at
-  boundaries, Potts MRF, smooth-bias correction (:mod:`._recommended`);
-* ``"reference"``: the reference's tiles at one scale, feature set F1..F7 and GM/MD/LVQ
-  (:class:`SWAModel`), unchanged.
+* ``"recommended"`` (the default, :class:`RecommendedModel`): per-pixel multi-scale SWA
+  statistics, coarse-to-fine at boundaries, Potts MRF, smooth-bias correction;
+* ``"reference"`` (:class:`SWAModel`): the reference's tiles at one scale, feature set
+  F1..F7 and GM/MD/LVQ.
 
-Rule: giving any of ``scale``, ``feature_set`` or ``classifier`` without ``method`` selects
-the reference (those are its knobs, so old calls keep their results); a saved model brings
-its own method.
+A saved model brings its own method. `segment_steps` is a generator that yields
+``(done, total, message)`` after each step and returns the :class:`SegmentationResult`
+(napari thread workers and progress bars use it); `segment` runs it to the end.
 
-`segment_steps` is a generator that yields ``(done, total, message)`` after each step and
-returns the :class:`SegmentationResult` (napari thread workers and progress bars use it);
-`segment` runs it to the end.
+Validate at the door, then trust: `segment_steps` checks the image and the samples once
+and hands the models the checked array (``check_input=False``); the recommended method
+makes one full-size float32 copy of the image, the reference one float64 copy.
 """
 
 from __future__ import annotations
@@ -26,19 +26,25 @@ from dataclasses import dataclass, field
 import numpy as np
 from scipy import ndimage as ndi
 
-from .._validation import as_image, normalize_spacing
+from .._validation import as_image
 from ._features import n_features
-from ._model import SWAModel, _check_scale
-from ._moments import tile_moments
-from ._recommended import RECOMMENDED_METHOD, RecommendedModel, majority_tiles, \
-    potts_mean_field
-from ._res import MOMENT_NAMES, ResStatistics, res_statistics
-from ._samples import Samples
+from ._model import SWAModel, check_scale
+from ._moments import MOMENT_NAMES, tile_moments_worker
+from ._recommended import RECOMMENDED_METHOD, RecommendedModel
+from ._res import ResStatistics, res_statistics_unchecked
+from ._samples import Samples, check_contrast
+from ._signatures import material_signatures
+from ._tiles import majority_tiles, tile_placement, upsample_tiles
+from ._window_features import window
 
 __all__ = ["SegmentationResult", "segment", "segment_steps", "sieve_labels",
-           "upsample_tiles", "tile_placement", "material_signatures", "METHODS"]
+           "upsample_tiles", "tile_placement", "material_signatures", "METHODS",
+           "REFERENCE_METHOD", "REFERENCE_ONLY"]
 
-METHODS = (RECOMMENDED_METHOD, "reference")
+REFERENCE_METHOD = "reference"
+METHODS = (RECOMMENDED_METHOD, REFERENCE_METHOD)
+REFERENCE_ONLY = ("feature_set", "classifier")     # options the recommended method has not
+STEPS = 5                                         # steps segment_steps reports
 
 
 @dataclass
@@ -70,6 +76,8 @@ class SegmentationResult:
         the reference.
     level : ndarray of int8 or None
         Recommended method: the scale that labelled each pixel (finer at boundaries).
+    notes : list of str
+        The warnings of the run (also issued with :func:`warnings.warn`).
     """
 
     labels: np.ndarray
@@ -79,9 +87,10 @@ class SegmentationResult:
     signatures: list[dict]
     res: ResStatistics | None = None
     seconds: dict[str, float] = field(default_factory=dict)
-    method: str = "reference"
+    method: str = REFERENCE_METHOD
     scales: tuple[int, ...] = ()
     level: np.ndarray | None = None
+    notes: list[str] = field(default_factory=list)
 
     @property
     def eps_l(self) -> float | None:
@@ -90,6 +99,13 @@ class SegmentationResult:
     @property
     def eps_m(self) -> float | None:
         return self.model.scores.get("eps_m")
+
+    def pixels_per_scale(self) -> dict[int, int]:
+        """Recommended method: how many pixels each scale's classifier labelled."""
+        if self.level is None:
+            return {}
+        values, counts = np.unique(self.level, return_counts=True)
+        return {int(v): int(c) for v, c in zip(values[::-1], counts[::-1])}
 
     def summary(self) -> dict:
         """Plain-JSON summary (what ``swa-imesh segment --json`` prints)."""
@@ -102,41 +118,52 @@ class SegmentationResult:
             "eps_m": self.eps_m, "training_tiles": self.model.scores.get("training_tiles"),
             "regularized": self.model.scores.get("regularized"),
             "suggested_scale": None if self.res is None else self.res.suggested_scale,
-            "signatures": self.signatures, "seconds": self.seconds,
+            "signatures": self.signatures, "seconds": self.seconds, "notes": self.notes,
         }
         if self.method == RECOMMENDED_METHOD:
             out["model"] = self.model.summary()
             if self.level is not None:
-                values, counts = np.unique(self.level, return_counts=True)
-                out["pixels_per_scale"] = {int(v): int(c) for v, c in zip(values, counts)}
+                out["pixels_per_scale"] = self.pixels_per_scale()
         return out
 
+    def describe(self, *, notes: bool = True) -> str:
+        """The run in a few lines of plain text: what the command line, the demo and the
+        widget print.
 
-def upsample_tiles(tile_labels: np.ndarray, scale: int, shape: tuple[int, ...]) -> np.ndarray:
-    """Full-resolution labels from tile labels: repeat each tile 2^scale times, crop to `shape`.
-
-    Examples
-    --------
-    >>> upsample_tiles(np.array([[1, 2]]), 1, (2, 3)).tolist()
-    [[1, 1, 2], [1, 1, 2]]
-    """
-    out = tile_labels
-    s = 1 << scale
-    for axis in range(tile_labels.ndim):
-        out = np.repeat(out, s, axis=axis)
-    return np.ascontiguousarray(out[tuple(slice(0, n) for n in shape)])
-
-
-def tile_placement(scale: int, spacing=None, ndim: int | None = None
-                   ) -> tuple[tuple[float, ...], tuple[float, ...]]:
-    """Layer ``scale`` and ``translate`` that put tile labels exactly over the image.
-
-    napari puts pixel i's centre at ``i * spacing``; a tile of s = 2^scale pixels covers
-    pixels t*s .. t*s+s-1, so its centre sits at ``t*s*spacing + (s-1)/2*spacing``.
-    """
-    sp = normalize_spacing(spacing, ndim if ndim is not None else len(spacing))
-    s = 1 << scale
-    return tuple(v * s for v in sp), tuple(v * (s - 1) / 2 for v in sp)
+        Method and scales (windows or tiles), feature set and classifier, how many pixels
+        each scale labelled, the training error, regularised covariances, each material's
+        signature at its scale, and (with `notes`) the run's warnings.
+        """
+        model = self.model
+        if self.method == RECOMMENDED_METHOD:
+            scales = list(self.scales)
+            lines = [f"recommended method: scales {', '.join(map(str, scales))} (windows of "
+                     f"{', '.join(str(window(j)) for j in scales)} px), suggested RES "
+                     f"{model.res_scale}; {model.feature_set} statistics, "
+                     f"{model.classifier_name.upper()}"]
+            if self.level is not None:
+                lines.append("pixels labelled per scale: " + ", ".join(
+                    f"{j}: {n}" for j, n in self.pixels_per_scale().items()))
+        else:
+            lines = [f"reference method: scale {self.scale} (tiles of {1 << self.scale} px), "
+                     f"{model.feature_set} + {model.classifier_name.upper()}"]
+        if self.eps_l is not None:
+            lines.append(f"eps_l = {self.eps_l:.2f}% ({model.scores.get('eps_l_method')}), "
+                         f"eps_m = {self.eps_m:.3f}")
+        if model.scores.get("regularized"):
+            lines.append(f"covariance regularised for material(s) "
+                         f"{model.scores['regularized']}")
+        for row in self.signatures:
+            where = f" at scale {row['scale']}" if "scale" in row else ""
+            if row["tiles"]:
+                lines.append(f"  {row['name']}: {row['tiles']} tiles{where}, mean "
+                             f"{row['mean_mean']:.4g} (+-{row['mean_std']:.3g}), variance "
+                             f"{row['variance_mean']:.4g}")
+            else:
+                lines.append(f"  {row['name']}: no tile classified as it")
+        if notes:
+            lines += [f"warning: {note}" for note in self.notes]
+        return "\n".join(lines)
 
 
 def sieve_labels(labels: np.ndarray, min_size: int) -> np.ndarray:
@@ -163,45 +190,29 @@ def sieve_labels(labels: np.ndarray, min_size: int) -> np.ndarray:
     return labels[tuple(idx)]
 
 
-def material_signatures(moments: np.ndarray, counts: np.ndarray, tile_labels: np.ndarray,
-                        model: SWAModel, names: dict[int, str] | None = None) -> list[dict]:
-    """Per material: mean and std of each moment over the full tiles classified as it."""
-    full = counts == counts.max()
-    rows = []
-    for m in model.materials:
-        sel = full & (tile_labels == m.label)
-        tiles = moments[sel]
-        row = {"label": m.label, "name": m.name, "tiles": int(sel.sum())}
-        for k, name in enumerate(MOMENT_NAMES):
-            row[f"{name}_mean"] = float(tiles[:, k].mean()) if tiles.size else float("nan")
-            row[f"{name}_std"] = float(tiles[:, k].std()) if tiles.size else float("nan")
-        rows.append(row)
-    return rows
-
-
-def _resolve_method(method, model, scale, feature_set, classifier) -> str:
-    if model is not None:
-        own = getattr(model, "method", "reference")
-        if method is not None and method != own:
-            raise ValueError(f"the model was fitted with the {own!r} method; got "
-                             f"method={method!r}. Leave the method unset to apply a model.")
-        return own
-    if method is None:
-        explicit = scale is not None or feature_set is not None or classifier is not None
-        return "reference" if explicit else RECOMMENDED_METHOD
+def _resolve_method(method, model, feature_set, classifier) -> str:
     if method not in METHODS:
         raise ValueError(f"unknown method {method!r}; choose {' or '.join(METHODS)}.")
-    if method == RECOMMENDED_METHOD and (feature_set is not None or classifier is not None):
+    if model is not None:
+        own = model.method
+        # the default ("recommended") yields to the model's own method; another does not
+        if method != own and method != RECOMMENDED_METHOD:
+            raise ValueError(f"the model was fitted with the {own!r} method; got "
+                             f"method={method!r}. Leave the method unset to apply a model.")
+        method = own
+    given = [name for name, value in zip(REFERENCE_ONLY, (feature_set, classifier))
+             if value is not None]
+    if method == RECOMMENDED_METHOD and given:
         raise ValueError(
-            "feature_set and classifier belong to the reference method; drop them or pass "
-            "method='reference'.")
+            f"{' and '.join(given)} belong to the reference method; drop "
+            f"{'them' if len(given) > 1 else 'it'} or pass method='reference'.")
     return method
 
 
-def segment_steps(image, samples: Samples | None = None, *, scale: int | None = None,
-                  feature_set: str | None = None, classifier: str | None = None,
-                  sieve: int = 0, model: SWAModel | RecommendedModel | None = None,
-                  spacing=None, method: str | None = None
+def segment_steps(image, samples: Samples | None = None, *, method: str = RECOMMENDED_METHOD,
+                  scale: int | None = None, sieve: int = 0,
+                  model: SWAModel | RecommendedModel | None = None, spacing=None,
+                  feature_set: str | None = None, classifier: str | None = None
                   ) -> Generator[tuple[int, int, str], None, SegmentationResult]:
     """Run the segmentation step by step, yielding ``(done, total, message)``; returns the
     result. See :func:`segment` for the parameters (``total`` is 5 for both methods).
@@ -209,78 +220,78 @@ def segment_steps(image, samples: Samples | None = None, *, scale: int | None = 
     if (samples is None) == (model is None):
         raise ValueError("give either sample boxes (to fit a classifier) or a fitted model, "
                          "not both and not neither.")
-    chosen = _resolve_method(method, model, scale, feature_set, classifier)
+    chosen = _resolve_method(method, model, feature_set, classifier)
+    img = as_image(image, copy=False)
+    if model is None:
+        samples.check(img.shape)
+        check_contrast(img, samples)
+    else:
+        model.checked_image(img)
+        if scale is not None and scale != model.scale:
+            raise ValueError(f"the model works at scale {model.scale}; got scale {scale}. "
+                             "Leave the scale unset when applying a saved model.")
     if chosen == RECOMMENDED_METHOD:
-        return (yield from _recommended_steps(image, samples, scale=scale, sieve=sieve,
+        return (yield from _recommended_steps(img, samples, scale=scale, sieve=sieve,
                                               model=model, spacing=spacing))
     return (yield from _reference_steps(
-        image, samples, scale=scale, feature_set="F1" if feature_set is None else feature_set,
+        img, samples, scale=scale, feature_set="F1" if feature_set is None else feature_set,
         classifier="gm" if classifier is None else classifier, sieve=sieve, model=model,
         spacing=spacing))
 
 
-def _recommended_steps(image, samples, *, scale, sieve, model, spacing):
+def _recommended_steps(img, samples, *, scale, sieve, model, spacing):
     seconds: dict[str, float] = {}
     t0 = time.perf_counter()
-    img = as_image(image)
-    total = 5
     res = None
     if model is None:
-        samples.check(img.shape)
-        yield 0, total, "tile statistics against scale (RES)"
-        res = res_statistics(img, samples)
+        yield 0, STEPS, "tile statistics against scale (RES)"
+        res = res_statistics_unchecked(img, samples)
         seconds["res"] = time.perf_counter() - t0
-        yield 1, total, "fitting the multi-scale classifiers on the sample boxes"
+        yield 1, STEPS, "fitting the multi-scale classifiers on the sample boxes"
         t = time.perf_counter()
-        model = RecommendedModel(max_scale=scale)
-        model.fit(img, samples, spacing=spacing, res_scale=res.suggested_scale)
+        model = RecommendedModel(max_scale=scale).fit(
+            img, samples, spacing=spacing, res_scale=res.suggested_scale, check_input=False)
         seconds["fit"] = time.perf_counter() - t
-    elif scale is not None and scale != model.scale:
-        raise ValueError(f"the model works at scale {model.scale}; got scale {scale}. "
-                         "Leave the scale unset when applying a saved model.")
-    yield 2, total, (f"classifying pixels at scales {model.scale}..{model.finest_scale} "
+    yield 2, STEPS, (f"classifying pixels at scales {model.scale}..{model.finest_scale} "
                      f"with MRF smoothing")
     t = time.perf_counter()
-    img = model._check_image(img)
-    ll, level = model._labels_and_ll(img)
-    labels = model.label_values()[potts_mean_field(ll, model.beta, labels_only=True)]
-    del ll
+    labels, level = model.predict(img, check_input=False, return_level=True)
     seconds["classify"] = time.perf_counter() - t
-    yield 3, total, "sieving and tiling"
+    yield 3, STEPS, "sieving and tiling"
     t = time.perf_counter()
     if sieve:
         labels = sieve_labels(labels, int(sieve))
     tiles = majority_tiles(labels, model.scale, model.labels)
     seconds["output"] = time.perf_counter() - t
-    yield 4, total, "material signatures"
+    yield 4, STEPS, "material signatures"
     t = time.perf_counter()
     sig_scale = model.res_scale if model.res_scale else max(model.scale, 1)
     sig_scale = min(sig_scale, int(np.floor(np.log2(max(img.shape)))))
-    moments, counts = tile_moments(img, sig_scale)
+    moments, counts = tile_moments_worker(img, None, sig_scale)
     signatures = material_signatures(moments, counts,
-                                     majority_tiles(labels, sig_scale, model.labels), model)
+                                     majority_tiles(labels, sig_scale, model.labels),
+                                     model.materials)
     for row in signatures:
         row["scale"] = sig_scale
     seconds["signatures"] = time.perf_counter() - t
     seconds["total"] = time.perf_counter() - t0
-    yield 5, total, "done"
+    yield 5, STEPS, "done"
     return SegmentationResult(labels, tiles, model.scale, model, signatures, res, seconds,
                               method=RECOMMENDED_METHOD, scales=tuple(model.scales),
-                              level=level)
+                              level=level, notes=list(model.scores.get("notes", [])))
 
 
-def _reference_steps(image, samples, *, scale, feature_set, classifier, sieve, model,
+def _reference_steps(img, samples, *, scale, feature_set, classifier, sieve, model,
                      spacing):
     seconds: dict[str, float] = {}
     t0 = time.perf_counter()
-    img = as_image(image)
-    total = 5
+    img = np.asarray(img, np.float64)     # the feature workers compute in float64
     res = None
+    notes: list[str] = []
     if model is None:
-        samples.check(img.shape)
         if scale is None:
-            yield 0, total, "tile statistics against scale (RES)"
-            res = res_statistics(img, samples)
+            yield 0, STEPS, "tile statistics against scale (RES)"
+            res = res_statistics_unchecked(img, samples)
             scale = res.suggested_scale
             if scale is None:
                 raise ValueError(
@@ -290,7 +301,7 @@ def _reference_steps(image, samples, *, scale, feature_set, classifier, sieve, m
             explicit = False
         else:
             explicit = True
-        _check_scale(scale, img.shape)
+        check_scale(scale, img.shape)
         if classifier.lower() == "gm":
             # a class covariance needs more tiles than features; with fewer, GM fits a
             # ridge and calls every pixel the other material (measured on small boxes)
@@ -299,77 +310,84 @@ def _reference_steps(image, samples, *, scale, feature_set, classifier, sieve, m
             if limit is not None:
                 if explicit or limit[0] < 0:
                     raise ValueError(limit[1] + ".")
-                warnings.warn(f"{limit[1]}; using scale {limit[0]}.", UserWarning,
-                              stacklevel=2)
+                notes.append(f"{limit[1]}; using scale {limit[0]}.")
+                warnings.warn(notes[-1], UserWarning, stacklevel=2)
                 scale = limit[0]
-        yield 1, total, f"fitting {classifier.upper()} on {feature_set.upper()} at scale {scale}"
+        yield 1, STEPS, f"fitting {classifier.upper()} on {feature_set.upper()} at scale {scale}"
         t = time.perf_counter()
         model = SWAModel(scale=scale, feature_set=feature_set, classifier=classifier)
-        model.fit(img, samples, spacing=spacing)
+        model.fit(img, samples, spacing=spacing, check_input=False)
         seconds["fit"] = time.perf_counter() - t
-    elif scale is not None and scale != model.scale:
-        raise ValueError(f"the model works at scale {model.scale}; got scale {scale}. "
-                         "Leave the scale unset when applying a saved model.")
-    yield 2, total, f"classifying tiles at scale {model.scale}"
+    yield 2, STEPS, f"classifying tiles at scale {model.scale}"
     t = time.perf_counter()
-    feats, counts = model.tile_features(img)
+    feats, counts = model.tile_features(img, check_input=False)
     tiles = model.classify_features(feats)
     seconds["classify"] = time.perf_counter() - t
-    yield 3, total, "sieving and upsampling"
+    yield 3, STEPS, "sieving and upsampling"
     t = time.perf_counter()
     if sieve:
         tiles = sieve_labels(tiles, int(sieve))
     labels = upsample_tiles(tiles, model.scale, img.shape)
     seconds["output"] = time.perf_counter() - t
-    yield 4, total, "material signatures"
+    yield 4, STEPS, "material signatures"
     t = time.perf_counter()
     if set(MOMENT_NAMES) <= set(model.feature_names):   # the moments are features already
         moments = feats[..., [model.feature_names.index(n) for n in MOMENT_NAMES]]
     else:
-        moments, counts = tile_moments(img, model.scale)
+        moments, counts = tile_moments_worker(img, None, model.scale)
     del feats
-    signatures = material_signatures(moments, counts, tiles, model)
+    signatures = material_signatures(moments, counts, tiles, model.materials)
     seconds["signatures"] = time.perf_counter() - t
     seconds["total"] = time.perf_counter() - t0
-    yield 5, total, "done"
+    yield 5, STEPS, "done"
     return SegmentationResult(labels, tiles, model.scale, model, signatures, res, seconds,
-                              method="reference", scales=(model.scale,))
+                              method=REFERENCE_METHOD, scales=(model.scale,), notes=notes)
 
 
-def segment(image, samples: Samples | None = None, *, scale: int | None = None,
-            feature_set: str | None = None, classifier: str | None = None, sieve: int = 0,
+def segment(image, samples: Samples | None = None, *, method: str = RECOMMENDED_METHOD,
+            scale: int | None = None, sieve: int = 0,
             model: SWAModel | RecommendedModel | None = None, spacing=None,
-            method: str | None = None) -> SegmentationResult:
+            feature_set: str | None = None, classifier: str | None = None
+            ) -> SegmentationResult:
     """Segment an image with SWA.
 
     Parameters
     ----------
     image : (M, N[, P, ...]) array_like
         Grey-level image, any size (non-dyadic sizes are handled without padding leaking
-        into statistics).
+        into statistics). Checked here, once; never modified.
     samples : Samples, optional
         Sample boxes per material (to fit a classifier). Give this or `model`.
+    method : {"recommended", "reference"}
+        "recommended" (:class:`RecommendedModel`) or the reference's tiles at one scale
+        (:class:`SWAModel`). With `model`, the model's own method is used (another
+        explicit method is an error).
     scale : int, optional
-        Reference: the tile scale j (default the suggested RES). Recommended: the largest
-        scale considered (default the suggested RES, capped at 6).
-    feature_set : {"F1", ..., "F7"}, optional
-        Reference only: Table 2.1 feature set (default F1, moments).
-    classifier : {"gm", "md", "lvq"}, optional
-        Reference only: the classifier (default GM, Gaussian maximum likelihood).
+        Means what the method's model says. Recommended: the *largest* scale considered
+        (windows of 2^scale + 1 px; default the suggested RES, capped at 6); the model
+        picks its scales below it. Reference: *the* tile scale j (tiles of 2^j px; default
+        the suggested RES).
     sieve : int
-        Remove connected components smaller than this many tiles (reference) or pixels
-        (recommended); 0: off.
+        Remove connected components smaller than this: *pixels* with the recommended
+        method (full-resolution labels), *tiles* with the reference (tile labels); 0: off.
     model : SWAModel or RecommendedModel, optional
         A fitted model to apply instead of fitting one (it brings its method).
     spacing : sequence of float, optional
         Voxel spacing, recorded in the model.
-    method : {"recommended", "reference"}, optional
-        Default: "reference" when `scale`, `feature_set` or `classifier` is given (the
-        reference's own knobs, so such calls keep their results), else "recommended".
+    feature_set : {"F1", ..., "F7"}, optional
+        Reference only: Table 2.1 feature set (default F1, moments).
+    classifier : {"gm", "md", "lvq"}, optional
+        Reference only: the classifier (default GM, Gaussian maximum likelihood).
 
     Returns
     -------
     SegmentationResult
+
+    Raises
+    ------
+    ValueError
+        For a bad image or samples, and for `feature_set` or `classifier` with the
+        recommended method (they belong to the reference method).
 
     Examples
     --------
@@ -381,9 +399,9 @@ def segment(image, samples: Samples | None = None, *, scale: int | None = None,
     >>> r.method, r.labels.shape, int((r.labels[:, :16] == 1).mean() > 0.95)
     ('recommended', (32, 32), 1)
     """
-    gen = segment_steps(image, samples, scale=scale, feature_set=feature_set,
-                        classifier=classifier, sieve=sieve, model=model, spacing=spacing,
-                        method=method)
+    gen = segment_steps(image, samples, method=method, scale=scale, sieve=sieve,
+                        model=model, spacing=spacing, feature_set=feature_set,
+                        classifier=classifier)
     while True:
         try:
             next(gen)
