@@ -64,9 +64,9 @@ def _in_widget(qtbot, ticker, start, panel):
 def test_event_loop_keeps_running_during_3d_classify_and_mesh(phantom_viewer, qtbot):
     viewer, image, truth = phantom_viewer
     flow = WorkflowWidget(viewer)
-    flow.samples.truth_combo.select(truth)
-    flow.samples.scale_spin.setValue(1)
-    flow.samples.per_material_spin.setValue(8)
+    flow.samples.truth_combo.value = truth
+    flow.samples.scale_spin.value = 1
+    flow.samples.per_material_spin.value = 8
     flow.samples.samples_from_truth()
     wait_idle(qtbot, flow.samples)
     samples = flow.samples.current_samples()
@@ -74,9 +74,9 @@ def test_event_loop_keeps_running_during_3d_classify_and_mesh(phantom_viewer, qt
 
     frozen = _in_main_thread(ticker, lambda: segment(image.data, samples, scale=1,
                                                      feature_set="F5", classifier="lvq"))
-    flow.classify.scale_spin.setValue(1)
-    flow.classify.feature_combo.setCurrentText("F5")
-    flow.classify.classifier_combo.setCurrentText("LVQ")
+    flow.classify.scale_combo.value = 1
+    flow.classify.feature_combo.value = "F5"
+    flow.classify.classifier_combo.value = "LVQ"
     ticks, pause, seconds = _in_widget(qtbot, ticker, flow.classify.classify, flow.classify)
     print(f"classify: frozen {frozen:.2f} s in the main thread; in the widget {seconds:.2f} s, "
           f"{ticks} ticks, longest pause {pause:.3f} s")
