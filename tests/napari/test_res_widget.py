@@ -182,3 +182,31 @@ def test_classify_after_a_box_change_uses_the_current_suggested_res(mosaic_viewe
     assert any("classifying at the suggested RES" in w and "scale 2" in w
                for w in notifications.messages("warning"))
     assert not notifications.errors
+
+
+@pytest.mark.parametrize("stale", [False, True])
+def test_figure_title_clears_the_column_titles(mosaic_viewer, stale):
+    from napari_swa_imesh._napari._res_widget import ResWidget
+    from napari_swa_imesh.segmentation import samples_from_truth
+
+    viewer, image, truth = mosaic_viewer
+    widget = ResWidget(viewer)
+    widget.figure.set_size_inches(6.0, 12.0)       # drawn first in a tall dock
+    widget.show_stats(res_statistics(image.data, samples_from_truth(truth.data, scale=3)))
+    if stale:
+        widget.stale = True
+        widget._draw()
+    figure = widget.figure
+    (title,) = [t for t in figure.texts if t.get_text() == figure.get_suptitle()]
+    assert ("OUT OF DATE" in title.get_text()) == stale
+    # then the dock is made shorter: the layout must follow
+    for size in ((6.0, 12.0), (4.0, 4.0)):
+        figure.set_size_inches(*size)
+        widget.canvas.draw()
+        renderer = widget.canvas.get_renderer()
+        top = title.get_window_extent(renderer)
+        columns = [ax.title for ax in figure.axes if ax.get_title()]
+        assert len(columns) == 2
+        for column in columns:
+            box = column.get_window_extent(renderer)
+            assert box.y1 <= top.y0, (size, top, box)   # column titles below the title

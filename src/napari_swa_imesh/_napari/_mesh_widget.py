@@ -42,14 +42,15 @@ def quality_metric(ndim: int):
 
 @lru_cache(maxsize=None)
 def bound_range(ndim: int) -> tuple[float, float]:
-    """Best and worst radius-to-edge ratio of the IMESH template elements in `ndim`-D.
+    """Radius-to-edge range of every IMESH template element in `ndim`-D (the shaded range).
 
-    Read from :func:`napari_swa_imesh.mesh.quality_table`, which meshes every leaf
-    configuration with the mesher's own templates, so the shaded range is the proven one
-    (about 1.5 s in 3-D: call it in a worker first; it is cached).
+    From the regular simplex (the best any element can be) to the worst template simplex
+    of :func:`napari_swa_imesh.mesh.quality_table`, which meshes every leaf configuration
+    with the mesher's own templates: the proven bound, not a number copied here. About
+    1.5 s in 3-D, so call it in a worker first; it is cached.
     """
-    ratios = [row["radius_edge_ratio"] for row in quality_table(ndim)]
-    return min(ratios), max(ratios)
+    regular = quality_metric(ndim).valid_range[0]
+    return regular, max(row["radius_edge_ratio"] for row in quality_table(ndim))
 
 
 def _labels_present(data: np.ndarray) -> list[int]:
@@ -231,12 +232,12 @@ class MeshWidget(QWidget):
             table = np.stack([transform_color(default_color(m))[0] for m in materials])
             layer.vertex_colors = table[np.searchsorted(materials, values["material"])]
         else:
-            best = quality_metric(mesh.ndim).valid_range[0]
+            lo, hi = bound_range(mesh.ndim)
             worst = float(np.max(values["quality"])) if len(values["quality"]) else 1.0
             layer.vertex_colors = None
             layer.vertex_values = values["quality"]
             layer.colormap = "turbo"
-            layer.contrast_limits = [best, max(bound_range(mesh.ndim)[1], worst) + 1e-9]
+            layer.contrast_limits = [lo, max(hi, worst) + 1e-9]
 
     def _show_summary(self, mesh: "Mesh", checks, n_faces: int) -> None:
         info = mesh.info
@@ -272,10 +273,8 @@ class MeshWidget(QWidget):
         q = mesh.quality[np.isfinite(mesh.quality)]
         lo, hi = bound_range(mesh.ndim)
         ax.axvspan(lo, hi, color="#2ca02c", alpha=0.18, lw=0, label="IMESH bound range")
-        ax.axvline(hi, color="#2ca02c", lw=1)      # visible when the range is one value
-        # from the ideal element to the worst one or the bound, so every mesh still bins
-        best = quality_metric(mesh.ndim).valid_range[0]
-        span = (min(best, float(q.min(initial=best))), max(hi, float(q.max(initial=hi))))
+        # the range always spans the bound, so a mesh of one element shape still bins
+        span = (min(lo, float(q.min(initial=lo))), max(hi, float(q.max(initial=hi))))
         ax.hist(q, bins=40, range=span, color="#6fb1ff" if dark_theme(self.viewer) else "#1f77b4")
         ax.set_yscale("log")
         ax.set_xlabel("radius-to-edge ratio (circumradius / shortest edge)", fontsize=8)
