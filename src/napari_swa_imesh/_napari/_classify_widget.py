@@ -22,8 +22,8 @@ if TYPE_CHECKING:
 
     from ..segmentation import SegmentationResult, SWAModel
 
-__all__ = ["ClassifyWidget", "SEGMENTATION_KEY", "OUTPUT_FULL", "OUTPUT_TILES", "METHOD_RECOMMENDED",
-           "METHOD_REFERENCE"]
+__all__ = ["ClassifyWidget", "SEGMENTATION_KEY", "OUTPUT_FULL", "OUTPUT_TILES",
+           "METHOD_RECOMMENDED", "METHOD_REFERENCE", "run_summary"]
 
 SEGMENTATION_KEY = "swa_imesh_segmentation"   # Labels metadata: the run's summary
 OUTPUT_FULL = "full resolution"
@@ -361,34 +361,11 @@ class ClassifyWidget(QWidget):
             labels = self.viewer.add_labels(data, name=name, scale=layer_scale,
                                             translate=translate, opacity=0.5,
                                             colormap=labels_colormap(colors), metadata=metadata)
-        self._show_scores(result, dice, names)
+        self.scores.value = run_summary(result, dice, names)
         self._show_signatures(result.signatures)
         self.save_model_button.enabled = True
         self.export_button.enabled = True
         self.labels_ready.emit(labels)
-
-    def _show_scores(self, result, dice, names) -> None:
-        eps_l, eps_m = result.eps_l, result.eps_m
-        how = result.model.scores.get("eps_l_method", "")
-        if getattr(result, "method", "reference") == "recommended":
-            scales = list(result.scales)
-            parts = [f"recommended: scales {', '.join(map(str, scales))} (windows up to "
-                     f"{(1 << max(scales)) + 1} px; pixels per scale "
-                     f"{result.summary().get('pixels_per_scale', {})}), "
-                     f"{result.model.feature_set}, {result.model.classifier_name.upper()}"]
-        else:
-            parts = [f"scale {result.scale} (tiles of {1 << result.scale} px), "
-                     f"{result.model.feature_set}, {result.model.classifier_name.upper()}"]
-        if eps_l is not None:
-            parts.append(f"eps_l = {eps_l:.2f} % ({how}), eps_m = {eps_m:.3f}")
-        regularized = result.model.scores.get("regularized")
-        if regularized:
-            parts.append(f"covariance regularised for material(s) {regularized}")
-        if dice:
-            parts.append("Dice: " + ", ".join(
-                f"{names.get(k, k)} {v:.3f}" for k, v in dice.items() if not math.isnan(v)))
-        parts.append(f"{result.seconds.get('total', float('nan')):.2f} s")
-        self.scores.value = "; ".join(parts)
 
     def _show_signatures(self, signatures: list[dict]) -> None:
         columns = ["name", "tiles"] + [f"{m}_{s}" for m in MOMENT_NAMES for s in ("mean", "std")]
@@ -461,3 +438,32 @@ class ClassifyWidget(QWidget):
         path, _ = QFileDialog.getOpenFileName(self, "Load model", "", "SWA model (*.npz)")
         if path:
             self.load_model(path)
+
+
+def run_summary(result: "SegmentationResult", dice: dict[int, float] | None,
+                names: dict[int, str]) -> str:
+    """One line about a classification: method and scales, scores, Dice, time.
+
+    The only place the widget formats a result (swap point for the library's
+    ``SegmentationResult.describe()``).
+    """
+    eps_l, eps_m = result.eps_l, result.eps_m
+    how = result.model.scores.get("eps_l_method", "")
+    model = f"{result.model.feature_set}, {result.model.classifier_name.upper()}"
+    if getattr(result, "method", "reference") == "recommended":
+        scales = list(result.scales)
+        parts = [f"recommended: scales {', '.join(map(str, scales))} (windows up to "
+                 f"{(1 << max(scales)) + 1} px; pixels per scale "
+                 f"{result.summary().get('pixels_per_scale', {})}), {model}"]
+    else:
+        parts = [f"scale {result.scale} (tiles of {1 << result.scale} px), {model}"]
+    if eps_l is not None:
+        parts.append(f"eps_l = {eps_l:.2f} % ({how}), eps_m = {eps_m:.3f}")
+    regularized = result.model.scores.get("regularized")
+    if regularized:
+        parts.append(f"covariance regularised for material(s) {regularized}")
+    if dice:
+        parts.append("Dice: " + ", ".join(
+            f"{names.get(k, k)} {v:.3f}" for k, v in dice.items() if not math.isnan(v)))
+    parts.append(f"{result.seconds.get('total', float('nan')):.2f} s")
+    return "; ".join(parts)

@@ -9,7 +9,7 @@ import numpy as np
 if TYPE_CHECKING:
     import napari
 
-__all__ = ["PALETTE", "material_palette", "labels_colormap", "layer_picker", "pick", "theme_colors",
+__all__ = ["PALETTE", "material_palette", "labels_colormap", "layer_picker", "pick",
            "layer_spacing", "index_to_layer_data", "mesh_translate", "SAMPLES_KEY",
            "MATERIALS_KEY", "EXTENT_KEY", "MESH_KEY", "SCALE_KEY"]
 
@@ -44,19 +44,6 @@ def labels_colormap(colors: dict[int, str]):
     color_dict = {None: "transparent", 0: "transparent"}
     color_dict.update({int(k): v for k, v in colors.items()})
     return DirectLabelColormap(color_dict=color_dict)
-
-
-def theme_colors(viewer: "napari.viewer.Viewer") -> tuple[bool, str, str]:
-    """(dark, background hex, text hex) of the viewer's theme, for matplotlib figures."""
-    from napari.utils.theme import get_theme
-
-    try:
-        theme = get_theme(viewer.theme)
-        bg, fg = theme.background.as_hex(), theme.text.as_hex()
-    except (ValueError, KeyError, AttributeError):
-        bg, fg = "#262930", "#f0f1f2"
-    rgb = np.array([int(bg[i:i + 2], 16) for i in (1, 3, 5)]) / 255
-    return bool(rgb @ [0.299, 0.587, 0.114] < 0.5), bg, fg
 
 
 def layer_spacing(layer) -> tuple[float, ...]:

@@ -70,8 +70,8 @@ class ThemedFigure(BaseNapariMPLWidget):
     def _on_napari_theme_changed(self, event) -> None:
         # napari-matplotlib's hook (NapariMPLWidget overrides it the same way): the style
         # sheet is updated first, then the figure is drawn in it
-        super()._on_napari_theme_changed(event)
         try:
+            super()._on_napari_theme_changed(event)
             self.redraw()
         except RuntimeError:  # the Qt side is gone; napari drops us with the Python side
             pass

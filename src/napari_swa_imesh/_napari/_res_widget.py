@@ -129,8 +129,9 @@ class ResWidget(QWidget):
 
     def _show_reason(self) -> None:
         stats = self.stats
+        settled = {m: stats.material_res.get(m) for m in stats.materials}
         per_material = ", ".join(
-            f"{name}: {stats.material_res.get(m) if stats.material_res.get(m) is not None else 'not settled'}"
+            f"{name}: {'not settled' if settled[m] is None else settled[m]}"
             for m, name in zip(stats.materials, stats.names))
         text = (f"Suggested RES: {stats.suggested_scale} ({stats.reason}) "
                 f"Per material: {per_material}.")
