@@ -11,7 +11,7 @@ now every dock can shrink to 89-116 px and the window keeps its size.
 """
 
 import pytest
-from qtpy.QtWidgets import QApplication
+from qtpy.QtWidgets import QApplication, QScrollArea
 from swa_napari_helpers import wait_idle
 
 PLUGIN = "napari-swa-imesh"
@@ -48,6 +48,8 @@ def test_docks_fit_a_1080_px_screen(make_napari_viewer, qtbot):
     before = window.height()
     docked = [viewer.window.add_plugin_dock_widget(PLUGIN, name) for name in DOCKS]
     widgets = [widget for _, widget in docked]
+    bodies = [widget.findChild(QScrollArea).widget() for widget in widgets[1:]]
+    empty = [body.minimumSizeHint().width() for body in bodies]
     _fill(widgets, truth, qtbot)
     QApplication.processEvents()
     for (dock, widget), name in zip(docked, DOCKS):
@@ -56,6 +58,10 @@ def test_docks_fit_a_1080_px_screen(make_napari_viewer, qtbot):
         assert hint <= MAX_HINT and minimum <= MAX_HINT, name
     for widget in widgets[1:]:      # the workflow's tabs are these very widgets
         assert widget.minimumSizeHint().height() < 200
+    # long messages wrap instead of widening the dock (magicgui sizes labels to their text)
+    for body, width in zip(bodies, empty):
+        print(f"content at least {width} px wide, {body.minimumSizeHint().width()} px filled")
+        assert body.minimumSizeHint().width() <= max(width, 420)
     print(f"window {before} -> {window.height()} px (minimum "
           f"{window.minimumSizeHint().height()} px) on a screen of {screen.height()} px")
     assert window.height() == before               # docking did not grow the window

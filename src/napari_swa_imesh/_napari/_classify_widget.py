@@ -6,7 +6,7 @@ import math
 from typing import TYPE_CHECKING
 
 import numpy as np
-from magicgui.widgets import ComboBox, Container, Label, PushButton, SpinBox
+from magicgui.widgets import ComboBox, Container, PushButton, SpinBox
 from qtpy.QtCore import Signal
 from qtpy.QtWidgets import QFileDialog, QTableWidget, QTableWidgetItem, QWidget
 
@@ -102,12 +102,14 @@ class ClassifyWidget(QWidget):
         layout = scroll_body(self)
         layout.addWidget(Container(widgets=[
             self.image_combo, self.samples_combo, self.method_combo, self.feature_combo,
-            self.classifier_combo, self.scale_combo, self.scale_note, self.sieve_spin,
-            self.output_combo, self.truth_combo, self.classify_button]).native)
+            self.classifier_combo, self.scale_combo]).native)
+        layout.addWidget(self.scale_note.native)
+        layout.addWidget(Container(widgets=[self.sieve_spin, self.output_combo,
+                                            self.truth_combo, self.classify_button]).native)
         layout.addWidget(self.tasks)
         layout.addWidget(self.scores.native)
-        layout.addWidget(Label(value="Material signatures (moments of the tiles of each "
-                                     "material)").native)
+        layout.addWidget(wrapped_label("Material signatures (moments of the tiles of each "
+                                       "material)").native)
         layout.addWidget(self.signature_table, 1)
         layout.addWidget(self.export_button.native)
         layout.addWidget(group("Model", [

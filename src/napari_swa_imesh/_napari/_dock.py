@@ -9,7 +9,7 @@ minimum height and grow with the space they are given.
 
 from __future__ import annotations
 
-from qtpy.QtWidgets import QFrame, QGroupBox, QScrollArea, QVBoxLayout, QWidget
+from qtpy.QtWidgets import QFrame, QGroupBox, QScrollArea, QSizePolicy, QVBoxLayout, QWidget
 
 __all__ = ["scroll_body", "side_by_side", "group", "wrapped_label", "button"]
 
@@ -44,11 +44,16 @@ def group(title: str, widgets) -> QGroupBox:
 
 
 def wrapped_label(text: str = ""):
-    """A magicgui Label whose text wraps to the dock's width."""
+    """A magicgui Label whose text wraps to the dock's width.
+
+    Add its ``.native`` to a layout directly: magicgui sizes labels (and the rows of a
+    labelled Container) to their unwrapped text, which would widen the dock.
+    """
     from magicgui.widgets import Label
 
     label = Label(value=text)
     label.native.setWordWrap(True)
+    label.native.setSizePolicy(QSizePolicy.Preferred, QSizePolicy.Preferred)
     return label
 
 

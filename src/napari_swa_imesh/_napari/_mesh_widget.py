@@ -6,13 +6,13 @@ from functools import lru_cache
 from typing import TYPE_CHECKING
 
 import numpy as np
-from magicgui.widgets import CheckBox, ComboBox, Container, Label, PushButton
+from magicgui.widgets import CheckBox, ComboBox, Container, PushButton
 from qtpy.QtCore import Qt, Signal
 from qtpy.QtWidgets import QFileDialog, QLabel, QListWidget, QListWidgetItem, QWidget
 
 from ..mesh import QUALITY_METRICS, check_mesh, mesh_labels, quality_table, write_mesh
 from ..mesh._export import MESH_SUFFIXES
-from ._dock import scroll_body
+from ._dock import scroll_body, wrapped_label
 from ._layers import MESH_KEY, default_color, layer_picker, layer_spacing, mesh_translate, pick
 from ._plots import ThemedFigure, dark_theme, theme_text_color
 from ._surface import mesh_surface
@@ -95,8 +95,7 @@ class MeshWidget(QWidget):
         self.mesh_button = PushButton(text="Mesh")
         self.export_button = PushButton(text="Export mesh...", enabled=False, tooltip=(
             "Write the mesh (" + ", ".join(s for s in MESH_SUFFIXES if s != ".ele") + ")."))
-        self.summary = Label()
-        self.summary.native.setWordWrap(True)
+        self.summary = wrapped_label()
         self.summary.native.setTextInteractionFlags(Qt.TextSelectableByMouse)
         self.plot = ThemedFigure(self.viewer, self._draw_histogram, min_height=180)
         self.tasks = TaskPanel()

@@ -4,13 +4,13 @@ from __future__ import annotations
 
 from typing import TYPE_CHECKING
 
-from magicgui.widgets import ComboBox, Container, Label, PushButton, SpinBox
+from magicgui.widgets import ComboBox, Container, PushButton, SpinBox
 from qtpy.QtCore import Signal
 from qtpy.QtWidgets import QWidget
 
 from ..segmentation import plot_res, res_statistics
 from . import _samples_layer as sl
-from ._dock import scroll_body
+from ._dock import scroll_body, wrapped_label
 from ._layers import layer_picker, pick
 from ._plots import ThemedFigure, dark_theme
 from ._tasks import TaskPanel, notify_error, notify_warning
@@ -65,9 +65,8 @@ class ResWidget(QWidget):
         self.scale_spin = SpinBox(label="chosen scale j", min=0, max=16, enabled=False,
                                   tooltip="Scale j to classify at (tiles of 2^j pixels per "
                                           "axis); or click a panel of the plot.")
-        self.reason = Label(value="Compute the statistics of the sample boxes to see where "
-                                  "they settle with scale.")
-        self.reason.native.setWordWrap(True)
+        self.reason = wrapped_label("Compute the statistics of the sample boxes to see where "
+                                    "they settle with scale.")
         self.plot = ThemedFigure(self.viewer, self._draw_figure, min_height=360)
         self.plot.canvas.mpl_connect("button_press_event", self._on_click)
         self.tasks = TaskPanel()
@@ -76,7 +75,8 @@ class ResWidget(QWidget):
         layout.addWidget(Container(widgets=[self.image_combo, self.samples_combo,
                                             self.max_scale, self.compute_button]).native)
         layout.addWidget(self.tasks)
-        layout.addWidget(Container(widgets=[self.scale_spin, self.reason]).native)
+        layout.addWidget(Container(widgets=[self.scale_spin]).native)
+        layout.addWidget(self.reason.native)
         layout.addWidget(self.plot, 1)
         self.compute_button.changed.connect(self.compute)
         self.scale_spin.changed.connect(self.choose_scale)
