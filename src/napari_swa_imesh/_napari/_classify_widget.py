@@ -6,14 +6,14 @@ import math
 from typing import TYPE_CHECKING
 
 import numpy as np
-from magicgui.widgets import ComboBox, Container, PushButton, SpinBox
+from magicgui.widgets import ComboBox, Container, SpinBox
 from qtpy.QtCore import Signal
 from qtpy.QtWidgets import QFileDialog, QTableWidget, QTableWidgetItem, QWidget
 
 from ..segmentation import (CLASSIFIERS, FEATURE_SETS, MOMENT_NAMES, dice_scores, load_model,
                             segment_steps, tile_placement)
 from . import _samples_layer as sl
-from ._dock import group, scroll_body, side_by_side, wrapped_label
+from ._dock import button, group, scroll_body, side_by_side, wrapped_label
 from ._layers import labels_colormap, layer_picker, layer_spacing, material_palette, pick
 from ._tasks import TaskPanel, notify_error, notify_info, notify_warning
 
@@ -85,18 +85,20 @@ class ClassifyWidget(QWidget):
                                   tooltip="Merge connected regions smaller than this many "
                                           "tiles into their surroundings.")
         self.output_combo = ComboBox(label="output", choices=[OUTPUT_FULL, OUTPUT_TILES])
-        self.truth_combo = layer_picker(self.viewer, "Labels", label="truth (Dice)",
-                                        none_text="(none)", tooltip="A ground truth to report "
-                                        "Dice against (optional).")
-        self.classify_button = PushButton(text="Classify")
-        self.save_model_button = PushButton(text="Save model...", enabled=False)
-        self.load_model_button = PushButton(text="Load model...")
-        self.apply_model_button = PushButton(text="Apply loaded model to image", enabled=False)
+        self.truth_combo = layer_picker(
+            self.viewer, "Labels", label="truth (Dice)", none_text="(none)",
+            tooltip="A ground truth to report Dice against (optional).")
+        self.classify_button = button("Classify", self.classify)
+        self.save_model_button = button("Save model...", self._on_save_model_clicked)
+        self.load_model_button = button("Load model...", self._on_load_model_clicked)
+        self.apply_model_button = button("Apply loaded model to image", self.apply_model)
         self.model_label = wrapped_label("no model loaded")
         self.scores = wrapped_label()
         self.signature_table = QTableWidget(0, 0)
         self.signature_table.setEditTriggers(QTableWidget.NoEditTriggers)
-        self.export_button = PushButton(text="Export signatures CSV...", enabled=False)
+        self.export_button = button("Export signatures CSV...", self._on_export_clicked)
+        for later in (self.save_model_button, self.apply_model_button, self.export_button):
+            later.enabled = False
         self.tasks = TaskPanel()
 
         layout = scroll_body(self)
@@ -115,12 +117,6 @@ class ClassifyWidget(QWidget):
         layout.addWidget(group("Model", [
             side_by_side(self.save_model_button, self.load_model_button), self.model_label,
             self.apply_model_button]))
-        for button, slot in ((self.classify_button, self.classify),
-                             (self.save_model_button, self._on_save_model_clicked),
-                             (self.load_model_button, self._on_load_model_clicked),
-                             (self.apply_model_button, self.apply_model),
-                             (self.export_button, self._on_export_clicked)):
-            button.changed.connect(slot)
         self.method_combo.changed.connect(self._on_method_changed)
         self.scale_combo.changed.connect(self._on_scale_combo)
         self.samples_combo.changed.connect(self._on_samples_layer_selected)

@@ -103,4 +103,3 @@ class MaterialTable(QTableWidget):
                 self.selectRow(row)
                 return
         raise ValueError(f"no material with label {label}; add it first.")
-

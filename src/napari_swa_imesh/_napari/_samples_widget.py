@@ -47,13 +47,13 @@ class SamplesWidget(QWidget):
         self.samples_combo = layer_picker(self.viewer, "Shapes", label="samples",
                                           accept=sl.is_samples_layer)
         self.new_button = button("New samples layer", self.new_samples_layer,
-                                  "Add a Shapes layer over the image and start drawing "
-                                  "rectangles (one per sample box).")
+                                 "Add a Shapes layer over the image and start drawing "
+                                 "rectangles (one per sample box).")
         self.material_table = MaterialTable()
         self.add_material_button = button("Add material", self.add_material)
         self.remove_material_button = button("Remove material", self._on_remove_material)
         self.assign_button = button("Assign to selected boxes", self.assign_selected,
-                                     "Give the selected rectangles the selected material.")
+                                    "Give the selected rectangles the selected material.")
         self.depth_spin = SpinBox(
             label="depth (slices, 3-D)", min=1, max=4096, value=sl.DEFAULT_DEPTH,
             tooltip="3-D: slices a rectangle spans, centred on the slice it is drawn on. "
@@ -71,8 +71,8 @@ class SamplesWidget(QWidget):
         self.truth_combo = layer_picker(self.viewer, "Labels", label="truth")
         self.per_material_spin = SpinBox(label="boxes per material", min=1, max=64, value=4)
         self.truth_button = button("Samples from truth", self.samples_from_truth,
-                                    "Boxes on the largest homogeneous blocks of each material "
-                                    "of a ground-truth Labels layer (its 2^d-tree).")
+                                   "Boxes on the largest homogeneous blocks of each material "
+                                   "of a ground-truth Labels layer (its 2^d-tree).")
         self.tasks = TaskPanel()
 
         layout = scroll_body(self)
