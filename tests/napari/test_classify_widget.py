@@ -14,13 +14,13 @@ from napari_swa_imesh.segmentation import dice_scores, load_model
 
 def _classified(viewer, image, truth, qtbot, scale=4, method=METHOD_REFERENCE):
     flow = WorkflowWidget(viewer)
-    flow.classify.method_combo.setCurrentText(method)
-    flow.samples.truth_combo.select(truth)
-    flow.samples.per_material_spin.setValue(16)
-    flow.samples.scale_spin.setValue(scale)
+    flow.classify.method_combo.value = method
+    flow.samples.truth_combo.value = truth
+    flow.samples.per_material_spin.value = 16
+    flow.samples.scale_spin.value = scale
     flow.samples.samples_from_truth()
     wait_idle(qtbot, flow.samples)
-    flow.classify.scale_spin.setValue(scale)
+    flow.classify.scale_combo.value = scale
     flow.classify.classify()
     wait_idle(qtbot, flow.classify)
     return flow
@@ -48,8 +48,8 @@ def test_signatures_model_round_trip_and_apply_to_another_image(mosaic_viewer, q
     (other, kwargs, _), (other_truth, truth_kwargs, _) = make_texture_mosaic(layout="halves")
     other_layer = viewer.add_image(other, name="halves")
     classify.load_model(tmp_path / "model.npz")
-    assert "scale 4" in classify.model_label.text()
-    classify.image_combo.select(other_layer)
+    assert "scale 4" in classify.model_label.value
+    classify.image_combo.value = other_layer
     classify.apply_model()
     wait_idle(qtbot, classify)
     labels = viewer.layers["halves SWA labels"]
@@ -66,7 +66,7 @@ def test_sieve_removes_small_regions(mosaic_viewer, qtbot):
     viewer, image, truth = mosaic_viewer
     flow = _classified(viewer, image, truth, qtbot, scale=2)
     before = flow.classify.result.tile_labels
-    flow.classify.sieve_spin.setValue(50)
+    flow.classify.sieve_spin.value = 50
     flow.classify.classify()
     wait_idle(qtbot, flow.classify)
     after = flow.classify.result.tile_labels
@@ -84,19 +84,19 @@ def test_recommended_is_the_default_and_beats_the_reference(mosaic_viewer, qtbot
     viewer, image, truth = mosaic_viewer
     ref_flow = _classified(viewer, image, truth, qtbot)   # keep it: its widgets live with it
     ref_dice = dice_scores(ref_flow.classify.result.labels, truth.data)
-    assert ref_flow.classify.feature_combo.isEnabled()
+    assert ref_flow.classify.feature_combo.enabled
     fresh = WorkflowWidget(viewer)
-    assert fresh.classify.method_combo.currentText() == METHOD_RECOMMENDED
+    assert fresh.classify.method_combo.value == METHOD_RECOMMENDED
     flow = _classified(viewer, image, truth, qtbot, method=METHOD_RECOMMENDED)
     classify = flow.classify
-    assert not classify.feature_combo.isEnabled() and not classify.classifier_combo.isEnabled()
+    assert not classify.feature_combo.enabled and not classify.classifier_combo.enabled
     result = classify.result
     assert result.method == "recommended" and result.labels.shape == image.data.shape
     dice = dice_scores(viewer.layers[f"{image.name} SWA labels"].data, truth.data)
     # full-resolution labels follow the disc's curved edge that 16-px tiles cut into steps
     # (measured 0.962 / 0.909 against the reference's 0.911 / 0.800)
     assert all(dice[m] > ref_dice[m] + 0.03 for m in (1, 2)), (dice, ref_dice)
-    assert "multiscale" in classify.scores.text()
+    assert "multiscale" in classify.scores.value
     classify.save_model(tmp_path / "rec.npz")
     assert load_model(tmp_path / "rec.npz").method == "recommended"
     classify.load_model(tmp_path / "rec.npz")
@@ -128,20 +128,20 @@ def test_window_limit_is_said_before_the_run_and_after_it(mosaic_viewer, qtbot,
     viewer, image, truth = mosaic_viewer
     flow = _unbalanced(viewer)
     classify = flow.classify
-    assert classify.method_combo.currentText() == METHOD_RECOMMENDED
-    classify.scale_spin.setValue(4)
+    assert classify.method_combo.value == METHOD_RECOMMENDED
+    classify.scale_combo.value = 4
     _, sentence = flow.samples.current_samples().window_limit(4)
     # before any run: the panel says which box is too small and what to do
-    assert sentence in classify.scale_note.text()
-    assert classify.scale_note.text().startswith("Next run: scale 4, set in this panel")
+    assert sentence in classify.scale_note.value
+    assert classify.scale_note.value.startswith("Next run: scale 4, set in this panel")
     classify.classify()
     assert any(sentence in w for w in notifications.messages("warning"))
     wait_idle(qtbot, classify)
     assert classify.tasks.last_error is None
-    assert sentence in classify.scale_note.text()      # still said next to the result
+    assert sentence in classify.scale_note.value      # still said next to the result
     # the reference method uses tiles, not windows: no window sentence
-    classify.method_combo.setCurrentText(METHOD_REFERENCE)
-    assert sentence not in classify.scale_note.text()
+    classify.method_combo.value = METHOD_REFERENCE
+    assert sentence not in classify.scale_note.value
 
 
 def test_library_warnings_of_a_run_reach_the_panel(mosaic_viewer, qtbot, monkeypatch):
@@ -161,11 +161,11 @@ def test_library_warnings_of_a_run_reach_the_panel(mosaic_viewer, qtbot, monkeyp
     monkeypatch.setattr(_classify_widget, "segment_steps", warning_steps)
     viewer, image, truth = mosaic_viewer
     flow = _unbalanced(viewer)
-    flow.classify.method_combo.setCurrentText(METHOD_REFERENCE)
-    flow.classify.scale_spin.setValue(3)
+    flow.classify.method_combo.value = METHOD_REFERENCE
+    flow.classify.scale_combo.value = 3
     flow.classify.classify()
     wait_idle(qtbot, flow.classify)
     assert flow.classify.result is not None
-    note = flow.classify.scale_note.text()
+    note = flow.classify.scale_note.value
     assert note.startswith("Last run used scale 3: scale 3, set in this panel")
     assert "scale capped at 3: the largest box of 'grass' is 16x80 px" in note

@@ -53,9 +53,9 @@ def test_box_too_small_for_the_scale(mosaic_viewer, qtbot, notifications):
     samples.set_scale(4)
     assert samples.report.flags[1] == ["too small at scale 4"]
     classify = ClassifyWidget(viewer)
-    classify.method_combo.setCurrentText(METHOD_REFERENCE)   # tiles need whole-tile boxes
-    classify.samples_combo.select(layer)
-    classify.scale_spin.setValue(4)
+    classify.method_combo.value = METHOD_REFERENCE  # tiles need whole-tile boxes
+    classify.samples_combo.value = layer
+    classify.scale_combo.value = 4
     n_layers = len(viewer.layers)
     classify.classify()
     wait_idle(qtbot, classify)
@@ -66,7 +66,7 @@ def test_box_too_small_for_the_scale(mosaic_viewer, qtbot, notifications):
     assert classify.tasks.last_error == error
     assert len(viewer.layers) == n_layers        # no labels layer
     # the same boxes work at a scale they can hold
-    classify.scale_spin.setValue(1)
+    classify.scale_combo.value = 1
     classify.classify()
     wait_idle(qtbot, classify)
     assert len(viewer.layers) == n_layers + 1
@@ -78,7 +78,7 @@ def test_box_outside_the_image_is_refused_before_running(mosaic_viewer, notifica
     samples, layer = _brick_and_tiny_grass(viewer, image)
     layer.add_rectangles([rect(200, 200, 300, 300)])
     res = ResWidget(viewer)
-    res.samples_combo.select(layer)
+    res.samples_combo.value = layer
     assert res.compute() is None
     (error,) = notifications.errors
     assert "box 3 (grass)" in error and "outside the image" in error
@@ -124,12 +124,12 @@ def _cancel_on_first_report(panel, event):
 def test_cancel_classification_mid_run(phantom_viewer, qtbot, gate, notifications):
     viewer, image, truth = phantom_viewer
     flow = WorkflowWidget(viewer)
-    flow.samples.truth_combo.select(truth)
-    flow.samples.scale_spin.setValue(2)
+    flow.samples.truth_combo.value = truth
+    flow.samples.scale_spin.value = 2
     flow.samples.samples_from_truth()
     wait_idle(qtbot, flow.samples)
     n_layers = len(viewer.layers)
-    flow.classify.scale_spin.setValue(2)
+    flow.classify.scale_combo.value = 2
     _cancel_on_first_report(flow.classify.tasks, gate)
     worker = flow.classify.classify()
     aborted = []
@@ -154,7 +154,7 @@ def test_cancel_meshing_mid_run(phantom_viewer, qtbot, gate, notifications):
     assert gate.is_set()
     assert len(viewer.layers) == n_layers
     assert mesh.mesh is None and mesh.surface_layer is None
-    assert not mesh.export_button.isEnabled()
+    assert not mesh.export_button.enabled
     assert mesh.tasks.status.text().endswith("cancelled")
     assert not notifications.errors
 

@@ -16,7 +16,7 @@ from napari_swa_imesh.segmentation import res_statistics
 def test_res_plot_and_scale_chosen_by_click(mosaic_viewer, qtbot):
     viewer, image, truth = mosaic_viewer
     flow = WorkflowWidget(viewer)
-    flow.samples.truth_combo.select(truth)
+    flow.samples.truth_combo.value = truth
     flow.samples.samples_from_truth()
     wait_idle(qtbot, flow.samples)
     flow.res.compute()
@@ -36,9 +36,9 @@ def test_res_plot_and_scale_chosen_by_click(mosaic_viewer, qtbot):
     x, y = ax.transData.transform((2.2, float(np.nanmean(stats.mean[0, :, 0]))))
     event = MouseEvent("button_press_event", flow.res.canvas, x, y, button=1)
     flow.res.canvas.callbacks.process("button_press_event", event)
-    assert flow.res.scale_spin.value() == 2
-    assert flow.classify.scale_spin.value() == 2
-    assert flow.samples.scale_spin.value() == 2
+    assert flow.res.scale_spin.value == 2
+    assert flow.classify.scale_combo.value == 2
+    assert flow.samples.scale_spin.value == 2
     assert chosen_scale(flow.samples.samples_layer(), image) == 2
     # the plot is redrawn with the chosen scale as a solid vertical line in every panel
     for ax in flow.res.figure.axes:
@@ -49,7 +49,7 @@ def test_res_plot_and_scale_chosen_by_click(mosaic_viewer, qtbot):
 def test_plots_follow_the_napari_theme(mosaic_viewer, qtbot):
     viewer, image, truth = mosaic_viewer
     flow = WorkflowWidget(viewer)
-    flow.samples.truth_combo.select(truth)
+    flow.samples.truth_combo.value = truth
     flow.samples.samples_from_truth()
     wait_idle(qtbot, flow.samples)
     flow.res.compute()
@@ -57,13 +57,19 @@ def test_plots_follow_the_napari_theme(mosaic_viewer, qtbot):
     flow.mesh.select_labels(truth)
     flow.mesh.run_mesh()
     wait_idle(qtbot, flow.mesh)
-    backgrounds = {}
+    from matplotlib.colors import to_hex, to_rgb
+    from napari.utils.theme import get_theme
+
+    text = {}
     for theme in ("dark", "light"):
         viewer.theme = theme
-        backgrounds[theme] = (flow.res.figure.get_facecolor(), flow.mesh.figure.get_facecolor())
-    dark, light = backgrounds["dark"], backgrounds["light"]
-    for d, l in zip(dark, light):
-        assert sum(d[:3]) < 1.0 < sum(l[:3])      # dark background, then a light one
+        text[theme] = (flow.res.figure.axes[0].yaxis.label.get_color(),
+                       flow.mesh.figure.axes[0].xaxis.label.get_color())
+        # transparent figures: the dock's napari background shows through
+        assert flow.res.figure.get_facecolor()[3] == 0 == flow.mesh.figure.get_facecolor()[3]
+        assert to_hex(text[theme][1]) == get_theme(theme).text.as_hex()
+    for d, l in zip(text["dark"], text["light"]):
+        assert sum(to_rgb(d)) > 1.5 > sum(to_rgb(l))      # light text, then dark text
 
 
 def _change_samples(kind, viewer, flow, image):
@@ -100,8 +106,8 @@ def _change_samples(kind, viewer, flow, image):
 def test_res_goes_stale_when_the_samples_change(mosaic_viewer, qtbot, kind):
     viewer, image, truth = mosaic_viewer
     flow = WorkflowWidget(viewer)
-    flow.samples.truth_combo.select(truth)
-    flow.samples.per_material_spin.setValue(16)
+    flow.samples.truth_combo.value = truth
+    flow.samples.per_material_spin.value = 16
     flow.samples.samples_from_truth()
     wait_idle(qtbot, flow.samples)
     flow.res.compute()
@@ -113,30 +119,30 @@ def test_res_goes_stale_when_the_samples_change(mosaic_viewer, qtbot, kind):
 
     _change_samples(kind, viewer, flow, image)
 
-    current_image = flow.res.image_combo.layer()
+    current_image = flow.res.image_combo.value
     # the stored choice carries what it was chosen on, so every consumer sees it is stale
     assert chosen_scale(layer, current_image) is None
     assert sl.scale_choice(layer, current_image).fresh is False
     # the RES tab says so, drops the chosen line and refuses a choice on old numbers
     assert flow.res.stale
-    assert "OUT OF DATE" in flow.res.reason.text()
-    assert not flow.res.scale_spin.isEnabled()
+    assert "OUT OF DATE" in flow.res.reason.value
+    assert not flow.res.scale_spin.enabled
     for ax in flow.res.figure.axes:
         assert not any(line.get_linestyle() == "-" and np.allclose(line.get_xdata(), 2)
                        for line in ax.get_lines())
     flow.res.choose_scale(3)
     assert chosen_scale(layer, current_image) is None
     # the classify tab drops the scale and says where the next one comes from
-    assert flow.classify.scale_spin.value() == -1
-    note = flow.classify.scale_note.text()
+    assert flow.classify.scale_combo.value is None
+    note = flow.classify.scale_note.value
     assert "suggested RES of the current sample boxes" in note and "scale 2" in note
     assert "not used" in note
 
     # computing again makes the statistics and the choice fresh
     flow.res.compute()
     wait_idle(qtbot, flow.res)
-    assert not flow.res.stale and flow.res.scale_spin.isEnabled()
-    assert "OUT OF DATE" not in flow.res.reason.text()
+    assert not flow.res.stale and flow.res.scale_spin.enabled
+    assert "OUT OF DATE" not in flow.res.reason.value
     suggested = flow.res.stats.suggested_scale
     assert chosen_scale(layer, current_image) == suggested
     assert flow.classify.resolve_scale() == (
@@ -150,15 +156,15 @@ def test_classify_after_a_box_change_uses_the_current_suggested_res(mosaic_viewe
     it trains on, as the command line does, warns, and says so in the panel."""
     viewer, image, truth = mosaic_viewer
     flow = WorkflowWidget(viewer)
-    flow.classify.method_combo.setCurrentText(METHOD_REFERENCE)   # one scale: easy to read
-    flow.samples.truth_combo.select(truth)
-    flow.samples.per_material_spin.setValue(16)
+    flow.classify.method_combo.value = METHOD_REFERENCE  # one scale: easy to read
+    flow.samples.truth_combo.value = truth
+    flow.samples.per_material_spin.value = 16
     flow.samples.samples_from_truth()
     wait_idle(qtbot, flow.samples)
     flow.res.compute()
     wait_idle(qtbot, flow.res)
     flow.res.choose_scale(2)
-    assert flow.classify.scale_spin.value() == 2
+    assert flow.classify.scale_combo.value == 2
 
     layer = flow.samples.samples_layer()
     layer.selected_data = set(range(0, len(layer.data), 2))
@@ -170,9 +176,37 @@ def test_classify_after_a_box_change_uses_the_current_suggested_res(mosaic_viewe
     flow.classify.classify()
     wait_idle(qtbot, flow.classify)
     assert flow.classify.result.scale == expected
-    note = flow.classify.scale_note.text()
+    note = flow.classify.scale_note.value
     assert note.startswith(f"Last run used scale {expected}: the suggested RES of the "
                            "current sample boxes")
     assert any("classifying at the suggested RES" in w and "scale 2" in w
                for w in notifications.messages("warning"))
     assert not notifications.errors
+
+
+@pytest.mark.parametrize("stale", [False, True])
+def test_figure_title_clears_the_column_titles(mosaic_viewer, stale):
+    from napari_swa_imesh._napari._res_widget import ResWidget
+    from napari_swa_imesh.segmentation import samples_from_truth
+
+    viewer, image, truth = mosaic_viewer
+    widget = ResWidget(viewer)
+    widget.figure.set_size_inches(6.0, 12.0)       # drawn first in a tall dock
+    widget.show_stats(res_statistics(image.data, samples_from_truth(truth.data, scale=3)))
+    if stale:
+        widget.stale = True
+        widget._draw()
+    figure = widget.figure
+    (title,) = [t for t in figure.texts if t.get_text() == figure.get_suptitle()]
+    assert ("OUT OF DATE" in title.get_text()) == stale
+    # then the dock is made shorter: the layout must follow
+    for size in ((6.0, 12.0), (4.0, 4.0)):
+        figure.set_size_inches(*size)
+        widget.canvas.draw()
+        renderer = widget.canvas.get_renderer()
+        top = title.get_window_extent(renderer)
+        columns = [ax.title for ax in figure.axes if ax.get_title()]
+        assert len(columns) == 2
+        for column in columns:
+            box = column.get_window_extent(renderer)
+            assert box.y1 <= top.y0, (size, top, box)   # column titles below the title

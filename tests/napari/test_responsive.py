@@ -19,6 +19,7 @@ import numpy as np
 from swa_napari_helpers import wait_idle
 from qtpy.QtCore import QTimer
 
+from napari_swa_imesh._napari._classify_widget import METHOD_REFERENCE
 from napari_swa_imesh._napari._workflow import WorkflowWidget
 from napari_swa_imesh.mesh._checks import check_mesh
 from napari_swa_imesh.mesh._imesh import mesh_labels
@@ -64,9 +65,9 @@ def _in_widget(qtbot, ticker, start, panel):
 def test_event_loop_keeps_running_during_3d_classify_and_mesh(phantom_viewer, qtbot):
     viewer, image, truth = phantom_viewer
     flow = WorkflowWidget(viewer)
-    flow.samples.truth_combo.select(truth)
-    flow.samples.scale_spin.setValue(1)
-    flow.samples.per_material_spin.setValue(8)
+    flow.samples.truth_combo.value = truth
+    flow.samples.scale_spin.value = 1
+    flow.samples.per_material_spin.value = 8
     flow.samples.samples_from_truth()
     wait_idle(qtbot, flow.samples)
     samples = flow.samples.current_samples()
@@ -75,9 +76,10 @@ def test_event_loop_keeps_running_during_3d_classify_and_mesh(phantom_viewer, qt
     frozen = _in_main_thread(ticker, lambda: segment(image.data, samples, scale=1,
                                                      method="reference", feature_set="F5",
                                                      classifier="lvq"))
-    flow.classify.scale_spin.setValue(1)
-    flow.classify.feature_combo.setCurrentText("F5")
-    flow.classify.classifier_combo.setCurrentText("LVQ")
+    flow.classify.method_combo.value = METHOD_REFERENCE
+    flow.classify.scale_combo.value = 1
+    flow.classify.feature_combo.value = "F5"
+    flow.classify.classifier_combo.value = "LVQ"
     ticks, pause, seconds = _in_widget(qtbot, ticker, flow.classify.classify, flow.classify)
     print(f"classify: frozen {frozen:.2f} s in the main thread; in the widget {seconds:.2f} s, "
           f"{ticks} ticks, longest pause {pause:.3f} s")

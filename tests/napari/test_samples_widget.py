@@ -48,7 +48,7 @@ def test_flags_outside_too_small_constant_and_not_a_box(mosaic_viewer):
     image.data[200:220, 10:30] = 0.5          # a flat patch, as padding would be
     widget = SamplesWidget(viewer)
     layer = widget.new_samples_layer()
-    widget.scale_spin.setValue(4)             # tiles of 16 px
+    widget.scale_spin.value = 4  # tiles of 16 px
     layer.add_rectangles([rect(0, 0, 64, 64), rect(240, 240, 270, 270), rect(10, 100, 20, 200),
                           rect(200, 10, 220, 30)])
     layer.add_ellipses([rect(100, 100, 120, 120)])
@@ -99,7 +99,7 @@ def test_3d_rectangle_with_depth_is_a_centred_box(phantom_viewer):
     viewer, image, _ = phantom_viewer
     widget = SamplesWidget(viewer)
     layer = widget.new_samples_layer()
-    widget.depth_spin.setValue(6)
+    widget.depth_spin.value = 6
     widget._on_current_material()
     corners = np.array([[20, 9.5, 9.5], [20, 9.5, 29.5], [20, 29.5, 29.5], [20, 29.5, 9.5]])
     layer.add_rectangles([corners])
@@ -109,7 +109,7 @@ def test_3d_rectangle_with_depth_is_a_centred_box(phantom_viewer):
     assert sorted({float(r[0, 0]) for r in overlay.data}) == [17, 18, 19, 21, 22]
     # changing the depth of the selected box updates the box and its overlay
     layer.selected_data = {0}
-    widget.depth_spin.setValue(2)
+    widget.depth_spin.value = 2
     assert widget.current_samples().boxes[0].start[0] == 19
     assert len(overlay.data) == 1
 
@@ -131,9 +131,9 @@ def test_samples_from_truth_match_the_library(mosaic_viewer, qtbot):
 
     viewer, image, truth = mosaic_viewer
     widget = SamplesWidget(viewer)
-    widget.truth_combo.select(truth)
-    widget.scale_spin.setValue(3)
-    widget.per_material_spin.setValue(5)
+    widget.truth_combo.value = truth
+    widget.scale_spin.value = 3
+    widget.per_material_spin.value = 5
     widget.samples_from_truth()
     wait_idle(qtbot, widget)
     expected = samples_from_truth(truth.data, scale=3, per_material=5)
@@ -146,7 +146,7 @@ def test_a_shapes_layer_drawn_before_the_widget_is_adopted(mosaic_viewer):
     shapes = viewer.add_shapes([rect(0, 0, 32, 32), rect(64, 64, 128, 96)],
                                shape_type="rectangle", name="my boxes")
     widget = SamplesWidget(viewer)
-    widget.samples_combo.select(shapes)
+    widget.samples_combo.value = shapes
     widget._on_samples_layer_selected()
     assert shapes.features["label"].tolist() == [1, 1]
     boxes = widget.current_samples().boxes
@@ -162,7 +162,7 @@ def test_a_rectangle_drawn_with_the_mouse_lies_on_the_current_slice(phantom_view
 
     viewer, image, _ = phantom_viewer
     widget = SamplesWidget(viewer)
-    widget.depth_spin.setValue(4)
+    widget.depth_spin.value = 4
     layer = widget.new_samples_layer()
     viewer.dims.set_point(0, 20 * image.scale[0])        # world coordinate of slice 20
     start, end = (40.0, 9.5, 9.5), (40.0, 29.5, 25.5)     # world: pixel edges in-plane
@@ -203,8 +203,8 @@ def test_material_too_small_for_the_recommended_windows_is_flagged(mosaic_viewer
     widget.set_scale(3)
     assert widget.report.flags == [[], [], [], []]   # 9-px windows fit in the 16-px box
     # the classify tab's scale is the scale in use: the samples tab checks at it
-    flow.classify.scale_spin.setValue(4)
-    assert widget.scale_spin.value() == 4
+    flow.classify.scale_combo.value = 4
+    assert widget.scale_spin.value == 4
     flags = widget.report.flags
     assert flags[0] == flags[1] == []
     assert flags[2] == ["too small for scale 4 windows (needs 17 px)"]
@@ -213,7 +213,7 @@ def test_material_too_small_for_the_recommended_windows_is_flagged(mosaic_viewer
     assert "scale 4 windows" in layer.text.values[2]
     # the summary gives the library's sentence: which box to enlarge, to what
     _, sentence = widget.current_samples().window_limit(4)
-    assert sentence in widget.summary.text()
+    assert sentence in widget.summary.value
     assert "enlarge it to at least 17 px" in sentence
     # the flags are warnings: the samples can still be used
     assert widget.report.blocking == []

@@ -28,9 +28,9 @@ def test_mosaic_workflow(mosaic_viewer, qtbot, tmp_path, notifications):
 
     # samples: from the truth, named after it, coloured by material
     samples = flow.samples
-    samples.image_combo.select(image)
-    samples.truth_combo.select(truth)
-    samples.per_material_spin.setValue(16)
+    samples.image_combo.value = image
+    samples.truth_combo.value = truth
+    samples.per_material_spin.value = 16
     samples.samples_from_truth()
     wait_idle(qtbot, samples)
     layer = samples.samples_layer()
@@ -46,15 +46,15 @@ def test_mosaic_workflow(mosaic_viewer, qtbot, tmp_path, notifications):
     wait_idle(qtbot, flow.res)
     stats = flow.res.stats
     assert stats.suggested_scale == 5
-    assert flow.res.scale_spin.value() == 5
-    assert flow.classify.scale_spin.value() == 5
+    assert flow.res.scale_spin.value == 5
+    assert flow.classify.scale_combo.value == 5
     assert len(flow.res.figure.axes) == 4 * 2      # moments x materials
-    assert "Suggested RES: 5" in flow.res.reason.text()
+    assert "Suggested RES: 5" in flow.res.reason.value
 
     # classify with the defaults (F1, GM, chosen RES), Dice against the truth
-    assert flow.classify.feature_combo.currentText() == "F1"
-    assert flow.classify.classifier_combo.currentText() == "GM"
-    flow.classify.truth_combo.select(truth)
+    assert flow.classify.feature_combo.value == "F1"
+    assert flow.classify.classifier_combo.value == "GM"
+    flow.classify.truth_combo.value = truth
     flow.classify.classify()
     wait_idle(qtbot, flow.classify)
     labels = viewer.layers[f"{image.name} SWA labels"]
@@ -65,16 +65,16 @@ def test_mosaic_workflow(mosaic_viewer, qtbot, tmp_path, notifications):
     # GM needs more tiles than features (5) per material; the 32-px tiles of the boxes are
     # fewer, so the library lowers the chosen RES by one and says so
     assert labels.metadata[SEGMENTATION_KEY]["scale"] == 4
-    assert "eps_l" in flow.classify.scores.text() and "Dice" in flow.classify.scores.text()
+    assert "eps_l" in flow.classify.scores.value and "Dice" in flow.classify.scores.value
     assert flow.classify.signature_table.rowCount() == 2
 
     # mesh: the classification is passed on; checks pass; one vertex triple per triangle
-    assert flow.mesh.labels_combo.layer() is labels
+    assert flow.mesh.labels_combo.value is labels
     flow.mesh.run_mesh()
     wait_idle(qtbot, flow.mesh)
     mesh = flow.mesh.mesh
     assert flow.mesh.checks["all_passed"]
-    assert "checks: all passed" in flow.mesh.summary.text()
+    assert "checks: all passed" in flow.mesh.summary.value
     surface = flow.mesh.surface_layer
     vertices, triangles, values = surface.data
     assert len(triangles) == mesh.n_cells
@@ -82,11 +82,11 @@ def test_mosaic_workflow(mosaic_viewer, qtbot, tmp_path, notifications):
     np.testing.assert_allclose(values, np.repeat(mesh.quality, 3))
     assert flow.mesh.figure.axes, "quality histogram drawn"
     # colour toggle: by material every triangle has one colour on its three vertices
-    flow.mesh.color_combo.setCurrentText(COLOR_BY_MATERIAL)
+    flow.mesh.color_combo.value = COLOR_BY_MATERIAL
     colors = surface.vertex_colors.reshape(-1, 3, 4)
     assert (colors == colors[:, :1]).all()
     assert len(np.unique(colors[:, 0], axis=0)) == 2
-    flow.mesh.color_combo.setCurrentText(COLOR_BY_QUALITY)
+    flow.mesh.color_combo.value = COLOR_BY_QUALITY
     assert surface.vertex_colors is None or len(surface.vertex_colors) == 0
 
     # export through the widget and through napari's Save (the npe2 writer)

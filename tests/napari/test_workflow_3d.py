@@ -26,9 +26,9 @@ def test_phantom_workflow(phantom_viewer, qtbot, tmp_path, notifications):
     viewer.window.add_dock_widget(flow)
 
     samples = flow.samples
-    samples.truth_combo.select(truth)
-    samples.per_material_spin.setValue(8)
-    samples.scale_spin.setValue(2)
+    samples.truth_combo.value = truth
+    samples.per_material_spin.value = 8
+    samples.scale_spin.value = 2
     samples.samples_from_truth()
     wait_idle(qtbot, samples)
     layer = samples.samples_layer()
@@ -46,9 +46,9 @@ def test_phantom_workflow(phantom_viewer, qtbot, tmp_path, notifications):
     flow.res.compute()
     wait_idle(qtbot, flow.res)
     assert flow.res.stats.suggested_scale == 2
-    assert flow.classify.scale_spin.value() == 2
+    assert flow.classify.scale_combo.value == 2
 
-    flow.classify.truth_combo.select(truth)
+    flow.classify.truth_combo.value = truth
     flow.classify.classify()
     wait_idle(qtbot, flow.classify)
     labels = viewer.layers[f"{image.name} SWA labels"]
@@ -89,13 +89,13 @@ def test_tile_resolution_labels_overlay_the_image(phantom_viewer, qtbot):
     viewer, image, truth = phantom_viewer
     flow = WorkflowWidget(viewer)
     samples = flow.samples
-    samples.truth_combo.select(truth)
-    samples.scale_spin.setValue(1)          # CSF blocks of 4^3 voxels: 8 tiles each at j=1
+    samples.truth_combo.value = truth
+    samples.scale_spin.value = 1  # CSF blocks of 4^3 voxels: 8 tiles each at j=1
     samples.samples_from_truth()
     wait_idle(qtbot, samples)
-    flow.classify.method_combo.setCurrentText(METHOD_REFERENCE)   # one tile scale
-    flow.classify.scale_spin.setValue(1)
-    flow.classify.output_combo.setCurrentText(OUTPUT_TILES)
+    flow.classify.method_combo.value = METHOD_REFERENCE  # one tile scale
+    flow.classify.scale_combo.value = 1
+    flow.classify.output_combo.value = OUTPUT_TILES
     flow.classify.classify()
     wait_idle(qtbot, flow.classify)
     tiles = viewer.layers[f"{image.name} SWA labels"]

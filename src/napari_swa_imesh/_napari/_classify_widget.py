@@ -6,15 +6,15 @@ import math
 from typing import TYPE_CHECKING
 
 import numpy as np
+from magicgui.widgets import ComboBox, Container, SpinBox
 from qtpy.QtCore import Signal
-from qtpy.QtWidgets import (QComboBox, QFileDialog, QFormLayout, QGroupBox, QHBoxLayout,
-                            QLabel, QPushButton, QSpinBox, QTableWidget, QTableWidgetItem,
-                            QVBoxLayout, QWidget)
+from qtpy.QtWidgets import QFileDialog, QTableWidget, QTableWidgetItem, QWidget
 
 from ..segmentation import (CLASSIFIERS, FEATURE_SETS, MOMENT_NAMES, dice_scores, load_model,
                             segment_steps, tile_placement)
 from . import _samples_layer as sl
-from ._layers import LayerCombo, labels_colormap, layer_spacing, material_palette
+from ._dock import button, group, scroll_body, side_by_side, wrapped_label
+from ._layers import labels_colormap, layer_picker, layer_spacing, material_palette, pick
 from ._tasks import TaskPanel, notify_error, notify_info, notify_warning
 
 if TYPE_CHECKING:
@@ -22,15 +22,15 @@ if TYPE_CHECKING:
 
     from ..segmentation import SegmentationResult, SWAModel
 
-__all__ = ["ClassifyWidget", "SEGMENTATION_KEY", "OUTPUT_FULL", "OUTPUT_TILES", "METHOD_RECOMMENDED",
-           "METHOD_REFERENCE"]
+__all__ = ["ClassifyWidget", "SEGMENTATION_KEY", "OUTPUT_FULL", "OUTPUT_TILES",
+           "METHOD_RECOMMENDED", "METHOD_REFERENCE", "run_summary"]
 
 SEGMENTATION_KEY = "swa_imesh_segmentation"   # Labels metadata: the run's summary
 OUTPUT_FULL = "full resolution"
 OUTPUT_TILES = "one label per tile"
 METHOD_RECOMMENDED = "recommended (multi-scale, full resolution)"
 METHOD_REFERENCE = "reference (one tile scale)"
-_SEGMENT_STEPS = 5   # segment_steps reports done = 0..5
+SUGGESTED = "suggested RES"
 
 
 class ClassifyWidget(QWidget):
@@ -58,108 +58,78 @@ class ClassifyWidget(QWidget):
         self.result: SegmentationResult | None = None
         self.dice: dict[int, float] | None = None
         self.loaded_model: SWAModel | None = None
-        self._scale_from_res: int | None = None   # spin value set from the RES choice
+        self._scale_from_res: int | None = None   # scale set from the RES choice
         self._setting_scale = False
         self._dropped_scale: int | None = None    # a RES choice dropped as stale
         self._watcher = sl.SamplesWatcher(self.update_scale_note)
-
-        self.image_combo = LayerCombo(self.viewer, ("Image",))
-        self.samples_combo = LayerCombo(self.viewer, ("Shapes",), accept=sl.is_samples_layer)
-        self.method_combo = QComboBox()
-        self.method_combo.addItems([METHOD_RECOMMENDED, METHOD_REFERENCE])
-        self.method_combo.setToolTip(
-            "recommended: per-pixel statistics at every scale up to the RES, refined at "
-            "boundaries, MRF-smoothed and bias-corrected (full-resolution labels); reference: "
-            "the dissertation's method, one feature set and classifier on tiles of one scale.")
-        self.method_combo.currentTextChanged.connect(self._on_method_changed)
-        self.feature_combo = QComboBox()
-        self.feature_combo.addItems(list(FEATURE_SETS))
-        self.feature_combo.setToolTip("Table 2.1: F1 moments, F2 entropy, F3 correlation "
-                                      "lengths, F4..F7 their unions.")
-        self.classifier_combo = QComboBox()
-        self.classifier_combo.addItems([c.upper() for c in CLASSIFIERS])
-        self.classifier_combo.setToolTip("GM: Gaussian maximum likelihood; MD: nearest "
-                                         "neighbour; LVQ: learning vector quantisation.")
-        self.scale_spin = QSpinBox()
-        self.scale_spin.setRange(-1, 16)
-        self.scale_spin.setValue(-1)
-        self.scale_spin.setSpecialValueText("suggested RES")
-        self.scale_spin.setToolTip("Tile scale j (tiles of 2^j px per axis); by default the "
-                                   "scale chosen in the RES plots, else the suggested RES.")
-        self.scale_spin.valueChanged.connect(self._on_scale_spin)
-        self.scale_note = QLabel("")
-        self.scale_note.setWordWrap(True)
-        self.sieve_spin = QSpinBox()
-        self.sieve_spin.setRange(0, 1_000_000)
-        self.sieve_spin.setSpecialValueText("off")
-        self.sieve_spin.setToolTip("Merge connected regions smaller than this many tiles "
-                                   "into their surroundings.")
-        self.output_combo = QComboBox()
-        self.output_combo.addItems([OUTPUT_FULL, OUTPUT_TILES])
-        self.truth_combo = LayerCombo(self.viewer, ("Labels",), none_text="(none)")
-        self.truth_combo.setToolTip("A ground truth to report Dice against (optional).")
-        self.classify_button = QPushButton("Classify")
-        self.classify_button.clicked.connect(self.classify)
-
-        self.save_model_button = QPushButton("Save model...")
-        self.save_model_button.setEnabled(False)
-        self.save_model_button.clicked.connect(self._on_save_model_clicked)
-        self.load_model_button = QPushButton("Load model...")
-        self.load_model_button.clicked.connect(self._on_load_model_clicked)
-        self.apply_model_button = QPushButton("Apply loaded model to image")
-        self.apply_model_button.setEnabled(False)
-        self.apply_model_button.clicked.connect(self.apply_model)
-        self.model_label = QLabel("no model loaded")
-        self.model_label.setWordWrap(True)
-
-        self.scores = QLabel("")
-        self.scores.setWordWrap(True)
+        self.image_combo = layer_picker(self.viewer, "Image", label="image")
+        self.samples_combo = layer_picker(self.viewer, "Shapes", label="samples",
+                                          accept=sl.is_samples_layer)
+        self.method_combo = ComboBox(
+            label="method", choices=[METHOD_RECOMMENDED, METHOD_REFERENCE],
+            tooltip="recommended: per-pixel statistics at every scale up to the RES, refined "
+                    "at boundaries, MRF-smoothed and bias-corrected (full-resolution labels); "
+                    "reference: the dissertation's method, one feature set and classifier on "
+                    "tiles of one scale.")
+        self.feature_combo = ComboBox(label="feature set", choices=list(FEATURE_SETS),
+                                      tooltip="Table 2.1: F1 moments, F2 entropy, F3 "
+                                              "correlation lengths, F4..F7 their unions.")
+        self.classifier_combo = ComboBox(
+            label="classifier", choices=[c.upper() for c in CLASSIFIERS],
+            tooltip="GM: Gaussian maximum likelihood; MD: nearest neighbour; LVQ: learning "
+                    "vector quantisation.")
+        self.scale_combo = ComboBox(label="scale j", choices=[(SUGGESTED, None)] + [
+            (str(j), j) for j in range(17)])
+        self.scale_note = wrapped_label()
+        self.sieve_spin = SpinBox(label="sieve (tiles, 0 = off)", min=0, max=1_000_000,
+                                  tooltip="Merge connected regions smaller than this many "
+                                          "tiles into their surroundings.")
+        self.output_combo = ComboBox(label="output", choices=[OUTPUT_FULL, OUTPUT_TILES])
+        self.truth_combo = layer_picker(
+            self.viewer, "Labels", label="truth (Dice)", none_text="(none)",
+            tooltip="A ground truth to report Dice against (optional).")
+        self.classify_button = button("Classify", self.classify)
+        self.save_model_button = button("Save model...", self._on_save_model_clicked)
+        self.load_model_button = button("Load model...", self._on_load_model_clicked)
+        self.apply_model_button = button("Apply loaded model to image", self.apply_model)
+        self.model_label = wrapped_label("no model loaded")
+        self.scores = wrapped_label()
         self.signature_table = QTableWidget(0, 0)
         self.signature_table.setEditTriggers(QTableWidget.NoEditTriggers)
-        self.export_button = QPushButton("Export signatures CSV...")
-        self.export_button.setEnabled(False)
-        self.export_button.clicked.connect(self._on_export_clicked)
+        self.export_button = button("Export signatures CSV...", self._on_export_clicked)
+        for later in (self.save_model_button, self.apply_model_button, self.export_button):
+            later.enabled = False
         self.tasks = TaskPanel()
 
-        form = QFormLayout()
-        form.addRow("image", self.image_combo)
-        form.addRow("samples", self.samples_combo)
-        form.addRow("method", self.method_combo)
-        form.addRow("feature set", self.feature_combo)
-        form.addRow("classifier", self.classifier_combo)
-        form.addRow("scale j", self.scale_spin)
-        form.addRow(self.scale_note)
-        form.addRow("sieve (tiles)", self.sieve_spin)
-        form.addRow("output", self.output_combo)
-        form.addRow("truth (Dice)", self.truth_combo)
-        model_box = QGroupBox("Model")
-        model_layout = QVBoxLayout(model_box)
-        row = QHBoxLayout()
-        row.addWidget(self.save_model_button)
-        row.addWidget(self.load_model_button)
-        model_layout.addLayout(row)
-        model_layout.addWidget(self.model_label)
-        model_layout.addWidget(self.apply_model_button)
-        layout = QVBoxLayout(self)
-        layout.addLayout(form)
-        layout.addWidget(self.classify_button)
+        layout = scroll_body(self)
+        layout.addWidget(Container(widgets=[
+            self.image_combo, self.samples_combo, self.method_combo, self.feature_combo,
+            self.classifier_combo, self.scale_combo]).native)
+        layout.addWidget(self.scale_note.native)
+        layout.addWidget(Container(widgets=[self.sieve_spin, self.output_combo,
+                                            self.truth_combo, self.classify_button]).native)
         layout.addWidget(self.tasks)
-        layout.addWidget(self.scores)
-        layout.addWidget(QLabel("Material signatures (moments of the tiles of each material)"))
+        layout.addWidget(self.scores.native)
+        layout.addWidget(wrapped_label("Material signatures (moments of the tiles of each "
+                                       "material)").native)
         layout.addWidget(self.signature_table, 1)
-        layout.addWidget(self.export_button)
-        layout.addWidget(model_box)
-        self.samples_combo.currentTextChanged.connect(self._on_samples_layer_selected)
-        self.image_combo.currentTextChanged.connect(self._on_layers_changed)
+        layout.addWidget(self.export_button.native)
+        layout.addWidget(group("Model", [
+            side_by_side(self.save_model_button, self.load_model_button), self.model_label,
+            self.apply_model_button]))
+        self.method_combo.changed.connect(self._on_method_changed)
+        self.scale_combo.changed.connect(self._on_scale_combo)
+        self.samples_combo.changed.connect(self._on_samples_layer_selected)
+        self.image_combo.changed.connect(self._on_layers_changed)
         self._on_samples_layer_selected()
         self._on_method_changed()
 
     def _on_method_changed(self, *_) -> None:
         # feature set and classifier belong to the reference method only
-        reference = self.method_combo.currentText() == METHOD_REFERENCE
-        self.feature_combo.setEnabled(reference)
-        self.classifier_combo.setEnabled(reference)
-        self.scale_spin.setToolTip(
+        reference = self.method_combo.value == METHOD_REFERENCE
+        self.feature_combo.enabled = reference
+        self.classifier_combo.enabled = reference
+        self.scale_combo.tooltip = (
             "Tile scale j (tiles of 2^j px per axis); by default the scale chosen in the RES "
             "plots, else the suggested RES." if reference else
             "Largest scale the recommended method looks at (windows of 2^j+1 px); by default "
@@ -168,18 +138,18 @@ class ClassifyWidget(QWidget):
 
     # -- settings --------------------------------------------------------------------------
     def _on_samples_layer_selected(self, *_) -> None:
-        layer = self.samples_combo.layer()
+        layer = self.samples_combo.value
         if layer is not None:
             image_name = layer.metadata.get(sl.SAMPLES_KEY)
             if image_name and image_name in self.viewer.layers:
-                self.image_combo.select(self.viewer.layers[image_name])
-            chosen = sl.chosen_scale(layer, self.image_combo.layer())
+                pick(self.image_combo, self.viewer.layers[image_name])
+            chosen = sl.chosen_scale(layer, self.image_combo.value)
             if chosen is not None:
                 self.set_scale(chosen)
         self._on_layers_changed()
 
     def _on_layers_changed(self, *_) -> None:
-        self._watcher.watch(self.samples_combo.layer(), self.image_combo.layer())
+        self._watcher.watch(self.samples_combo.value, self.image_combo.value)
         self.update_scale_note()
 
     def set_scale(self, scale: int) -> None:
@@ -188,19 +158,19 @@ class ClassifyWidget(QWidget):
         The scale is used only while the samples layer's stored choice (see
         :func:`._samples_layer.chosen_scale`) still matches the boxes and image.
         """
-        self._set_spin(int(scale))
+        self._set_scale_combo(int(scale))
         self._scale_from_res = int(scale)
         self._dropped_scale = None
         self.update_scale_note()
 
-    def _set_spin(self, value: int) -> None:
+    def _set_scale_combo(self, value: int | None) -> None:
         self._setting_scale = True
         try:
-            self.scale_spin.setValue(value)
+            self.scale_combo.value = value
         finally:
             self._setting_scale = False
 
-    def _on_scale_spin(self, value: int) -> None:
+    def _on_scale_combo(self, value: int | None) -> None:
         if self._setting_scale:
             return
         self._scale_from_res = None          # typed here: the user's own choice
@@ -213,16 +183,16 @@ class ClassifyWidget(QWidget):
         Drops (resets to "suggested RES") a scale that came from a RES choice no longer
         matching the samples.
         """
-        value = self.scale_spin.value()
-        if value >= 0 and self._scale_from_res == value:
-            layer, image = self.samples_combo.layer(), self.image_combo.layer()
+        value = self.scale_combo.value
+        if value is not None and self._scale_from_res == value:
+            layer, image = self.samples_combo.value, self.image_combo.value
             choice = None if layer is None else sl.scale_choice(layer, image)
             if choice is not None and choice.fresh and choice.scale == value:
                 return value, f"scale {value}, chosen on the RES tab for these sample boxes"
             self._dropped_scale, self._scale_from_res = value, None
-            self._set_spin(-1)
-            value = -1
-        if value < 0:
+            self._set_scale_combo(None)
+            value = None
+        if value is None:
             source = ("the suggested RES of the current sample boxes (computed when you "
                       "classify, as the command line does)")
             if self._dropped_scale is not None:
@@ -234,7 +204,7 @@ class ClassifyWidget(QWidget):
 
     def window_warning(self, samples, scale: int | None) -> str | None:
         """The :meth:`Samples.window_limit` sentence for the recommended method at `scale`."""
-        if scale is None or self.method_combo.currentText() != METHOD_RECOMMENDED:
+        if scale is None or self.method_combo.value != METHOD_RECOMMENDED:
             return None
         limit = samples.window_limit(int(scale))
         return None if limit is None else limit[1]
@@ -243,7 +213,7 @@ class ClassifyWidget(QWidget):
         """Say which scale the next run uses, where it comes from, and what to enlarge."""
         scale, source = self.resolve_scale()
         text = f"Next run: {source}."
-        layer, image = self.samples_combo.layer(), self.image_combo.layer()
+        layer, image = self.samples_combo.value, self.image_combo.value
         if scale is not None and layer is not None and image is not None \
                 and layer.ndim == image.ndim:
             try:
@@ -253,16 +223,16 @@ class ClassifyWidget(QWidget):
             warning = None if samples is None else self.window_warning(samples, scale)
             if warning:
                 text += f" Warning: {warning}."
-        self.scale_note.setText(text)
+        self.scale_note.value = text
 
     def select_layers(self, image=None, samples=None) -> None:
         if samples is not None:
-            self.samples_combo.select(samples)
+            pick(self.samples_combo, samples)
         if image is not None:
-            self.image_combo.select(image)
+            pick(self.image_combo, image)
 
     def _truth(self, image_shape):
-        truth = self.truth_combo.layer()
+        truth = self.truth_combo.value
         if truth is None:
             return None
         if tuple(truth.data.shape) != tuple(image_shape):
@@ -274,7 +244,7 @@ class ClassifyWidget(QWidget):
     # -- runs ------------------------------------------------------------------------------
     def classify(self):
         """Fit on the samples and classify the image, in a worker."""
-        image, layer = self.image_combo.layer(), self.samples_combo.layer()
+        image, layer = self.image_combo.value, self.samples_combo.value
         if image is None:
             notify_error("no image layer to classify: open an image (or File > Open Sample) "
                          "and pick it in the classify widget.")
@@ -293,8 +263,7 @@ class ClassifyWidget(QWidget):
         if self._dropped_scale is not None:
             notify_warning(f"classifying at {source}.")
         window = self.window_warning(samples, scale)
-        self.scale_note.setText(f"Next run: {source}."
-                                + (f" Warning: {window}." if window else ""))
+        self.scale_note.value = f"Next run: {source}." + (f" Warning: {window}." if window else "")
         if window:
             notify_warning(window)
         small = [i for i, f in enumerate(report.flags) if any(x.startswith("too small at")
@@ -305,10 +274,10 @@ class ClassifyWidget(QWidget):
                 f"smaller than one tile at scale {scale} and give no training tile; enlarge "
                 "them or choose a smaller scale.")
         truth = self._truth(data.shape)
-        options = dict(scale=scale, sieve=self.sieve_spin.value(), spacing=layer_spacing(image))
-        if self.method_combo.currentText() == METHOD_REFERENCE:
-            options.update(method="reference", feature_set=self.feature_combo.currentText(),
-                           classifier=self.classifier_combo.currentText().lower())
+        options = dict(scale=scale, sieve=self.sieve_spin.value, spacing=layer_spacing(image))
+        if self.method_combo.value == METHOD_REFERENCE:
+            options.update(method="reference", feature_set=self.feature_combo.value,
+                           classifier=self.classifier_combo.value.lower())
         else:
             options.update(method="recommended")
 
@@ -321,7 +290,7 @@ class ClassifyWidget(QWidget):
             self._show_result(image, *out)
             self._show_scale_used(out[0], samples, source, window)
 
-        return self.tasks.run(steps, title="SWA classification", total=_SEGMENT_STEPS,
+        return self.tasks.run(steps, title="SWA classification",
                               on_result=show)
 
     def _show_scale_used(self, result, samples, source: str, window: str | None) -> None:
@@ -333,11 +302,11 @@ class ClassifyWidget(QWidget):
         notes = ([later] if later else []) + [w for w in self.tasks.warnings if w != later]
         if notes:
             text += " Warning: " + " ".join(n.rstrip(".") + "." for n in notes)
-        self.scale_note.setText(text)
+        self.scale_note.value = text
 
     def apply_model(self):
         """Apply the loaded model to the selected image, in a worker."""
-        image = self.image_combo.layer()
+        image = self.image_combo.value
         if self.loaded_model is None:
             notify_error("no model loaded: press 'Load model...' and pick a .npz model file.")
             return None
@@ -349,7 +318,7 @@ class ClassifyWidget(QWidget):
         except ValueError as exc:
             notify_error(f"cannot apply the model: {exc}")
             return None
-        model, sieve, truth = self.loaded_model, self.sieve_spin.value(), self._truth(data.shape)
+        model, sieve, truth = self.loaded_model, self.sieve_spin.value, self._truth(data.shape)
         if model.spacing and not np.allclose(model.spacing, layer_spacing(image)):
             notify_warning(f"the model was trained on voxels of {list(model.spacing)}, the "
                            f"image has {list(layer_spacing(image))}; tiles will cover other "
@@ -360,7 +329,7 @@ class ClassifyWidget(QWidget):
             dice = None if truth is None else dice_scores(result.labels, truth)
             return result, dice
 
-        return self.tasks.run(steps, title="Applying the model", total=_SEGMENT_STEPS,
+        return self.tasks.run(steps, title="Applying the model",
                               on_result=lambda out: self._show_result(image, *out))
 
     # -- results (main thread) ---------------------------------------------------------------
@@ -370,7 +339,7 @@ class ClassifyWidget(QWidget):
         names = {m.label: m.name for m in materials}
         colors = material_palette(names, {m.label: m.color for m in materials})
         spacing = layer_spacing(image)
-        if self.output_combo.currentText() == OUTPUT_TILES:
+        if self.output_combo.value == OUTPUT_TILES:
             data = result.tile_labels
             layer_scale, offset = tile_placement(result.scale, spacing, image.ndim)
             translate = tuple(t + o for t, o in zip(image.translate, offset))
@@ -390,34 +359,11 @@ class ClassifyWidget(QWidget):
             labels = self.viewer.add_labels(data, name=name, scale=layer_scale,
                                             translate=translate, opacity=0.5,
                                             colormap=labels_colormap(colors), metadata=metadata)
-        self._show_scores(result, dice, names)
+        self.scores.value = run_summary(result, dice, names)
         self._show_signatures(result.signatures)
-        self.save_model_button.setEnabled(True)
-        self.export_button.setEnabled(True)
+        self.save_model_button.enabled = True
+        self.export_button.enabled = True
         self.labels_ready.emit(labels)
-
-    def _show_scores(self, result, dice, names) -> None:
-        eps_l, eps_m = result.eps_l, result.eps_m
-        how = result.model.scores.get("eps_l_method", "")
-        if getattr(result, "method", "reference") == "recommended":
-            scales = list(result.scales)
-            parts = [f"recommended: scales {', '.join(map(str, scales))} (windows up to "
-                     f"{(1 << max(scales)) + 1} px; pixels per scale "
-                     f"{result.summary().get('pixels_per_scale', {})}), "
-                     f"{result.model.feature_set}, {result.model.classifier_name.upper()}"]
-        else:
-            parts = [f"scale {result.scale} (tiles of {1 << result.scale} px), "
-                     f"{result.model.feature_set}, {result.model.classifier_name.upper()}"]
-        if eps_l is not None:
-            parts.append(f"eps_l = {eps_l:.2f} % ({how}), eps_m = {eps_m:.3f}")
-        regularized = result.model.scores.get("regularized")
-        if regularized:
-            parts.append(f"covariance regularised for material(s) {regularized}")
-        if dice:
-            parts.append("Dice: " + ", ".join(
-                f"{names.get(k, k)} {v:.3f}" for k, v in dice.items() if not math.isnan(v)))
-        parts.append(f"{result.seconds.get('total', float('nan')):.2f} s")
-        self.scores.setText("; ".join(parts))
 
     def _show_signatures(self, signatures: list[dict]) -> None:
         columns = ["name", "tiles"] + [f"{m}_{s}" for m in MOMENT_NAMES for s in ("mean", "std")]
@@ -436,7 +382,7 @@ class ClassifyWidget(QWidget):
     # -- files -----------------------------------------------------------------------------
     def export_signatures(self, path) -> None:
         """Write the material signatures of the last run as CSV."""
-        from ..segmentation._cli import write_signatures_csv
+        from ..segmentation import write_signatures_csv
 
         if self.result is None:
             notify_error("classify first: the signatures come from a classification.")
@@ -468,9 +414,9 @@ class ClassifyWidget(QWidget):
             notify_error(f"could not load the model: {exc}")
             return
         self.loaded_model = model
-        self.apply_model_button.setEnabled(True)
+        self.apply_model_button.enabled = True
         names = ", ".join(m.name for m in model.materials)
-        self.model_label.setText(
+        self.model_label.value = (
             f"loaded: {model.ndim}-D, scale {model.scale}, {model.feature_set}, "
             f"{model.classifier_name.upper()}, materials {names}")
 
@@ -490,3 +436,19 @@ class ClassifyWidget(QWidget):
         path, _ = QFileDialog.getOpenFileName(self, "Load model", "", "SWA model (*.npz)")
         if path:
             self.load_model(path)
+
+
+def run_summary(result: "SegmentationResult", dice: dict[int, float] | None,
+                names: dict[int, str]) -> str:
+    """One line about a classification: method and scales, scores, Dice, time.
+
+    The library's ``SegmentationResult.describe()`` (what the command line and the demo
+    print), with the Dice against a truth layer and the time.
+    """
+    # the task panel shows the run's warnings, so the description leaves them out
+    parts = [result.describe(notes=False).replace("\n", "; ")]
+    if dice:
+        parts.append("Dice: " + ", ".join(
+            f"{names.get(k, k)} {v:.3f}" for k, v in dice.items() if not math.isnan(v)))
+    parts.append(f"{result.seconds.get('total', float('nan')):.2f} s")
+    return "; ".join(parts)

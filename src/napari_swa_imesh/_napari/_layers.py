@@ -1,16 +1,15 @@
-"""Small adapters between napari layers and the library: colours, spacing, placement, combos."""
+"""Small adapters between napari layers and the library: colours, spacing, placement, pickers."""
 
 from __future__ import annotations
 
 from typing import TYPE_CHECKING
 
 import numpy as np
-from qtpy.QtWidgets import QComboBox
 
 if TYPE_CHECKING:
     import napari
 
-__all__ = ["PALETTE", "material_palette", "labels_colormap", "LayerCombo", "theme_colors",
+__all__ = ["PALETTE", "material_palette", "labels_colormap", "layer_picker", "pick",
            "layer_spacing", "index_to_layer_data", "mesh_translate", "SAMPLES_KEY",
            "MATERIALS_KEY", "EXTENT_KEY", "MESH_KEY", "SCALE_KEY"]
 
@@ -47,19 +46,6 @@ def labels_colormap(colors: dict[int, str]):
     return DirectLabelColormap(color_dict=color_dict)
 
 
-def theme_colors(viewer: "napari.viewer.Viewer") -> tuple[bool, str, str]:
-    """(dark, background hex, text hex) of the viewer's theme, for matplotlib figures."""
-    from napari.utils.theme import get_theme
-
-    try:
-        theme = get_theme(viewer.theme)
-        bg, fg = theme.background.as_hex(), theme.text.as_hex()
-    except (ValueError, KeyError, AttributeError):
-        bg, fg = "#262930", "#f0f1f2"
-    rgb = np.array([int(bg[i:i + 2], 16) for i in (1, 3, 5)]) / 255
-    return bool(rgb @ [0.299, 0.587, 0.114] < 0.5), bg, fg
-
-
 def layer_spacing(layer) -> tuple[float, ...]:
     """Voxel spacing of a layer: its ``scale``."""
     return tuple(float(s) for s in layer.scale)
@@ -84,73 +70,69 @@ def mesh_translate(labels_layer) -> tuple[float, ...]:
     return tuple(float(t - s / 2) for t, s in zip(labels_layer.translate, labels_layer.scale))
 
 
-class LayerCombo(QComboBox):
-    """A combo box of the viewer's layers of some types, kept up to date.
+class _Follower:
+    """Re-lists a picker's choices on layer-list events; held by the picker only, so the
+    viewer's (weak) reference to it dies with the picker."""
+
+    def __init__(self, viewer, combo):
+        self.combo = combo
+        events = viewer.layers.events
+        self.emitters = (events.inserted, events.removed, events.reordered, events.renamed)
+        for emitter in self.emitters:
+            emitter.connect(self.reset)
+
+    def reset(self, event=None) -> None:
+        try:
+            self.combo.reset_choices()
+        except RuntimeError:  # the Qt side was deleted before Python's: stop listening
+            for emitter in self.emitters:
+                emitter.disconnect(self.reset)
+
+
+def layer_picker(viewer: "napari.viewer.Viewer", kind: str, *, label: str, accept=None,
+                 none_text: str | None = None, tooltip: str | None = None):
+    """A magicgui ComboBox of `viewer`'s layers of one type, kept in step with the layer list.
+
+    napari's own layer pickers (a parameter annotated ``napari.layers.Image``) find their
+    viewer by walking up the Qt parents, so they stay empty until docked; this one is bound
+    to `viewer` and works in a dock, in a tab of the workflow, and undocked (tests).
 
     Parameters
     ----------
     viewer : napari.viewer.Viewer
-    layer_types : tuple of str
-        napari layer class names, e.g. ``("Image",)``.
+    kind : str
+        napari layer class name, e.g. ``"Image"``.
+    label : str
+        Row label in a magicgui Container.
     accept : callable, optional
         Further filter on layers (e.g. not the 3-D extent overlay).
     none_text : str, optional
-        When given, a first entry with this text selects no layer.
+        When given, a first entry with this text selects no layer (value None).
+    tooltip : str, optional
+
+    Returns
+    -------
+    magicgui.widgets.ComboBox
+        ``.value`` is the selected layer (or None); ``.changed`` is emitted with it.
     """
+    import napari.layers
+    from magicgui.widgets import ComboBox
 
-    def __init__(self, viewer: "napari.viewer.Viewer", layer_types: tuple[str, ...], *,
-                 accept=None, none_text: str | None = None, parent=None):
-        super().__init__(parent)
-        self.viewer = viewer
-        self.layer_types = layer_types
-        self.accept = accept
-        self.none_text = none_text
-        events = viewer.layers.events
-        for emitter in (events.inserted, events.removed, events.reordered):
-            emitter.connect(self._on_layers_changed)
-        for layer in viewer.layers:
-            layer.events.name.connect(self._on_layers_changed)
-        self.refresh()
+    layer_type = getattr(napari.layers, kind)
 
-    def _on_layers_changed(self, event=None) -> None:
-        if event is not None and getattr(event, "type", "") == "inserted":
-            event.value.events.name.connect(self._on_layers_changed)
-        try:
-            self.refresh()
-        except RuntimeError:  # the Qt side was deleted before Python's: stop listening
-            events = self.viewer.layers.events
-            for emitter in (events.inserted, events.removed, events.reordered):
-                emitter.disconnect(self._on_layers_changed)
+    def choices(_widget):
+        layers = [layer for layer in viewer.layers if isinstance(layer, layer_type)
+                  and (accept is None or accept(layer))]
+        return ([(none_text, None)] if none_text is not None else []) + \
+            [(layer.name, layer) for layer in layers]
 
-    def _layers(self) -> list:
-        return [layer for layer in self.viewer.layers
-                if type(layer).__name__ in self.layer_types
-                and (self.accept is None or self.accept(layer))]
+    combo = ComboBox(label=label, choices=choices, tooltip=tooltip)
+    combo._follower = _Follower(viewer, combo)
+    return combo
 
-    def refresh(self) -> None:
-        """Re-list the layers, keeping the current one selected if it still exists."""
-        current = self.currentText()
-        names = ([self.none_text] if self.none_text is not None else []) + \
-            [layer.name for layer in self._layers()]
-        self.blockSignals(True)
-        self.clear()
-        self.addItems(names)
-        if current in names:
-            self.setCurrentText(current)
-        self.blockSignals(False)
-        if self.currentText() != current:
-            self.currentTextChanged.emit(self.currentText())
 
-    def layer(self):
-        """The selected layer, or None."""
-        name = self.currentText()
-        if not name or name == self.none_text or name not in self.viewer.layers:
-            return None
-        return self.viewer.layers[name]
-
-    def select(self, layer) -> None:
-        """Select `layer` (refreshing first, in case it was just added)."""
-        self.refresh()
-        index = self.findText(layer.name)
-        if index >= 0:
-            self.setCurrentIndex(index)
+def pick(combo, layer) -> None:
+    """Select `layer` in a :func:`layer_picker` (re-listing first, in case it was just added)."""
+    combo.reset_choices()
+    if layer in combo.choices:
+        combo.value = layer

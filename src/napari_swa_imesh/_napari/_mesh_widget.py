@@ -2,26 +2,30 @@
 
 from __future__ import annotations
 
+from functools import lru_cache
 from typing import TYPE_CHECKING
 
 import numpy as np
+from magicgui.widgets import CheckBox, ComboBox, Container, PushButton
 from qtpy.QtCore import Qt, Signal
-from qtpy.QtWidgets import (QCheckBox, QComboBox, QFileDialog, QFormLayout, QLabel,
-                            QListWidget, QListWidgetItem, QPushButton, QVBoxLayout, QWidget)
+from qtpy.QtWidgets import QFileDialog, QLabel, QListWidget, QListWidgetItem, QWidget
 
-from ..mesh import QUALITY_METRICS, check_mesh, mesh_labels, write_mesh
+from ..mesh import QUALITY_METRICS, check_mesh, mesh_labels, quality_table, write_mesh
 from ..mesh._export import MESH_SUFFIXES
-from ._layers import MESH_KEY, LayerCombo, default_color, layer_spacing, mesh_translate
+from ._dock import scroll_body, wrapped_label
+from ._layers import MESH_KEY, default_color, layer_picker, layer_spacing, mesh_translate, pick
+from ._plots import ThemedFigure, dark_theme, theme_text_color
 from ._surface import mesh_surface
 from ._tasks import TaskPanel, notify_error, notify_info
 
 if TYPE_CHECKING:
     import napari
+    from matplotlib.figure import Figure
 
     from ..mesh import Mesh
 
 __all__ = ["MeshWidget", "COLOR_BY_QUALITY", "COLOR_BY_MATERIAL", "CHECKS_KEY",
-           "SURFACE_VALUES_KEY"]
+           "SURFACE_VALUES_KEY", "bound_range"]
 
 COLOR_BY_QUALITY = "quality (radius-to-edge)"
 COLOR_BY_MATERIAL = "material"
@@ -34,6 +38,19 @@ _ELEMENT = {2: "triangles", 3: "tetrahedra"}
 def quality_metric(ndim: int):
     """The radius-to-edge descriptor of the library for `ndim`-D elements."""
     return next(m for m in QUALITY_METRICS if m.name == "quality" and m.dim == ndim)
+
+
+@lru_cache(maxsize=None)
+def bound_range(ndim: int) -> tuple[float, float]:
+    """Radius-to-edge range of every IMESH template element in `ndim`-D (the shaded range).
+
+    From the regular simplex (the best any element can be) to the worst template simplex
+    of :func:`napari_swa_imesh.mesh.quality_table`, which meshes every leaf configuration
+    with the mesher's own templates: the proven bound, not a number copied here. About
+    1.5 s in 3-D, so call it in a worker first; it is cached.
+    """
+    regular = quality_metric(ndim).valid_range[0]
+    return regular, max(row["radius_edge_ratio"] for row in quality_table(ndim))
 
 
 def _labels_present(data: np.ndarray) -> list[int]:
@@ -55,82 +72,63 @@ class MeshWidget(QWidget):
     mesh_ready = Signal(object)
 
     def __init__(self, napari_viewer: "napari.viewer.Viewer", parent: QWidget | None = None):
-        from matplotlib.backends.backend_qtagg import FigureCanvasQTAgg
-        from matplotlib.figure import Figure
-
         super().__init__(parent)
         self.viewer = napari_viewer
         self.mesh: Mesh | None = None
         self.checks: dict | None = None
         self.surface_layer = None
-
-        self.labels_combo = LayerCombo(self.viewer, ("Labels",))
-        self.labels_combo.currentTextChanged.connect(self._refresh_materials)
-        self.method_combo = QComboBox()
-        self.method_combo.addItems(list(METHODS))
-        self.method_combo.setToolTip("template: look-up-table mesher, conforming with a "
-                                     "quality bound; delaunay: the reference's Qhull step, "
-                                     "for comparison (not conforming in 3-D).")
+        self.labels_combo = layer_picker(self.viewer, "Labels", label="labels")
+        self.method_combo = ComboBox(
+            label="method", choices=METHODS,
+            tooltip="template: look-up-table mesher, conforming with a quality bound; "
+                    "delaunay: the reference's Qhull step, for comparison (not conforming "
+                    "in 3-D).")
         self.exclude_list = QListWidget()
         self.exclude_list.setMaximumHeight(110)
         self.exclude_list.setToolTip("Checked materials are not meshed; their faces become "
                                      "the mesh boundary.")
-        self.checks_box = QCheckBox("check the mesh (conforming, volumes, labels recovered)")
-        self.checks_box.setChecked(True)
-        self.color_combo = QComboBox()
-        self.color_combo.addItems([COLOR_BY_QUALITY, COLOR_BY_MATERIAL])
-        self.color_combo.currentTextChanged.connect(lambda *_: self.apply_colors())
-        self.edges_box = QCheckBox("show element edges")
-        self.edges_box.setChecked(True)
-        self.edges_box.toggled.connect(lambda *_: self.apply_colors())
-        self.mesh_button = QPushButton("Mesh")
-        self.mesh_button.clicked.connect(self.run_mesh)
-        self.export_button = QPushButton("Export mesh...")
-        self.export_button.setEnabled(False)
-        self.export_button.setToolTip("Write the mesh (" + ", ".join(
-            s for s in MESH_SUFFIXES if s != ".ele") + ").")
-        self.export_button.clicked.connect(self._on_export_clicked)
-        self.summary = QLabel("")
-        self.summary.setWordWrap(True)
-        self.summary.setTextInteractionFlags(Qt.TextSelectableByMouse)
-        self.figure = Figure(figsize=(4, 2.4))
-        self.canvas = FigureCanvasQTAgg(self.figure)
-        self.canvas.setMinimumHeight(200)
+        self.checks_box = CheckBox(
+            text="check the mesh (conforming, volumes, labels recovered)", value=True)
+        self.color_combo = ComboBox(label="colour by",
+                                    choices=[COLOR_BY_QUALITY, COLOR_BY_MATERIAL])
+        self.edges_box = CheckBox(text="show element edges", value=True)
+        self.mesh_button = PushButton(text="Mesh")
+        self.export_button = PushButton(text="Export mesh...", enabled=False, tooltip=(
+            "Write the mesh (" + ", ".join(s for s in MESH_SUFFIXES if s != ".ele") + ")."))
+        self.summary = wrapped_label()
+        self.summary.native.setTextInteractionFlags(Qt.TextSelectableByMouse)
+        self.plot = ThemedFigure(self.viewer, self._draw_histogram, min_height=180)
         self.tasks = TaskPanel()
 
-        form = QFormLayout()
-        form.addRow("labels", self.labels_combo)
-        form.addRow("method", self.method_combo)
-        form.addRow("exclude", self.exclude_list)
-        form.addRow(self.checks_box)
-        form.addRow("colour by", self.color_combo)
-        form.addRow(self.edges_box)
-        layout = QVBoxLayout(self)
-        layout.addLayout(form)
-        layout.addWidget(self.mesh_button)
+        layout = scroll_body(self)
+        layout.addWidget(Container(widgets=[self.labels_combo, self.method_combo]).native)
+        layout.addWidget(QLabel("exclude"))
+        layout.addWidget(self.exclude_list)
+        layout.addWidget(Container(widgets=[self.checks_box, self.color_combo, self.edges_box,
+                                            self.mesh_button]).native)
         layout.addWidget(self.tasks)
-        layout.addWidget(self.summary)
-        layout.addWidget(self.canvas, 1)
-        layout.addWidget(self.export_button)
+        layout.addWidget(self.summary.native)
+        layout.addWidget(self.plot, 1)
+        layout.addWidget(self.export_button.native)
+        self.labels_combo.changed.connect(self._refresh_materials)
+        self.color_combo.changed.connect(self.apply_colors)
+        self.edges_box.changed.connect(self.apply_colors)
+        self.mesh_button.changed.connect(self.run_mesh)
+        self.export_button.changed.connect(self._on_export_clicked)
         self._refresh_materials()
-        self.viewer.events.theme.connect(self._on_theme)
 
-    def _on_theme(self, event=None) -> None:
-        if self.mesh is None:
-            return
-        try:
-            self._draw_histogram(self.mesh)
-        except RuntimeError:  # the Qt side is gone; napari drops us with the Python side
-            pass
+    @property
+    def figure(self) -> "Figure":
+        return self.plot.figure
 
     # -- inputs ----------------------------------------------------------------------------
     def select_labels(self, layer) -> None:
         """Mesh this Labels layer next (the workflow passes the classification)."""
-        self.labels_combo.select(layer)
+        pick(self.labels_combo, layer)
         self._refresh_materials()
 
     def _refresh_materials(self, *_) -> None:
-        layer = self.labels_combo.layer()
+        layer = self.labels_combo.value
         self.exclude_list.clear()
         if layer is None:
             return
@@ -158,7 +156,7 @@ class MeshWidget(QWidget):
     # -- run -------------------------------------------------------------------------------
     def run_mesh(self):
         """Mesh the selected Labels layer in a worker; show it when done."""
-        layer = self.labels_combo.layer()
+        layer = self.labels_combo.value
         if layer is None:
             notify_error("no Labels layer to mesh: classify an image first (classify widget) "
                          "or open a label image, and pick it in the mesh widget.")
@@ -169,7 +167,7 @@ class MeshWidget(QWidget):
             return None
         data = np.asarray(layer.data)
         spacing, exclude = layer_spacing(layer), self.excluded()
-        method, run_checks = self.method_combo.currentText(), self.checks_box.isChecked()
+        method, run_checks = self.method_combo.value, self.checks_box.value
         names = {int(k): str(v) for k, v in layer.metadata.get("material_names", {}).items()}
 
         def steps():
@@ -182,10 +180,11 @@ class MeshWidget(QWidget):
                 checks = check_mesh(mesh, data, exclude=exclude)
             yield 2, 3, "faces to draw"
             surface = mesh_surface(mesh)
+            bound_range(mesh.ndim)       # cached here, not computed in the main thread
             yield 3, 3, "done"
             return mesh, checks, surface
 
-        return self.tasks.run(steps, title="IMESH meshing", total=3,
+        return self.tasks.run(steps, title="IMESH meshing",
                               on_result=lambda out: self._show_mesh(layer, *out))
 
     # -- results (main thread) ---------------------------------------------------------------
@@ -212,33 +211,32 @@ class MeshWidget(QWidget):
         self.surface_layer = layer
         self.apply_colors()
         self._show_summary(mesh, checks, surface["n_faces"])
-        self._draw_histogram(mesh)
-        self.export_button.setEnabled(True)
+        self.plot.redraw()
+        self.export_button.enabled = True
         self.mesh_ready.emit(layer)
 
-    def apply_colors(self) -> None:
+    def apply_colors(self, *_) -> None:
         """Colour the mesh Surface by element quality or by material."""
         layer = self.surface_layer
         if layer is None or SURFACE_VALUES_KEY not in layer.metadata:
             return
         values = layer.metadata[SURFACE_VALUES_KEY]
         mesh = layer.metadata[MESH_KEY]
-        layer.wireframe.visible = self.edges_box.isChecked()
+        layer.wireframe.visible = self.edges_box.value
         layer.wireframe.color = "black"
-        if self.color_combo.currentText() == COLOR_BY_MATERIAL:
+        if self.color_combo.value == COLOR_BY_MATERIAL:
             from napari.utils.colormaps.standardize_color import transform_color
 
             materials = np.unique(values["material"])
             table = np.stack([transform_color(default_color(m))[0] for m in materials])
             layer.vertex_colors = table[np.searchsorted(materials, values["material"])]
         else:
-            metric = quality_metric(mesh.ndim)
+            lo, hi = bound_range(mesh.ndim)
             worst = float(np.max(values["quality"])) if len(values["quality"]) else 1.0
             layer.vertex_colors = None
             layer.vertex_values = values["quality"]
             layer.colormap = "turbo"
-            layer.contrast_limits = [metric.optimal_range[0],
-                                     max(metric.optimal_range[1], worst) + 1e-9]
+            layer.contrast_limits = [lo, max(hi, worst) + 1e-9]
 
     def _show_summary(self, mesh: "Mesh", checks, n_faces: int) -> None:
         info = mesh.info
@@ -262,34 +260,26 @@ class MeshWidget(QWidget):
         if mesh.ndim == 3:
             lines.append(f"shown: {n_faces} boundary and interface faces (3-D view: "
                          "View > Toggle Ndisplay)")
-        self.summary.setText("\n".join(lines))
+        self.summary.value = "\n".join(lines)
 
-    def _draw_histogram(self, mesh: "Mesh") -> None:
-        from ._layers import theme_colors
-
-        dark, background, text = theme_colors(self.viewer)
-        metric = quality_metric(mesh.ndim)
-        fig = self.figure
-        fig.clear()
-        fig.set_facecolor(background)
-        ax = fig.add_subplot(1, 1, 1)
-        ax.set_facecolor(background)
+    def _draw_histogram(self, figure: "Figure") -> None:
+        """Element quality histogram; the IMESH bound range (:func:`bound_range`) shaded."""
+        figure.clear()
+        mesh = self.mesh
+        if mesh is None:
+            return
+        ax = figure.add_subplot(1, 1, 1)
         q = mesh.quality[np.isfinite(mesh.quality)]
-        lo, hi = metric.optimal_range
+        lo, hi = bound_range(mesh.ndim)
         ax.axvspan(lo, hi, color="#2ca02c", alpha=0.18, lw=0, label="IMESH bound range")
         # the range always spans the bound, so a mesh of one element shape still bins
         span = (min(lo, float(q.min(initial=lo))), max(hi, float(q.max(initial=hi))))
-        ax.hist(q, bins=40, range=span, color="#6fb1ff" if dark else "#1f77b4")
+        ax.hist(q, bins=40, range=span, color="#6fb1ff" if dark_theme(self.viewer) else "#1f77b4")
         ax.set_yscale("log")
-        ax.set_xlabel("radius-to-edge ratio (circumradius / shortest edge)", color=text,
-                      fontsize=8)
-        ax.set_ylabel("elements", color=text, fontsize=8)
-        ax.tick_params(colors=text, labelsize=7)
-        for spine in ax.spines.values():
-            spine.set_color(text)
-        ax.legend(fontsize=7, frameon=False, labelcolor=text)
-        fig.tight_layout()
-        self.canvas.draw_idle()
+        ax.set_xlabel("radius-to-edge ratio (circumradius / shortest edge)", fontsize=8)
+        ax.set_ylabel("elements", fontsize=8)
+        ax.tick_params(labelsize=7)
+        ax.legend(fontsize=7, frameon=False, labelcolor=theme_text_color(self.viewer))
 
     # -- export ----------------------------------------------------------------------------
     def export_mesh(self, path):
@@ -305,7 +295,7 @@ class MeshWidget(QWidget):
             yield 1, 1, "done"
             return written
 
-        return self.tasks.run(steps, title="Mesh export", total=1, on_result=lambda written:
+        return self.tasks.run(steps, title="Mesh export", on_result=lambda written:
                               notify_info("mesh written to " + ", ".join(map(str, written))))
 
     def _on_export_clicked(self) -> None:

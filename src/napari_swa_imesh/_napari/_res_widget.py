@@ -4,17 +4,20 @@ from __future__ import annotations
 
 from typing import TYPE_CHECKING
 
+from magicgui.widgets import ComboBox, Container, PushButton, SpinBox
 from qtpy.QtCore import Signal
-from qtpy.QtWidgets import (QFormLayout, QHBoxLayout, QLabel, QPushButton, QScrollArea,
-                            QSpinBox, QVBoxLayout, QWidget)
+from qtpy.QtWidgets import QWidget
 
 from ..segmentation import plot_res, res_statistics
 from . import _samples_layer as sl
-from ._layers import LayerCombo, theme_colors
+from ._dock import scroll_body, wrapped_label
+from ._layers import layer_picker, pick
+from ._plots import ThemedFigure, dark_theme
 from ._tasks import TaskPanel, notify_error, notify_warning
 
 if TYPE_CHECKING:
     import napari
+    from matplotlib.figure import Figure
 
     from ..segmentation import ResStatistics
 
@@ -45,85 +48,65 @@ class ResWidget(QWidget):
     stale_changed = Signal(bool)
 
     def __init__(self, napari_viewer: "napari.viewer.Viewer", parent: QWidget | None = None):
-        from matplotlib.backends.backend_qtagg import FigureCanvasQTAgg
-        from matplotlib.figure import Figure
-
         super().__init__(parent)
         self.viewer = napari_viewer
         self.stats: ResStatistics | None = None
         self.stats_fingerprint: str | None = None   # of the samples `stats` were computed on
         self.stale = False
         self._watcher = sl.SamplesWatcher(self._check_stale)
-        self.image_combo = LayerCombo(self.viewer, ("Image",))
-        self.samples_combo = LayerCombo(self.viewer, ("Shapes",), accept=sl.is_samples_layer)
-        self.max_scale_spin = QSpinBox()
-        self.max_scale_spin.setRange(-1, 16)
-        self.max_scale_spin.setValue(-1)
-        self.max_scale_spin.setSpecialValueText("auto")
-        self.max_scale_spin.setToolTip("Largest scale to compute; auto: the largest at which "
-                                       "some material still has 2^d tiles.")
-        self.compute_button = QPushButton("Compute RES statistics")
-        self.compute_button.clicked.connect(self.compute)
-        self.scale_spin = QSpinBox()
-        self.scale_spin.setRange(0, 16)
-        self.scale_spin.setEnabled(False)
-        self.scale_spin.setToolTip("Scale j to classify at (tiles of 2^j pixels per axis); "
-                                   "or click a panel of the plot.")
-        self.scale_spin.valueChanged.connect(self._on_scale_spin)
-        self.reason = QLabel("Compute the statistics of the sample boxes to see where they "
-                             "settle with scale.")
-        self.reason.setWordWrap(True)
-
-        self.figure = Figure(figsize=(6, 8))
-        self.canvas = FigureCanvasQTAgg(self.figure)
-        self.canvas.setMinimumSize(360, 480)
-        self.canvas.mpl_connect("button_press_event", self._on_click)
-        scroll = QScrollArea()
-        scroll.setWidget(self.canvas)
-        scroll.setWidgetResizable(True)
+        self.image_combo = layer_picker(self.viewer, "Image", label="image")
+        self.samples_combo = layer_picker(self.viewer, "Shapes", label="samples",
+                                          accept=sl.is_samples_layer)
+        self.max_scale = ComboBox(
+            label="max scale", choices=[("auto", None)] + [(str(j), j) for j in range(17)],
+            tooltip="Largest scale to compute; auto: the largest at which some material "
+                    "still has 2^d tiles.")
+        self.compute_button = PushButton(text="Compute RES statistics")
+        self.scale_spin = SpinBox(label="chosen scale j", min=0, max=16, enabled=False,
+                                  tooltip="Scale j to classify at (tiles of 2^j pixels per "
+                                          "axis); or click a panel of the plot.")
+        self.reason = wrapped_label("Compute the statistics of the sample boxes to see where "
+                                    "they settle with scale.")
+        self.plot = ThemedFigure(self.viewer, self._draw_figure, min_height=360)
+        self.plot.canvas.mpl_connect("button_press_event", self._on_click)
         self.tasks = TaskPanel()
 
-        form = QFormLayout()
-        form.addRow("image", self.image_combo)
-        form.addRow("samples", self.samples_combo)
-        form.addRow("max scale", self.max_scale_spin)
-        row = QHBoxLayout()
-        row.addWidget(QLabel("chosen scale j"))
-        row.addWidget(self.scale_spin)
-        row.addStretch(1)
-        layout = QVBoxLayout(self)
-        layout.addLayout(form)
-        layout.addWidget(self.compute_button)
+        layout = scroll_body(self)
+        layout.addWidget(Container(widgets=[self.image_combo, self.samples_combo,
+                                            self.max_scale, self.compute_button]).native)
         layout.addWidget(self.tasks)
-        layout.addLayout(row)
-        layout.addWidget(self.reason)
-        layout.addWidget(scroll, 1)
-        self.samples_combo.currentTextChanged.connect(self._on_samples_layer_selected)
-        self.image_combo.currentTextChanged.connect(self._on_image_selected)
+        layout.addWidget(Container(widgets=[self.scale_spin]).native)
+        layout.addWidget(self.reason.native)
+        layout.addWidget(self.plot, 1)
+        self.compute_button.changed.connect(self.compute)
+        self.scale_spin.changed.connect(self.choose_scale)
+        self.samples_combo.changed.connect(self._on_samples_layer_selected)
+        self.image_combo.changed.connect(self._on_image_selected)
         self._on_samples_layer_selected()
-        self.viewer.events.theme.connect(self._on_theme)
 
-    def _on_theme(self, event=None) -> None:
-        try:
-            self._draw()
-        except RuntimeError:  # the Qt side is gone; napari drops us with the Python side
-            pass
+    @property
+    def figure(self) -> "Figure":
+        return self.plot.figure
+
+    @property
+    def canvas(self):
+        return self.plot.canvas
 
     def _on_samples_layer_selected(self, *_) -> None:
-        layer = self.samples_combo.layer()
+        layer = self.samples_combo.value
         if layer is not None:
             image_name = layer.metadata.get(sl.SAMPLES_KEY)
             if image_name and image_name in self.viewer.layers:
-                self.image_combo.select(self.viewer.layers[image_name])
+                pick(self.image_combo, self.viewer.layers[image_name])
         self._on_image_selected()
 
     def _on_image_selected(self, *_) -> None:
-        self._watcher.watch(self.samples_combo.layer(), self.image_combo.layer())
+        self._watcher.watch(self.samples_combo.value, self.image_combo.value)
         self._check_stale()
 
     def current_fingerprint(self) -> str | None:
         """Fingerprint of the samples and image selected now (None if they cannot be read)."""
-        layer, image = self.samples_combo.layer(), self.image_combo.layer()
+        layer, image = self.samples_combo.value, self.image_combo.value
         if layer is None or image is None or layer.ndim != image.ndim:
             return None
         try:
@@ -139,15 +122,16 @@ class ResWidget(QWidget):
         if stale == self.stale:
             return
         self.stale = stale
-        self.scale_spin.setEnabled(not stale)
+        self.scale_spin.enabled = not stale
         self._show_reason()
         self._draw()
         self.stale_changed.emit(stale)
 
     def _show_reason(self) -> None:
         stats = self.stats
+        settled = {m: stats.material_res.get(m) for m in stats.materials}
         per_material = ", ".join(
-            f"{name}: {stats.material_res.get(m) if stats.material_res.get(m) is not None else 'not settled'}"
+            f"{name}: {'not settled' if settled[m] is None else settled[m]}"
             for m, name in zip(stats.materials, stats.names))
         text = (f"Suggested RES: {stats.suggested_scale} ({stats.reason}) "
                 f"Per material: {per_material}.")
@@ -155,14 +139,14 @@ class ResWidget(QWidget):
             text = ("OUT OF DATE: the sample boxes, materials or image changed since these "
                     "statistics were computed; the scale chosen on them no longer applies. "
                     "Press 'Compute RES statistics' again. (Were: " + text + ")")
-        self.reason.setText(text)
+        self.reason.value = text
 
     def select_layers(self, image=None, samples=None) -> None:
         """Point the widget at these layers (the workflow keeps its tabs in step)."""
         if samples is not None:
-            self.samples_combo.select(samples)
+            pick(self.samples_combo, samples)
         if image is not None:
-            self.image_combo.select(image)
+            pick(self.image_combo, image)
 
     def compute(self):
         """Compute the RES statistics of the samples in a worker; plot them when done.
@@ -170,7 +154,7 @@ class ResWidget(QWidget):
         The statistics are stamped with the fingerprint of the samples read here, so
         edits made while the worker runs show them out of date at once.
         """
-        image, layer = self.image_combo.layer(), self.samples_combo.layer()
+        image, layer = self.image_combo.value, self.samples_combo.value
         if image is None:
             notify_error("no image layer: open an image (or File > Open Sample) and pick it "
                          "in the RES widget.")
@@ -185,8 +169,7 @@ class ResWidget(QWidget):
         except ValueError as exc:
             notify_error(f"cannot compute the RES: {exc}")
             return None
-        max_scale = self.max_scale_spin.value()
-        max_scale = None if max_scale < 0 else max_scale
+        max_scale = self.max_scale.value
 
         def steps():
             yield 0, 1, "tile moments of every sample box at every scale"
@@ -194,7 +177,7 @@ class ResWidget(QWidget):
             yield 1, 1, "done"
             return stats
 
-        return self.tasks.run(steps, title="RES statistics", total=1,
+        return self.tasks.run(steps, title="RES statistics",
                               on_result=lambda stats: self.show_stats(stats, fingerprint))
 
     def show_stats(self, stats: "ResStatistics", fingerprint: str | None = None) -> None:
@@ -211,42 +194,47 @@ class ResWidget(QWidget):
         self.stats_fingerprint = fingerprint if fingerprint is not None \
             else self.current_fingerprint()
         self.stale = self.current_fingerprint() != self.stats_fingerprint
-        self.scale_spin.blockSignals(True)
-        self.scale_spin.setRange(int(stats.scales.min()), int(stats.scales.max()))
-        layer, image = self.samples_combo.layer(), self.image_combo.layer()
+        spin = self.scale_spin
+        layer, image = self.samples_combo.value, self.image_combo.value
         choice = None if layer is None else sl.scale_choice(layer, image)
         # keep an earlier choice only if it was made on these very samples
         previous = choice.scale if choice is not None and choice.fresh and not self.stale \
             else None
         start = previous if previous is not None and previous <= stats.scales.max() \
             else stats.suggested_scale
-        self.scale_spin.setValue(int(start if start is not None else stats.scales.max()))
-        self.scale_spin.setEnabled(not self.stale)
-        self.scale_spin.blockSignals(False)
+        with spin.changed.blocked():
+            spin.range = (int(stats.scales.min()), int(stats.scales.max()))
+            spin.value = int(start if start is not None else stats.scales.max())
+        spin.enabled = not self.stale
         self._show_reason()
         if self.stale:
             self._draw()
             self.stale_changed.emit(True)
         else:
-            self.choose_scale(self.scale_spin.value())
+            self.choose_scale(spin.value)
 
     def _draw(self) -> None:
+        self.plot.redraw()
+
+    def _draw_figure(self, figure: "Figure") -> None:
         if self.stats is None:
+            figure.clear()
             return
-        dark, background, _ = theme_colors(self.viewer)
-        plot_res(self.stats, figure=self.figure,
-                 selected_scale=None if self.stale else self.scale_spin.value(), dark=dark)
-        # match the dock exactly (plot_res knows only light and dark)
-        self.figure.set_facecolor(background)
-        for ax in self.figure.axes:
-            ax.set_facecolor(background)
+        figure.set_layout_engine("none")     # plot_res lays out once, tightly
+        plot_res(self.stats, figure=figure, dark=dark_theme(self.viewer),
+                 selected_scale=None if self.stale else self.scale_spin.value)
+        # see the dock through the figure, as napari-matplotlib's own plots do
+        figure.set_facecolor("none")
+        for ax in figure.axes:
+            ax.set_facecolor("none")
             if self.stale:      # grey the panels: these numbers belong to other samples
                 for artist in ax.lines + ax.collections:
                     artist.set_alpha(0.25)
         if self.stale:
-            self.figure.suptitle("OUT OF DATE: the samples changed; compute the RES again",
-                                 color="#ff8c69", fontsize=10)
-        self.canvas.draw_idle()
+            figure.suptitle("OUT OF DATE: the samples changed; compute the RES again",
+                            color="#ff8c69", fontsize=10)
+        # constrained layout keeps the figure title clear of the column titles
+        figure.set_layout_engine("constrained")
 
     def choose_scale(self, scale: int) -> None:
         """Make `scale` the chosen one: mark it, store it with the samples, tell the others.
@@ -258,18 +246,15 @@ class ResWidget(QWidget):
             notify_warning("the RES statistics are out of date (the samples changed); "
                            "compute them again before choosing a scale.")
             return
-        if self.scale_spin.value() != scale:
-            self.scale_spin.setValue(scale)   # comes back here through the spin box
+        if self.scale_spin.value != scale:
+            self.scale_spin.value = scale     # comes back here through the spin box
             return
-        layer = self.samples_combo.layer()
+        layer = self.samples_combo.value
         if layer is not None and self.stats_fingerprint is not None:
             sl.store_chosen_scale(layer, scale, fingerprint=self.stats_fingerprint,
                                   suggested=self.stats.suggested_scale)
         self._draw()
         self.scale_chosen.emit(scale)
-
-    def _on_scale_spin(self, value: int) -> None:
-        self.choose_scale(value)
 
     def _on_click(self, event) -> None:
         if self.stats is None or event.inaxes is None or event.xdata is None:

@@ -5,15 +5,16 @@ from __future__ import annotations
 from typing import TYPE_CHECKING
 
 import numpy as np
-from qtpy.QtCore import Qt, Signal
+from magicgui.widgets import Container, SpinBox
+from qtpy.QtCore import Signal
 from qtpy.QtGui import QColor
-from qtpy.QtWidgets import (QColorDialog, QFileDialog, QFormLayout, QGroupBox, QHBoxLayout,
-                            QHeaderView, QLabel, QPushButton, QSpinBox, QTableWidget,
-                            QTableWidgetItem, QVBoxLayout, QWidget)
+from qtpy.QtWidgets import QFileDialog, QHeaderView, QTableWidget, QTableWidgetItem, QWidget
 
 from ..segmentation import Material, Samples, load_samples, samples_from_truth, save_samples
 from . import _samples_layer as sl
-from ._layers import LayerCombo, default_color
+from ._dock import button, group, scroll_body, side_by_side, wrapped_label
+from ._layers import default_color, layer_picker, pick
+from ._materials import MaterialTable
 from ._tasks import TaskPanel, notify_error, notify_info, notify_warning
 
 if TYPE_CHECKING:
@@ -42,117 +43,66 @@ class SamplesWidget(QWidget):
         self.viewer = napari_viewer
         self._watched = None          # samples layer whose events we listen to
         self.report = None            # BoxReport of the samples layer, per shape
-
-        self.image_combo = LayerCombo(self.viewer, ("Image",))
-        self.samples_combo = LayerCombo(self.viewer, ("Shapes",), accept=sl.is_samples_layer)
-        self.new_button = QPushButton("New samples layer")
-        self.new_button.setToolTip("Add a Shapes layer over the image and start drawing "
-                                   "rectangles (one per sample box).")
-        self.new_button.clicked.connect(self._on_new_clicked)
-
-        self.material_table = QTableWidget(0, 3)
-        self.material_table.setHorizontalHeaderLabels(["label", "name", "colour"])
-        self.material_table.horizontalHeader().setSectionResizeMode(1, QHeaderView.Stretch)
-        self.material_table.verticalHeader().setVisible(False)
-        self.material_table.setSelectionBehavior(QTableWidget.SelectRows)
-        self.material_table.setSelectionMode(QTableWidget.SingleSelection)
-        self.material_table.setMaximumHeight(130)
-        self.material_table.itemChanged.connect(self._on_material_edited)
-        self.material_table.cellDoubleClicked.connect(self._on_material_double_clicked)
-        self.material_table.itemSelectionChanged.connect(self._on_current_material)
-        self.add_material_button = QPushButton("Add material")
-        self.add_material_button.clicked.connect(self.add_material)
-        self.remove_material_button = QPushButton("Remove material")
-        self.remove_material_button.clicked.connect(self._on_remove_material)
-        self.assign_button = QPushButton("Assign to selected boxes")
-        self.assign_button.setToolTip("Give the selected rectangles the selected material.")
-        self.assign_button.clicked.connect(self.assign_selected)
-
-        self.depth_spin = QSpinBox()
-        self.depth_spin.setRange(1, 4096)
-        self.depth_spin.setValue(sl.DEFAULT_DEPTH)
-        self.depth_spin.setToolTip("3-D: slices a rectangle spans, centred on the slice it is "
-                                   "drawn on. Applies to new boxes and to selected boxes.")
-        self.depth_spin.valueChanged.connect(self._on_depth_changed)
-        self.scale_spin = QSpinBox()
-        self.scale_spin.setRange(0, 16)
-        self.scale_spin.setValue(3)
-        self.scale_spin.setToolTip("Boxes shorter than one tile of 2^j pixels along some axis "
-                                   "give no training tile at scale j and are flagged; so are "
-                                   "the boxes of a material whose largest box holds no "
-                                   "window of 2^j+1 px (the recommended method's). Follows "
-                                   "the scale chosen on the RES tab and the classify tab's.")
-        self.scale_spin.valueChanged.connect(self.check_boxes)
-
-        self.box_table = QTableWidget(0, 4)
-        self.box_table.setHorizontalHeaderLabels(["material", "start", "stop", "flags"])
-        self.box_table.horizontalHeader().setSectionResizeMode(3, QHeaderView.Stretch)
-        self.box_table.setEditTriggers(QTableWidget.NoEditTriggers)
-        self.box_table.setSelectionBehavior(QTableWidget.SelectRows)
-        self.box_table.cellClicked.connect(self._on_box_clicked)
-        self.summary = QLabel("")
-        self.summary.setWordWrap(True)
-
-        self.import_button = QPushButton("Import JSON...")
-        self.import_button.clicked.connect(self._on_import_clicked)
-        self.export_button = QPushButton("Export JSON...")
-        self.export_button.clicked.connect(self._on_export_clicked)
-
-        self.truth_combo = LayerCombo(self.viewer, ("Labels",))
-        self.per_material_spin = QSpinBox()
-        self.per_material_spin.setRange(1, 64)
-        self.per_material_spin.setValue(4)
-        self.truth_button = QPushButton("Samples from truth")
-        self.truth_button.setToolTip("Boxes on the largest homogeneous blocks of each material "
-                                     "of a ground-truth Labels layer (its 2^d-tree).")
-        self.truth_button.clicked.connect(self.samples_from_truth)
+        self.image_combo = layer_picker(self.viewer, "Image", label="image")
+        self.samples_combo = layer_picker(self.viewer, "Shapes", label="samples",
+                                          accept=sl.is_samples_layer)
+        self.new_button = button("New samples layer", self.new_samples_layer,
+                                 "Add a Shapes layer over the image and start drawing "
+                                 "rectangles (one per sample box).")
+        self.material_table = MaterialTable()
+        self.add_material_button = button("Add material", self.add_material)
+        self.remove_material_button = button("Remove material", self._on_remove_material)
+        self.assign_button = button("Assign to selected boxes", self.assign_selected,
+                                    "Give the selected rectangles the selected material.")
+        self.depth_spin = SpinBox(
+            label="depth (slices, 3-D)", min=1, max=4096, value=sl.DEFAULT_DEPTH,
+            tooltip="3-D: slices a rectangle spans, centred on the slice it is drawn on. "
+                    "Applies to new boxes and to selected boxes.")
+        self.scale_spin = SpinBox(
+            label="check at scale j", min=0, max=16, value=3,
+            tooltip="Boxes shorter than one tile of 2^j pixels along some axis give no "
+                    "training tile at scale j and are flagged; so are the boxes of a material "
+                    "whose largest box holds no window of 2^j+1 px (the recommended "
+                    "method's). Follows the scale chosen on the RES tab and the classify tab's.")
+        self.box_table = _box_table()
+        self.summary = wrapped_label()
+        self.import_button = button("Import JSON...", self._on_import_clicked)
+        self.export_button = button("Export JSON...", self._on_export_clicked)
+        self.truth_combo = layer_picker(self.viewer, "Labels", label="truth")
+        self.per_material_spin = SpinBox(label="boxes per material", min=1, max=64, value=4)
+        self.truth_button = button("Samples from truth", self.samples_from_truth,
+                                   "Boxes on the largest homogeneous blocks of each material "
+                                   "of a ground-truth Labels layer (its 2^d-tree).")
         self.tasks = TaskPanel()
 
-        form = QFormLayout()
-        form.addRow("image", self.image_combo)
-        row = QHBoxLayout()
-        row.addWidget(self.samples_combo, 1)
-        row.addWidget(self.new_button)
-        form.addRow("samples", row)
-        materials = QGroupBox("Materials (select one, then draw rectangles)")
-        mat_layout = QVBoxLayout(materials)
-        mat_layout.addWidget(self.material_table)
-        row = QHBoxLayout()
-        for button in (self.add_material_button, self.remove_material_button,
-                       self.assign_button):
-            row.addWidget(button)
-        mat_layout.addLayout(row)
-        checks = QFormLayout()
-        checks.addRow("depth (slices, 3-D)", self.depth_spin)
-        checks.addRow("check at scale j", self.scale_spin)
-        truth = QGroupBox("From a ground truth")
-        truth_layout = QFormLayout(truth)
-        truth_layout.addRow("truth", self.truth_combo)
-        truth_layout.addRow("boxes per material", self.per_material_spin)
-        truth_layout.addRow(self.truth_button)
-        files = QHBoxLayout()
-        files.addWidget(self.import_button)
-        files.addWidget(self.export_button)
-        layout = QVBoxLayout(self)
-        layout.addLayout(form)
-        layout.addWidget(materials)
-        layout.addLayout(checks)
+        layout = scroll_body(self)
+        layout.addWidget(Container(widgets=[self.image_combo, self.samples_combo,
+                                            self.new_button]).native)
+        layout.addWidget(group("Materials (select one, then draw rectangles)", [
+            self.material_table, side_by_side(self.add_material_button,
+                                              self.remove_material_button, self.assign_button)]))
+        layout.addWidget(Container(widgets=[self.depth_spin, self.scale_spin]).native)
         layout.addWidget(self.box_table, 1)
-        layout.addWidget(self.summary)
-        layout.addLayout(files)
-        layout.addWidget(truth)
+        layout.addWidget(self.summary.native)
+        layout.addWidget(side_by_side(self.import_button, self.export_button))
+        layout.addWidget(group("From a ground truth", [Container(widgets=[
+            self.truth_combo, self.per_material_spin, self.truth_button]).native]))
         layout.addWidget(self.tasks)
-
-        self.samples_combo.currentTextChanged.connect(self._on_samples_layer_selected)
-        self.image_combo.currentTextChanged.connect(lambda *_: self.check_boxes())
+        self.material_table.edited.connect(self._store_materials)
+        self.material_table.itemSelectionChanged.connect(self._on_current_material)
+        self.depth_spin.changed.connect(self._on_depth_changed)
+        self.scale_spin.changed.connect(self.check_boxes)
+        self.box_table.cellClicked.connect(self._on_box_clicked)
+        self.samples_combo.changed.connect(self._on_samples_layer_selected)
+        self.image_combo.changed.connect(self.check_boxes)
         self._on_samples_layer_selected()
 
     # -- layers ----------------------------------------------------------------------------
     def image_layer(self):
-        return self.image_combo.layer()
+        return self.image_combo.value
 
     def samples_layer(self):
-        return self.samples_combo.layer()
+        return self.samples_combo.value
 
     def new_samples_layer(self):
         """Add an empty samples layer over the selected image and start rectangle drawing.
@@ -170,15 +120,12 @@ class SamplesWidget(QWidget):
             return None
         materials = self.materials() or [Material(1, "material 1", default_color(1)),
                                          Material(2, "material 2", default_color(2))]
-        layer = sl.new_samples_layer(self.viewer, image, materials, depth=self.depth_spin.value())
-        self.samples_combo.select(layer)
+        layer = sl.new_samples_layer(self.viewer, image, materials, depth=self.depth_spin.value)
+        pick(self.samples_combo, layer)
         self._on_samples_layer_selected()
         self.viewer.layers.selection.active = layer
         layer.mode = "add_rectangle"
         return layer
-
-    def _on_new_clicked(self) -> None:
-        self.new_samples_layer()
 
     def _on_samples_layer_selected(self, *_) -> None:
         layer = self.samples_layer()
@@ -187,17 +134,17 @@ class SamplesWidget(QWidget):
         if layer is not None and layer is not self._watched:
             if "label" not in layer.features and layer.ndim in (2, 3):
                 first = (self.materials() or [Material(1, "material 1", default_color(1))])[0]
-                sl.adopt_layer(layer, first, depth=self.depth_spin.value() if layer.ndim == 3
+                sl.adopt_layer(layer, first, depth=self.depth_spin.value if layer.ndim == 3
                                else 1)
             layer.events.data.connect(self._on_shapes_changed)
             image_name = layer.metadata.get(sl.SAMPLES_KEY)
             if image_name and image_name in self.viewer.layers:
-                self.image_combo.select(self.viewer.layers[image_name])
+                pick(self.image_combo, self.viewer.layers[image_name])
             chosen = sl.chosen_scale(layer, self.image_layer())
             if chosen is not None:        # only a scale chosen on these very boxes
-                self.scale_spin.setValue(chosen)
+                self.scale_spin.value = chosen
         self._watched = layer
-        self._show_materials(sl.layer_materials(layer) if layer is not None else [])
+        self.material_table.set_materials(sl.layer_materials(layer) if layer is not None else [])
         self.check_boxes()
         self.samples_layer_changed.emit(layer)
 
@@ -209,39 +156,13 @@ class SamplesWidget(QWidget):
 
     # -- materials -------------------------------------------------------------------------
     def materials(self) -> list[Material]:
-        """The material table as library Materials."""
-        out = []
-        for row in range(self.material_table.rowCount()):
-            label = int(self.material_table.item(row, 0).text())
-            name = self.material_table.item(row, 1).text().strip() or f"material {label}"
-            color = self.material_table.item(row, 2).data(Qt.UserRole)
-            out.append(Material(label, name, color))
-        return out
+        """The material list (label, name, colour) as library Materials."""
+        return list(self.material_table.materials)
 
     def set_materials(self, materials: list[Material]) -> None:
-        """Replace the material table (and the samples layer's copy of it)."""
-        self._show_materials(materials)
+        """Replace the material list (and the samples layer's copy of it)."""
+        self.material_table.set_materials(materials)
         self._store_materials()
-
-    def _show_materials(self, materials: list[Material]) -> None:
-        current = self.material_table.currentRow()
-        self.material_table.blockSignals(True)
-        self.material_table.setRowCount(len(materials))
-        for row, m in enumerate(materials):
-            label_item = QTableWidgetItem(str(m.label))
-            label_item.setFlags(label_item.flags() & ~Qt.ItemIsEditable)
-            color = m.color or default_color(m.label)
-            color_item = QTableWidgetItem("")
-            color_item.setData(Qt.UserRole, color)
-            color_item.setBackground(QColor(color))
-            color_item.setFlags(color_item.flags() & ~Qt.ItemIsEditable)
-            color_item.setToolTip("double-click to change")
-            self.material_table.setItem(row, 0, label_item)
-            self.material_table.setItem(row, 1, QTableWidgetItem(m.name))
-            self.material_table.setItem(row, 2, color_item)
-        self.material_table.blockSignals(False)
-        if materials:
-            self.material_table.selectRow(min(max(current, 0), len(materials) - 1))
 
     def _store_materials(self) -> None:
         layer = self.samples_layer()
@@ -256,7 +177,7 @@ class SamplesWidget(QWidget):
         label = max([m.label for m in materials], default=0) + 1
         material = Material(label, name or f"material {label}", default_color(label))
         self.set_materials(materials + [material])
-        self.material_table.selectRow(len(materials))
+        self.material_table.select_label(label)
         return material
 
     def _on_remove_material(self) -> None:
@@ -273,31 +194,12 @@ class SamplesWidget(QWidget):
             return
         self.set_materials(materials[:row] + materials[row + 1:])
 
-    def _on_material_edited(self, item) -> None:
-        self._store_materials()
-
-    def _on_material_double_clicked(self, row: int, column: int) -> None:
-        if column != 2:
-            return
-        item = self.material_table.item(row, 2)
-        color = QColorDialog.getColor(QColor(item.data(Qt.UserRole)), self, "Material colour")
-        if color.isValid():
-            item.setData(Qt.UserRole, color.name())
-            item.setBackground(color)
-            self._store_materials()
-
     def current_material(self) -> Material | None:
-        row = self.material_table.currentRow()
-        materials = self.materials()
-        return materials[row] if 0 <= row < len(materials) else None
+        return self.material_table.current()
 
     def select_material(self, label: int) -> None:
         """Make material `label` the one new rectangles get."""
-        for row, m in enumerate(self.materials()):
-            if m.label == label:
-                self.material_table.selectRow(row)
-                return
-        raise ValueError(f"no material with label {label}; add it first.")
+        self.material_table.select_label(label)
 
     def _on_current_material(self) -> None:
         layer, material = self.samples_layer(), self.current_material()
@@ -305,7 +207,7 @@ class SamplesWidget(QWidget):
             sl.set_current_material(layer, material, depth=self._depth_for(layer))
 
     def _depth_for(self, layer) -> int:
-        return self.depth_spin.value() if layer.ndim == 3 else 1
+        return self.depth_spin.value if layer.ndim == 3 else 1
 
     def assign_selected(self) -> None:
         """Give the selected rectangles the current material."""
@@ -332,6 +234,9 @@ class SamplesWidget(QWidget):
             layer.features = features
             self.check_boxes()
 
+    def _say(self, text: str) -> None:
+        self.summary.value = text
+
     # -- checks ----------------------------------------------------------------------------
     def check_boxes(self, *_):
         """Recompute every box and its flags; show them in the table and on the canvas.
@@ -342,18 +247,18 @@ class SamplesWidget(QWidget):
         self.report = None
         if layer is None or image is None:
             self.box_table.setRowCount(0)
-            self.summary.setText("Pick an image and create or pick a samples layer."
+            self._say("Pick an image and create or pick a samples layer."
                                  if image is None or layer is None else "")
             return None
         if layer.ndim != image.ndim:
             self.box_table.setRowCount(0)
-            self.summary.setText(f"The samples layer is {layer.ndim}-D but the image is "
+            self._say(f"The samples layer is {layer.ndim}-D but the image is "
                                  f"{image.ndim}-D; pick matching layers.")
             return None
         try:
-            report = sl.layer_report(layer, image, scale=self.scale_spin.value())
+            report = sl.layer_report(layer, image, scale=self.scale_spin.value)
         except ValueError as exc:
-            self.summary.setText(str(exc))
+            self._say(str(exc))
             return None
         self.report = report
         sl.restyle(layer, report)
@@ -369,8 +274,8 @@ class SamplesWidget(QWidget):
                     item.setForeground(QColor("#ff8c69"))
                 self.box_table.setItem(i, column, item)
         n_flagged = sum(bool(f) for f in report.flags)
-        limit = sl.report_window_limit(layer, report, self.scale_spin.value())
-        self.summary.setText(
+        limit = sl.report_window_limit(layer, report, self.scale_spin.value)
+        self._say(
             f"{len(report.boxes)} box(es), {n_flagged} flagged"
             + (f"; {len(report.blocking)} cannot be used until moved or deleted"
                if report.blocking else "")
@@ -391,7 +296,7 @@ class SamplesWidget(QWidget):
 
     def set_scale(self, scale: int) -> None:
         """Check boxes at `scale` (the workflow calls this when a RES is chosen)."""
-        self.scale_spin.setValue(int(scale))
+        self.scale_spin.value = int(scale)
 
     # -- files -----------------------------------------------------------------------------
     def current_samples(self) -> Samples:
@@ -403,7 +308,7 @@ class SamplesWidget(QWidget):
         if layer is None:
             raise ValueError("no samples layer; press 'New samples layer' and draw boxes, or "
                              "import a samples file.")
-        samples, _ = sl.samples_from_layer(layer, image, scale=self.scale_spin.value())
+        samples, _ = sl.samples_from_layer(layer, image, scale=self.scale_spin.value)
         return samples
 
     def export_samples(self, path) -> None:
@@ -439,7 +344,7 @@ class SamplesWidget(QWidget):
                      for m in samples.materials]
         samples = Samples(materials, samples.boxes)
         sl.put_boxes(layer, image, samples, thickness_axis=self._thickness_axis(image))
-        self._show_materials(materials)
+        self.material_table.set_materials(materials)
         self._on_current_material()
         self.check_boxes()
 
@@ -464,7 +369,7 @@ class SamplesWidget(QWidget):
     # -- from a truth ----------------------------------------------------------------------
     def samples_from_truth(self):
         """Boxes on the largest homogeneous blocks of the truth layer (in a worker)."""
-        truth, image = self.truth_combo.layer(), self.image_layer()
+        truth, image = self.truth_combo.value, self.image_layer()
         if truth is None or image is None:
             notify_error("pick an image and a ground-truth Labels layer to take samples from.")
             return None
@@ -475,7 +380,7 @@ class SamplesWidget(QWidget):
                          "the truth of this image.")
             return None
         data = np.asarray(truth.data)
-        scale, per_material = self.scale_spin.value(), self.per_material_spin.value()
+        scale, per_material = self.scale_spin.value, self.per_material_spin.value
         names = {int(k): str(v) for k, v in truth.metadata.get("material_names", {}).items()}
 
         def steps():
@@ -485,10 +390,19 @@ class SamplesWidget(QWidget):
             yield 1, 1, "done"
             return samples
 
-        return self.tasks.run(steps, title="Samples from truth", total=1, on_result=self._put)
+        return self.tasks.run(steps, title="Samples from truth", on_result=self._put)
 
 
 def image_array_shape(image_layer) -> tuple[int, ...]:
     """Shape of the image's pixel array (level 0 when multiscale)."""
     data = image_layer.data[0] if image_layer.multiscale else image_layer.data
     return tuple(data.shape)
+
+
+def _box_table() -> QTableWidget:
+    table = QTableWidget(0, 4)
+    table.setHorizontalHeaderLabels(["material", "start", "stop", "flags"])
+    table.horizontalHeader().setSectionResizeMode(3, QHeaderView.Stretch)
+    table.setEditTriggers(QTableWidget.NoEditTriggers)
+    table.setSelectionBehavior(QTableWidget.SelectRows)
+    return table

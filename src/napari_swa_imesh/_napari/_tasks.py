@@ -4,8 +4,11 @@ a status line, a Cancel button, and errors turned into notifications.
 Every widget of the plugin runs its library calls through :class:`TaskPanel.run`. The
 computation is a *steps* callable: it returns a generator that yields ``(done, total,
 message)`` after each step and returns the result (the protocol of
-``segment_steps``). The generator runs in a worker thread; the result is handed to a
-callback in the main thread, the only place where layers are created or changed.
+``segment_steps``). The step total is the generator's own: the progress bar is
+indeterminate until the first report and then counts to the total that report gives, so
+no widget repeats a library's step count. The generator runs in a worker thread; the
+result is handed to a callback in the main thread, the only place where layers are created
+or changed.
 Cancel asks the worker to stop at the next step boundary (a library call that is running
 finishes first), and then no result callback runs.
 """
@@ -107,7 +110,7 @@ class TaskPanel(QWidget):
     def busy(self) -> bool:
         return self.worker is not None
 
-    def run(self, steps: Steps, *, title: str, total: int,
+    def run(self, steps: Steps, *, title: str,
             on_result: Callable[[Any], None], on_cancel: Callable[[], None] | None = None):
         """Run `steps` in a napari thread worker; call `on_result` with its result.
 
@@ -117,8 +120,6 @@ class TaskPanel(QWidget):
             Returns a generator yielding ``(done, total, message)`` and returning the result.
         title : str
             What the computation is (progress bar text, start of every message).
-        total : int
-            Expected number of steps (the napari activity progress bar's length).
         on_result : callable
             Called in the main thread with the result.
         on_cancel : callable, optional
@@ -135,11 +136,12 @@ class TaskPanel(QWidget):
             notify_warning(f"{self.title} is still running; wait for it or press Cancel "
                            "before starting another computation here.")
             return None
-        worker = create_worker(_relay, steps, _progress={"total": total, "desc": title},
+        # no total: napari's activity bar, like ours, waits for the generator's first report
+        worker = create_worker(_relay, steps, _progress={"desc": title},
                                _ignore_errors=True, _start_thread=False)
         self.worker, self.title, self.last_error = worker, title, None
         self.warnings = []
-        self.progress_bar.setRange(0, total)
+        self.progress_bar.setRange(0, 0)      # busy until the generator reports its total
         self.progress_bar.setValue(0)
         self.progress_bar.setFormat(f"{title}: %v/%m")
         self.status.setText(f"{title}: starting")

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 from typing import TYPE_CHECKING
 
-from qtpy.QtWidgets import QScrollArea, QTabWidget, QVBoxLayout, QWidget
+from qtpy.QtWidgets import QTabWidget, QVBoxLayout, QWidget
 
 from ._classify_widget import ClassifyWidget
 from ._mesh_widget import MeshWidget
@@ -15,13 +15,6 @@ if TYPE_CHECKING:
     import napari
 
 __all__ = ["WorkflowWidget"]
-
-
-def _scrolled(widget: QWidget) -> QScrollArea:
-    area = QScrollArea()
-    area.setWidget(widget)
-    area.setWidgetResizable(True)
-    return area
 
 
 class WorkflowWidget(QWidget):
@@ -43,7 +36,7 @@ class WorkflowWidget(QWidget):
         self.tabs = QTabWidget()
         for widget, title in ((self.samples, "Samples"), (self.res, "RES"),
                               (self.classify, "Classify"), (self.mesh, "Mesh")):
-            self.tabs.addTab(_scrolled(widget), title)
+            self.tabs.addTab(widget, title)   # each tab scrolls its own content
         layout = QVBoxLayout(self)
         layout.setContentsMargins(0, 0, 0, 0)
         layout.addWidget(self.tabs)
@@ -51,13 +44,13 @@ class WorkflowWidget(QWidget):
         self.samples.samples_layer_changed.connect(self._on_samples_layer)
         self.res.scale_chosen.connect(self.classify.set_scale)
         self.res.scale_chosen.connect(self.samples.set_scale)
-        self.classify.scale_spin.valueChanged.connect(self._on_classify_scale)
+        self.classify.scale_combo.changed.connect(self._on_classify_scale)
         self.classify.labels_ready.connect(self.mesh.select_labels)
         self._on_samples_layer(self.samples.samples_layer())
 
-    def _on_classify_scale(self, scale: int) -> None:
+    def _on_classify_scale(self, scale: int | None) -> None:
         # the samples tab flags boxes at the scale the next run will use
-        if scale >= 0:
+        if scale is not None:
             self.samples.set_scale(scale)
 
     def _on_samples_layer(self, layer) -> None:

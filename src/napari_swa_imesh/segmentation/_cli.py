@@ -10,7 +10,7 @@ import numpy as np
 from .._cli_util import StepTimer, print_json
 from ..io import check_writable
 # re-exported for the classify widget until it imports them from the library
-from ._signatures import signatures_csv_text, write_signatures_csv  # noqa: F401
+from ._signatures import signatures_csv_text
 
 __all__ = ["add_commands"]
 
