@@ -109,7 +109,7 @@ def test_a_floating_region_exits_2(tmp_path, capsys):
     np.save(tmp_path / "island.npy", labels)
     rc, _, err = _run(capsys, "simulate", tmp_path / "island.npy", "-k", "2=1", "3=5",
                       "--exclude", "1", "-o", tmp_path / "f.vtu")
-    assert rc == 2 and "material 3" in err and "not connected to any face" in err
+    assert rc == 2 and "material 3" in err and "not connected to the x faces" in err
     assert sorted(p.name for p in tmp_path.iterdir()) == ["island.npy"]
 
 
@@ -147,7 +147,9 @@ def test_transient_run_writes_a_series_that_meshio_and_vtk_read(labels_file, cap
     (["--transient", "1", "-o", "s.vtu"], "XDMF/HDF5"),
     (["--transient", "1", "--fixed", "xmin"], "FACE=VALUE"),
     (["--transient", "1", "--fixed", "wmin=1"], "unknown face 'wmin'"),
-    (["--transient", "1", "--capacity", "bone=2"], "MATERIAL=VALUE"),
+    (["--transient", "1", "--capacity", "bone=2"], "capacity names material 'bone'"),
+    (["--transient", "1", "--capacity", "2=x"], "MATERIAL=VALUE"),
+    (["--transient", "1", "--fixed", "xmin=1", "xmin=2"], "face xmin twice"),
     (["--transient", "0"], "duration must be a positive"),
     (["--transient", "1", "--axes", "x"], "--axes"),
 ])

@@ -68,14 +68,17 @@ def test_capacity_and_time_scale_together():
 
 @pytest.mark.parametrize("kwargs, message", [
     ({"duration": 0.0}, "duration must be a positive"),
-    ({"duration": float("inf")}, "duration must be a positive"),
+    ({"duration": float("inf")}, "duration must be a finite number"),
+    ({"duration": "1"}, "duration must be a finite number"),
     ({"steps": 0}, "steps must be a positive whole"),
     ({"steps": 2.5}, "steps must be a positive whole"),
     ({"fixed": {"zmin": 1.0}}, "unknown face 'zmin'"),
-    ({"fixed": {"xmin": float("nan")}}, "must be finite"),
+    ({"fixed": {"xmin": float("nan")}}, "fixed on xmin must be a finite number"),
     ({"capacity": {1: 1.0, 2: 0.0}}, "capacity must be positive"),
     ({"capacity": {1: 1.0, 9: 1.0}}, "not in the mesh"),
-    ({"initial": {1: 1.0}}, "initial value of material 2"),
+    ({"initial": {1: 1.0, 9: 1.0}}, "initial value names material 9"),
+    ({"capacity": {"steel": 1.0}}, "capacity names material 'steel'"),
+    ({"capacity": {1: float("nan")}}, "capacity of material 1 must be a finite"),
     ({"save_every": 0}, "save_every"),
     ({"order": 3}, "order must be 1 or 2"),
 ])
@@ -85,3 +88,44 @@ def test_bad_transient_options_are_refused(kwargs, message):
     options = {"duration": 1.0, "steps": 2, **kwargs}
     with pytest.raises(ValueError, match=message):
         simulate_transient(labels, {1: 1.0, 2: 1.0}, **options)
+
+
+def test_saved_frames_are_the_field_at_their_times():
+    labels = _checker((2, 16))
+    r = simulate_transient(labels, {1: 1.0, 2: 1.0}, duration=4.0, steps=8,
+                           initial={1: 0.0, 2: 0.0}, fixed={"xmin": 1.0})
+    x = r.mesh.points[:, 1]
+    assert np.allclose(r.values[0][x > 0], 0.0)                 # the start, not the end
+    changes = np.abs(np.diff(r.values, axis=0)).max(axis=1)
+    assert np.all(changes > 1e-3)                               # every frame differs
+    assert np.all(np.diff(r.values[:, x == 8].mean(axis=1)) > 0)  # the front advances
+
+
+def test_p1_start_stays_within_its_values_and_p2_nearly():
+    labels = np.random.default_rng(3).integers(1, 3, size=(10, 11)).astype(np.uint8)
+    for order, slack in ((1, 1e-12), (2, 0.05)):
+        r = simulate_transient(labels, {1: 1.0, 2: 1.0}, duration=1.0, steps=1,
+                               initial={2: 1.0}, order=order)
+        assert r.values[0].min() >= -slack and r.values[0].max() <= 1 + slack
+
+
+def test_a_fixed_face_without_material_is_refused():
+    labels = np.full((6, 8), 2, dtype=np.uint8)
+    labels[:, 0] = 1                                            # 1 covers xmin
+    with pytest.raises(ValueError, match="no meshed material touches the xmin face"):
+        simulate_transient(labels, {2: 1.0}, duration=1.0, steps=2, fixed={"xmin": 1.0},
+                           exclude=[1])
+
+
+def test_names_work_for_every_per_material_option_and_the_mesh_is_not_modified():
+    from napari_swa_imesh.mesh import mesh_labels
+
+    labels = np.ones((6, 6), dtype=np.uint8)
+    labels[:, 3:] = 2
+    mesh = mesh_labels(labels)
+    r = simulate_transient(mesh, {"a": 1.0, "b": 2.0}, capacity={"b": 3.0},
+                           initial={"a": 1.0}, duration=1.0, steps=2,
+                           material_names={1: "a", 2: "b"})
+    assert mesh.material_names == {}
+    total = r.amount[1] + r.amount[2]
+    assert np.allclose(total, 18.0)                  # 18 px of a at 1, capacity 1

@@ -54,9 +54,11 @@ def add_commands(subparsers) -> None:
     t.add_argument("--fixed", nargs="+", action="extend", default=[], metavar="FACE=VALUE",
                    help="fixed values on box faces: xmin=1 (faces xmin..zmax)")
     t.add_argument("--initial", nargs="+", action="extend", default=[],
-                   metavar="MATERIAL=VALUE", help="initial value per material (default 0)")
+                   metavar="MATERIAL=VALUE",
+                   help="initial value per material, by label or name (others 0)")
     t.add_argument("--capacity", nargs="+", action="extend", default=[],
-                   metavar="MATERIAL=C", help="capacity c per material (default 1)")
+                   metavar="MATERIAL=C",
+                   help="capacity c per material, by label or name (others 1)")
     t.add_argument("--save-every", type=int, default=1, metavar="K",
                    help="write every K-th step (and the last)")
     p.add_argument("-o", "--output", default=None, metavar="FIELD",
@@ -156,6 +158,8 @@ def _transient_options(args) -> dict | None:
             fixed[face] = float("nan")
         if not sep or not np.isfinite(fixed[face]):
             raise ValueError(f"--fixed takes FACE=VALUE pairs such as xmin=1, not {item!r}.")
+        if sum(other.partition("=")[0] == face for other in args.fixed) > 1:
+            raise ValueError(f"--fixed gives face {face} twice; give each face one value.")
     return {"duration": args.transient, "steps": args.steps, "fixed": fixed,
             "initial": _numbers(args.initial, "--initial", 0.0),
             "capacity": _numbers(args.capacity, "--capacity", 1.0),
@@ -169,10 +173,16 @@ def _numbers(items: list[str], flag: str, default: float) -> dict | float:
     for item in items:
         key, sep, text = item.partition("=")
         try:
-            out[int(key)] = float(text)
+            value = float(text)
         except ValueError:
-            raise ValueError(f"{flag} takes MATERIAL=VALUE pairs with a material label, "
-                             f"such as 2=1.5, not {item!r}.") from None
+            value = None
+        if not sep or not key or value is None:
+            raise ValueError(f"{flag} takes MATERIAL=VALUE pairs (a label or a material "
+                             f"name), such as 2=1.5, not {item!r}.")
+        key = int(key) if key.lstrip("-").isdigit() else key
+        if key in out:
+            raise ValueError(f"{flag} gives material {key} twice.")
+        out[key] = value
     return out
 
 

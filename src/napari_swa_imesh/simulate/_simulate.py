@@ -2,17 +2,20 @@
 
 from __future__ import annotations
 
+import dataclasses
 import time
+import warnings
 from collections.abc import Generator, Mapping
 from dataclasses import dataclass, field
+from numbers import Real
 
 import numpy as np
 
 from ..mesh import Mesh, mesh_labels, signed_volumes
 from ._conductivity import axis_names, conductivity_tensors, is_isotropic
-from ._fe import cell_gradients, fe_basis, stiffness_matrix, vertex_values
+from ._fe import cell_gradients, dissipation, fe_basis, stiffness_matrix, vertex_values
 from ._protocols import box_bounds, check_within_bounds, mixed_boundary, voigt_reuss
-from ._solve import DEFAULT_TOLERANCE, SolverInfo, check_constrained
+from ._solve import DEFAULT_TOLERANCE, SolverInfo, connected_parts
 
 __all__ = ["SimulationResult", "simulate", "simulate_steps"]
 
@@ -101,27 +104,65 @@ def _check_axes(axes, ndim: int) -> tuple[str, ...]:
     return axes
 
 
+def prepare_mesh(mesh_or_labels, *, spacing=None, exclude=(),
+                 material_names: Mapping[int, str] | None = None) -> Mesh:
+    """The mesh to simulate on: a given mesh (with extra names, not modified) or the
+    IMESH mesh of a label image."""
+    if isinstance(mesh_or_labels, Mesh):
+        if spacing is not None or tuple(exclude):
+            raise ValueError("spacing and exclude apply to a label image; a mesh already "
+                             "has them.")
+        if not material_names:
+            return mesh_or_labels
+        names = {**mesh_or_labels.material_names, **dict(material_names)}
+        return dataclasses.replace(mesh_or_labels, material_names=names)
+    return mesh_labels(mesh_or_labels, spacing=spacing, exclude=exclude,
+                       material_names=dict(material_names or {}))
+
+
+def check_tolerance(tol) -> None:
+    if isinstance(tol, bool) or not isinstance(tol, Real) or not 0 < tol < 1:
+        raise ValueError(f"tol must be a relative residual between 0 and 1, not {tol!r}.")
+
+
+def _cell_flux(tensors: np.ndarray, cell_material: np.ndarray, grad: np.ndarray
+               ) -> np.ndarray:
+    """(M, d) ``-C grad u`` per element, looping over materials (a handful)."""
+    flux = np.empty_like(grad)
+    for i, tensor in enumerate(tensors):
+        cells = cell_material == i
+        flux[cells] = -grad[cells] @ tensor.T
+    return flux
+
+
 def simulate_steps(mesh_or_labels, conductivity: Mapping, *, spacing=None, order: int = 1,
                    axes=None, tol: float = DEFAULT_TOLERANCE, exclude=(),
                    material_names: Mapping[int, str] | None = None,
                    ) -> Generator[tuple[int, int, str], None, SimulationResult]:
-    """Run :func:`simulate` step by step, yielding ``(done, total, message)``."""
+    """Run :func:`simulate` step by step, for a progress bar.
+
+    Parameters
+    ----------
+    mesh_or_labels, conductivity, spacing, order, axes, tol, exclude, material_names
+        As for :func:`simulate`.
+
+    Yields
+    ------
+    (done, total, message) : (int, int, str)
+        Progress: assembly, then one solve per axis.
+
+    Returns
+    -------
+    SimulationResult
+        As the generator's return value (``StopIteration.value``).
+    """
     if order not in ORDERS:
         raise ValueError(f"order must be 1 or 2 (P1 or P2 elements), not {order!r}.")
-    if not (isinstance(tol, float) and 0 < tol < 1):
-        raise ValueError(f"tol must be a relative residual between 0 and 1, not {tol!r}.")
+    check_tolerance(tol)
     seconds: dict[str, float] = {}
     t0 = time.perf_counter()
-    if isinstance(mesh_or_labels, Mesh):
-        if spacing is not None or exclude:
-            raise ValueError("spacing and exclude apply to a label image; a mesh already "
-                             "has them.")
-        mesh = mesh_or_labels
-        if material_names:
-            mesh.material_names = {**mesh.material_names, **dict(material_names)}
-    else:
-        mesh = mesh_labels(mesh_or_labels, spacing=spacing, exclude=exclude,
-                           material_names=dict(material_names or {}))
+    mesh = prepare_mesh(mesh_or_labels, spacing=spacing, exclude=exclude,
+                        material_names=material_names)
     names = _check_axes(axes, mesh.ndim)
     materials, cell_material = np.unique(mesh.material, return_inverse=True)
     tensors = conductivity_tensors(conductivity, materials, mesh.ndim, mesh.material_names)
@@ -138,30 +179,35 @@ def simulate_steps(mesh_or_labels, conductivity: Mapping, *, spacing=None, order
     volumes = signed_volumes(mesh.points, mesh.cells)
     per_material = np.bincount(cell_material, weights=volumes, minlength=materials.size)
     fractions = per_material / float(np.prod(hi - lo))
+    if not (len(mesh.shape) == mesh.ndim and len(mesh.spacing) == mesh.ndim) \
+            and fractions.sum() < 1 - 1e-9:
+        warnings.warn("the mesh has voids and does not record the image box, so the box is "
+                      "the extent of its points; if an excluded material covered a whole "
+                      "face of the image, k_eff refers to a smaller box: simulate the label "
+                      "image instead.", stacklevel=2)
     image_axes = {n: i for i, n in enumerate(axis_names(mesh.ndim))}
+    parts = connected_parts(matrix)
+
+    def energy(u: np.ndarray) -> float:
+        return dissipation(basis, u, tensors, cell_material)
 
     k_eff, bounds, potential, flux, solver = {}, {}, {}, {}, {}
     seconds["solve"] = 0.0
-    constrained_checked = False
     for step, name in enumerate(names, start=2):
         yield step, total, f"solving along {name} ({matrix.shape[0]} unknowns)"
         t0 = time.perf_counter()
         axis = image_axes[name]
-        if not constrained_checked:
-            fixed = np.flatnonzero((basis.doflocs[axis] <= lo[axis] + 1e-9 * (hi - lo)[axis])
-                                   | (basis.doflocs[axis] >= hi[axis] - 1e-9 * (hi - lo)[axis]))
-            check_constrained(matrix, fixed, basis.element_dofs.T, mesh.material)
-            constrained_checked = True
-        result = mixed_boundary(matrix, basis.doflocs, axis, lo, hi, tol=tol, axis_name=name)
-        reuss_voigt = voigt_reuss(tensors, fractions, axis)[::-1]
-        check_within_bounds(result.k_eff, reuss_voigt[1], reuss_voigt[0], name)
+        result = mixed_boundary(matrix, basis.doflocs, name, lo, hi, energy, tol=tol,
+                                parts=parts, cell_dofs=basis.element_dofs.T,
+                                cell_material=mesh.material)
+        voigt, reuss = voigt_reuss(tensors, fractions, axis)
+        check_within_bounds(result.k_eff, voigt, reuss, name)
         k_eff[name] = result.k_eff
-        bounds[name] = reuss_voigt
+        bounds[name] = (reuss, voigt)
         solver[name] = result.info
         potential[name] = vertex_values(result.values, len(mesh.points))
         grad = cell_gradients(basis, result.values)                      # (M, d) axis order
-        cell_flux = -np.einsum("mij,mj->mi", tensors[cell_material], grad)
-        flux[name] = np.ascontiguousarray(cell_flux[:, ::-1])
+        flux[name] = np.ascontiguousarray(_cell_flux(tensors, cell_material, grad)[:, ::-1])
         seconds["solve"] += time.perf_counter() - t0
     yield total, total, "done"
     return SimulationResult(

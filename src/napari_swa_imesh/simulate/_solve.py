@@ -13,9 +13,10 @@ import numpy as np
 from scipy import sparse
 from scipy.sparse import csgraph
 
-__all__ = ["SPDSolver", "SolverInfo", "check_constrained", "solve_dirichlet", "solve_spd"]
+__all__ = ["SPDSolver", "SolverInfo", "check_constrained", "connected_parts", "solve_dirichlet",
+           "solve_spd"]
 
-DEFAULT_TOLERANCE = 1e-10        # relative residual; k_eff converges like its square
+DEFAULT_TOLERANCE = 1e-10        # relative residual of the conjugate-gradient solve
 MAX_ITERATIONS = 2000
 
 
@@ -30,7 +31,7 @@ class SolverInfo:
     iterations : int
         Conjugate-gradient iterations.
     residual : float
-        Final relative residual ``|b - A x| / |b|``.
+        Final relative residual ``|b - A x| / |b|`` of the diagonally scaled system.
     seconds : float
         Set-up plus solve time.
     """
@@ -41,36 +42,42 @@ class SolverInfo:
     seconds: float
 
 
-def check_constrained(matrix: sparse.csr_matrix, fixed: np.ndarray,
+def connected_parts(matrix: sparse.csr_matrix) -> np.ndarray:
+    """(n,) index of the connected part of each degree of freedom (the matrix pattern)."""
+    return csgraph.connected_components(matrix, directed=False)[1]
+
+
+def check_constrained(parts: np.ndarray, fixed: np.ndarray, where: str = "",
                       cell_dofs: np.ndarray | None = None,
                       cell_material: np.ndarray | None = None) -> None:
-    """Refuse a system with a connected part that touches no fixed value (singular).
+    """Refuse a steady problem with a connected part that touches no fixed value.
+
+    Such a part's potential is undetermined (the system is singular there).
 
     Parameters
     ----------
-    matrix : (n, n) sparse matrix
-        The stiffness; its pattern is the connectivity of the degrees of freedom.
+    parts : (n,) ndarray of int
+        From :func:`connected_parts`.
     fixed : (k,) ndarray of int
         Degrees of freedom with a prescribed value.
+    where : str
+        Names the condition in the message (e.g. "the x faces").
     cell_dofs, cell_material : ndarray, optional
         Element-to-dof table and the material of each element, to name the materials of
         a floating part in the message.
     """
-    n_parts, part = csgraph.connected_components(matrix, directed=False)
-    if n_parts == 1 and fixed.size:
-        return
-    anchored = np.zeros(n_parts, dtype=bool)
-    anchored[part[fixed]] = True
+    anchored = np.zeros(parts.max() + 1, dtype=bool)
+    anchored[parts[fixed]] = True
     if anchored.all():
         return
-    floating = np.flatnonzero(~anchored[part])
+    floating = np.flatnonzero(~anchored[parts])
     what = ""
     if cell_dofs is not None and cell_material is not None:
         hit = np.isin(cell_dofs[:, 0], floating)
         mats = np.unique(cell_material[hit])
         what = f" (material {', '.join(map(str, mats))})"
-    raise ValueError(f"{floating.size} nodes{what} are not connected to any face with a "
-                     "fixed value, so their temperature is undetermined; include the "
+    raise ValueError(f"{floating.size} nodes{what} are not connected to {where or 'any face'} "
+                     "with a fixed value, so their potential is undetermined; include the "
                      "material that separates them or give that region a condition.")
 
 
@@ -78,16 +85,24 @@ class SPDSolver:
     """Conjugate gradients preconditioned by one AMG hierarchy of `matrix`, reusable.
 
     Build once, solve many right-hand sides (the time steps of a transient run share
-    one matrix).
+    one matrix). The system is solved symmetrically scaled by its diagonal,
+    ``D^-1/2 A D^-1/2``, so the stopping test weighs every row alike: with conductivities
+    1e-6 and 1e6 in one image an unscaled residual is met while the low-conductivity
+    part is still wrong.
     """
 
     def __init__(self, matrix: sparse.csr_matrix, *, tol: float = DEFAULT_TOLERANCE):
         import pyamg
 
         t0 = time.perf_counter()
-        self.matrix = matrix
+        self.scale = 1.0 / np.sqrt(matrix.diagonal())
+        scaling = sparse.diags(self.scale)
+        self.matrix = (scaling @ matrix @ scaling).tocsr()
         self.tol = tol
-        self.hierarchy = pyamg.smoothed_aggregation_solver(matrix, symmetry="symmetric")
+        # 'local' weighting bounds the prolongation smoother's spectral radius row by row;
+        # the default estimates it from a random start, so results vary from run to run
+        self.hierarchy = pyamg.smoothed_aggregation_solver(
+            self.matrix, symmetry="symmetric", smooth=("jacobi", {"weighting": "local"}))
         self.setup_seconds = time.perf_counter() - t0
 
     def solve(self, rhs: np.ndarray, x0: np.ndarray | None = None
@@ -101,13 +116,16 @@ class SPDSolver:
             is not returned).
         """
         t0 = time.perf_counter()
+        rhs = rhs * self.scale
         norm_b = float(np.linalg.norm(rhs))
         if norm_b == 0:
             return np.zeros_like(rhs), SolverInfo(rhs.size, 0, 0.0, 0.0)
         residuals: list[float] = []
-        x = self.hierarchy.solve(rhs, x0=x0, tol=self.tol, accel="cg",
+        y0 = None if x0 is None else x0 / self.scale
+        y = self.hierarchy.solve(rhs, x0=y0, tol=self.tol, accel="cg",
                                  maxiter=MAX_ITERATIONS, residuals=residuals)
-        residual = float(np.linalg.norm(rhs - self.matrix @ x)) / norm_b
+        residual = float(np.linalg.norm(rhs - self.matrix @ y)) / norm_b
+        x = y * self.scale
         info = SolverInfo(int(rhs.size), max(len(residuals) - 1, 0), residual,
                           time.perf_counter() - t0)
         if not np.isfinite(residual) or residual > 10 * self.tol:

@@ -14,14 +14,16 @@ from __future__ import annotations
 import time
 from collections.abc import Mapping
 from dataclasses import dataclass, field
+from numbers import Real
 
 import numpy as np
 
-from ..mesh import Mesh, mesh_labels
+from ..mesh import Mesh
 from ._conductivity import conductivity_tensors, is_isotropic
 from ._fe import fe_basis, mass_matrix, stiffness_matrix, vertex_values
 from ._protocols import box_bounds, face_dofs, face_names
-from ._solve import DEFAULT_TOLERANCE, SPDSolver, check_constrained, solve_spd
+from ._simulate import check_tolerance, prepare_mesh
+from ._solve import DEFAULT_TOLERANCE, SPDSolver, solve_spd
 
 __all__ = ["TransientResult", "simulate_transient", "transient_steps"]
 
@@ -66,6 +68,7 @@ class TransientResult:
         }
 
     def describe(self) -> str:
+        """Two lines for people: the run's size and cost, the amount at start and end."""
         total = sum(a for a in self.amount.values())
         lines = [f"transient diffusion, P{self.order} on {self.mesh.n_cells} elements, "
                  f"{self.dofs} unknowns, {self.iterations.size} implicit Euler steps to "
@@ -74,74 +77,106 @@ class TransientResult:
         return "\n".join(lines)
 
 
-def _per_material(value, materials, what: str, default: float | None) -> np.ndarray:
-    """A number or a {material: number} mapping as one value per material."""
-    if value is None:
-        value = default
+def _per_material(value, materials, names: Mapping[int, str], what: str,
+                  default: float) -> np.ndarray:
+    """A number, or a {material label or name: number} mapping with `default` for the
+    materials it leaves out, as one value per material."""
     if isinstance(value, Mapping):
-        unknown = sorted(set(int(k) for k in value) - set(int(m) for m in materials))
-        if unknown:
-            raise ValueError(f"{what} names material {unknown[0]}, which is not in the mesh.")
-        out = np.array([value.get(int(m), default if default is not None else np.nan)
-                        for m in materials], dtype=np.float64)
-        if np.isnan(out).any():
-            missing = [int(m) for m, v in zip(materials, out) if np.isnan(v)]
-            raise ValueError(f"{what} of material {missing[0]} is not given.")
-    else:
-        out = np.full(len(materials), value, dtype=np.float64)
-    if not np.all(np.isfinite(out)):
-        raise ValueError(f"{what} must be finite.")
-    return out
+        by_name = {str(v): int(k) for k, v in names.items()}
+        table: dict[int, float] = {}
+        for key, number in value.items():
+            if isinstance(key, str) and key in by_name:
+                label = by_name[key]
+            elif isinstance(key, (int, np.integer)) and not isinstance(key, bool):
+                label = int(key)
+            else:
+                label = None
+            if label is None or label not in set(int(m) for m in materials):
+                raise ValueError(f"{what} names material {key!r}, which is not in the mesh; "
+                                 f"the materials are {', '.join(map(str, materials))}.")
+            table[label] = _number(number, f"the {what} of material {key}")
+        return np.array([table.get(int(m), default) for m in materials], dtype=np.float64)
+    return np.full(len(materials), _number(value, f"the {what}"), dtype=np.float64)
+
+
+def _number(value, what: str) -> float:
+    if isinstance(value, bool) or not isinstance(value, Real) or not np.isfinite(value):
+        raise ValueError(f"{what} must be a finite number, not {value!r}.")
+    return float(value)
+
+
+def _whole(value, what: str) -> int:
+    if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or value < 1:
+        raise ValueError(f"{what} must be a positive whole number, not {value!r}.")
+    return int(value)
 
 
 def transient_steps(mesh_or_labels, conductivity: Mapping, *, duration: float, steps: int,
-                    capacity=None, initial=0.0, fixed: Mapping[str, float] | None = None,
+                    capacity=1.0, initial=0.0, fixed: Mapping[str, float] | None = None,
                     spacing=None, order: int = 1, exclude=(), save_every: int = 1,
                     material_names: Mapping[int, str] | None = None,
                     tol: float = DEFAULT_TOLERANCE):
-    """Run :func:`simulate_transient` step by step, yielding ``(done, total, message)``."""
+    """Run :func:`simulate_transient` step by step, for a progress bar.
+
+    Parameters
+    ----------
+    mesh_or_labels, conductivity, duration, steps, capacity, initial, fixed, spacing, \
+order, exclude, save_every, material_names, tol
+        As for :func:`simulate_transient`.
+
+    Yields
+    ------
+    (done, total, message) : (int, int, str)
+        Progress: assembly, then one report per time step.
+
+    Returns
+    -------
+    TransientResult
+        As the generator's return value (``StopIteration.value``).
+    """
     if order not in (1, 2):
         raise ValueError(f"order must be 1 or 2 (P1 or P2 elements), not {order!r}.")
-    if not (np.isfinite(duration) and duration > 0):
+    duration = _number(duration, "duration")
+    if duration <= 0:
         raise ValueError(f"duration must be a positive time, not {duration!r}.")
-    if isinstance(steps, bool) or not isinstance(steps, (int, np.integer)) or steps < 1:
-        raise ValueError(f"steps must be a positive whole number, not {steps!r}.")
-    if isinstance(save_every, bool) or not isinstance(save_every, (int, np.integer)) \
-            or save_every < 1:
-        raise ValueError(f"save_every must be a positive whole number, not {save_every!r}.")
+    steps = _whole(steps, "steps")
+    save_every = _whole(save_every, "save_every")
+    check_tolerance(tol)
     fixed = dict(fixed or {})
     t0 = time.perf_counter()
-    if isinstance(mesh_or_labels, Mesh):
-        mesh = mesh_or_labels
-    else:
-        mesh = mesh_labels(mesh_or_labels, spacing=spacing, exclude=exclude,
-                           material_names=dict(material_names or {}))
+    mesh = prepare_mesh(mesh_or_labels, spacing=spacing, exclude=exclude,
+                        material_names=material_names)
     for face, value in fixed.items():
         if face not in face_names(mesh.ndim):
             raise ValueError(f"unknown face {face!r}; the faces of a {mesh.ndim}-D box are "
                              f"{', '.join(face_names(mesh.ndim))}.")
-        if not np.isfinite(value):
-            raise ValueError(f"the value fixed on {face} must be finite, not {value!r}.")
+        _number(value, f"the value fixed on {face}")
     materials, cell_material = np.unique(mesh.material, return_inverse=True)
     tensors = conductivity_tensors(conductivity, materials, mesh.ndim, mesh.material_names)
-    cap = _per_material(capacity, materials, "capacity", 1.0)
+    cap = _per_material(capacity, materials, mesh.material_names, "capacity", 1.0)
     if np.any(cap <= 0):
         raise ValueError("capacity must be positive for every material.")
-    start = _per_material(initial, materials, "initial value", None)
+    start = _per_material(initial, materials, mesh.material_names, "initial value", 0.0)
     yield 1, steps + 2, f"assembling P{order} on {mesh.n_cells} elements"
 
     basis = fe_basis(mesh, order)
     stiffness = stiffness_matrix(basis, tensors, cell_material, is_isotropic(tensors))
     mass = mass_matrix(basis, cap[cell_material])
     dt = duration / steps
+    # the mass term keeps the system definite: a part with no fixed face is well posed
     system = (mass / dt + stiffness).tocsr()
     lo, hi = box_bounds(mesh.points, mesh.shape, mesh.spacing, getattr(mesh, "origin", None))
-    fixed_dofs = [face_dofs(basis.doflocs, lo, hi, f) for f in fixed]
+    fixed_dofs = []
+    for face in fixed:
+        dofs_on_face = face_dofs(basis.doflocs, lo, hi, face)
+        if dofs_on_face.size == 0:
+            raise ValueError(f"no meshed material touches the {face} face, so a value fixed "
+                             "there acts on nothing; fix another face or mesh the material "
+                             "on it.")
+        fixed_dofs.append(dofs_on_face)
     dofs = np.concatenate(fixed_dofs) if fixed_dofs else np.zeros(0, dtype=np.intp)
-    values = np.concatenate([np.full(d.size, fixed[f]) for f, d in zip(fixed, fixed_dofs)]) \
-        if fixed_dofs else np.zeros(0)
-    if dofs.size:
-        check_constrained(stiffness, dofs, basis.element_dofs.T, mesh.material)
+    values = np.concatenate([np.full(d.size, float(fixed[f]))
+                             for f, d in zip(fixed, fixed_dofs)]) if fixed_dofs else np.zeros(0)
     free = np.ones(system.shape[0], dtype=bool)
     free[dofs] = False
     reduced = system[free][:, free].tocsr()
@@ -149,10 +184,7 @@ def transient_steps(mesh_or_labels, conductivity: Mapping, *, duration: float, s
     solver = SPDSolver(reduced, tol=tol)
     seconds = {"mesh_and_assembly": time.perf_counter() - t0}
 
-    # initial field: the capacity-weighted L2 projection of the per-material values, which
-    # keeps the amount int c u of the piecewise-constant start exactly
-    rhs = _cell_load(basis, (cap * start)[cell_material], order)
-    u = solve_spd(mass, rhs, tol=1e-12)[0] if np.any(start) else np.zeros(system.shape[0])
+    u = _initial_field(basis, order, mass, (cap * start)[cell_material], cap, start)
     u[dofs] = values
     fixed_values = u[~free].copy()
     cell_amount = _amount_per_cell_fn(basis, order, cap[cell_material])
@@ -181,6 +213,22 @@ def transient_steps(mesh_or_labels, conductivity: Mapping, *, duration: float, s
                            int(system.shape[0]), np.array(iterations, dtype=int), seconds)
 
 
+def _initial_field(basis, order: int, mass, load_per_cell: np.ndarray, cap: np.ndarray,
+                   start: np.ndarray) -> np.ndarray:
+    """The start as a finite-element field that keeps its amount ``int c u`` exactly.
+
+    P1: the lumped (row-sum) projection, a weighted average of the neighbouring elements'
+    values, so a 0/1 start stays within [0, 1]. P2: the consistent L2 projection (lumped
+    P2 mass has non-positive vertex entries); its overshoot is small.
+    """
+    if not np.any(start):
+        return np.zeros(mass.shape[0])
+    rhs = _cell_load(basis, load_per_cell, order)
+    if order == 1:
+        return rhs / np.asarray(mass.sum(axis=1)).ravel()
+    return solve_spd(mass, rhs, tol=1e-12)[0]
+
+
 def _cell_load(basis, per_cell: np.ndarray, order: int) -> np.ndarray:
     """``b_i = int c_e phi_i`` for a piecewise-constant c (exact quadrature)."""
     import skfem
@@ -207,7 +255,7 @@ def _amount_per_cell_fn(basis, order: int, capacity_per_cell: np.ndarray):
 
 
 def simulate_transient(mesh_or_labels, conductivity: Mapping, *, duration: float,
-                       steps: int, capacity=None, initial=0.0,
+                       steps: int, capacity=1.0, initial=0.0,
                        fixed: Mapping[str, float] | None = None, spacing=None,
                        order: int = 1, exclude=(), save_every: int = 1,
                        material_names: Mapping[int, str] | None = None,
@@ -223,11 +271,13 @@ def simulate_transient(mesh_or_labels, conductivity: Mapping, *, duration: float
         End time (the units of ``capacity * length^2 / conductivity``).
     steps : int
         Implicit Euler steps of ``duration / steps`` each.
-    capacity : float or mapping of int to float, optional
-        ``c`` per material (default 1).
-    initial : float or mapping of int to float
-        Initial value per material (a released substance: 1 in the source material,
-        0 elsewhere); projected onto the elements in L2, which keeps its amount.
+    capacity : float or mapping of int or str to float
+        ``c`` per material, by label or name (default 1; materials a mapping leaves out
+        get 1).
+    initial : float or mapping of int or str to float
+        Initial value per material (a released substance: 1 in the source material; a
+        mapping leaves the others at 0); projected onto the elements so that its amount
+        is kept.
     fixed : mapping of str to float, optional
         Faces of the box with a fixed value, e.g. ``{"xmin": 1.0}`` for a heat front
         entering from x = min; every other face is insulated. Faces: ``xmin`` ...
