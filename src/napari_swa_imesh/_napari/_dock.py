@@ -11,7 +11,10 @@ from __future__ import annotations
 
 from qtpy.QtWidgets import QFrame, QGroupBox, QScrollArea, QSizePolicy, QVBoxLayout, QWidget
 
-__all__ = ["scroll_body", "side_by_side", "group", "wrapped_label", "button"]
+__all__ = ["scroll_body", "side_by_side", "group", "wrapped_label", "button",
+           "SCROLL_MIN_HEIGHT"]
+
+SCROLL_MIN_HEIGHT = 48
 
 
 def scroll_body(widget: QWidget) -> QVBoxLayout:
@@ -21,6 +24,9 @@ def scroll_body(widget: QWidget) -> QVBoxLayout:
     area.setWidget(body)
     area.setWidgetResizable(True)
     area.setFrameShape(QFrame.NoFrame)
+    # below Qt's own minimum (about 90 px with its scroll bars): six docks of the plugin
+    # stacked in one dock area must still fit a small screen
+    area.setMinimumHeight(SCROLL_MIN_HEIGHT)
     outer = QVBoxLayout(widget)
     outer.setContentsMargins(0, 0, 0, 0)
     outer.addWidget(area)

@@ -1,4 +1,5 @@
-"""The main widget (Layers > Segment): Samples | RES | Classify | Mesh tabs kept in step."""
+"""The main widget (Layers > Segment): Samples | RES | Classify | Mesh | Simulate tabs kept in
+step."""
 
 from __future__ import annotations
 
@@ -10,6 +11,7 @@ from ._classify_widget import ClassifyWidget
 from ._mesh_widget import MeshWidget
 from ._res_widget import ResWidget
 from ._samples_widget import SamplesWidget
+from ._simulate_widget import SimulateWidget
 
 if TYPE_CHECKING:
     import napari
@@ -18,12 +20,12 @@ __all__ = ["WorkflowWidget"]
 
 
 class WorkflowWidget(QWidget):
-    """The segmentation-and-meshing workflow in four tabs.
+    """The pipeline in five tabs: samples, RES, classification, mesh, simulation.
 
-    The tabs are the plugin's four widgets; this one only passes choices along: the
+    The tabs are the plugin's five widgets; this one only passes choices along: the
     samples layer to the RES and classify tabs, the chosen scale to the samples checks and
     the classifier, the classify tab's scale to the samples checks, the classification to
-    the mesher.
+    the mesher, the mesh to the simulation.
     """
 
     def __init__(self, napari_viewer: "napari.viewer.Viewer", parent: QWidget | None = None):
@@ -33,9 +35,11 @@ class WorkflowWidget(QWidget):
         self.res = ResWidget(napari_viewer)
         self.classify = ClassifyWidget(napari_viewer)
         self.mesh = MeshWidget(napari_viewer)
+        self.simulate = SimulateWidget(napari_viewer)
         self.tabs = QTabWidget()
         for widget, title in ((self.samples, "Samples"), (self.res, "RES"),
-                              (self.classify, "Classify"), (self.mesh, "Mesh")):
+                              (self.classify, "Classify"), (self.mesh, "Mesh"),
+                              (self.simulate, "Simulate")):
             self.tabs.addTab(widget, title)   # each tab scrolls its own content
         layout = QVBoxLayout(self)
         layout.setContentsMargins(0, 0, 0, 0)
@@ -46,6 +50,7 @@ class WorkflowWidget(QWidget):
         self.res.scale_chosen.connect(self.samples.set_scale)
         self.classify.scale_combo.changed.connect(self._on_classify_scale)
         self.classify.labels_ready.connect(self.mesh.select_labels)
+        self.mesh.mesh_ready.connect(self.simulate.select_mesh)
         self._on_samples_layer(self.samples.samples_layer())
 
     def _on_classify_scale(self, scale: int | None) -> None:

@@ -10,10 +10,11 @@
 """
 
 from ._conductivity import conductivity_tensors, parse_conductivity_args
+from ._output import write_field, write_series
 from ._simulate import SimulationResult, simulate, simulate_steps
 from ._solve import SolverInfo
 from ._transient import TransientResult, simulate_transient, transient_steps
 
 __all__ = ["SimulationResult", "SolverInfo", "TransientResult", "conductivity_tensors",
            "parse_conductivity_args", "simulate", "simulate_steps", "simulate_transient",
-           "transient_steps"]
+           "transient_steps", "write_field", "write_series"]
