@@ -44,10 +44,11 @@ def test_widgets_in_the_plugins_menu_and_the_workflow_under_layers_segment(make_
     assert f"{PLUGIN}.workflow_widget" in segment
     plugins = commands("napari/plugins")
     assert {f"{PLUGIN}.{w}_widget" for w in ("workflow", "samples", "res", "classify",
-                                            "mesh")} <= plugins
+                                            "mesh", "simulate")} <= plugins
     _, widget = viewer.window.add_plugin_dock_widget(PLUGIN, "Segment and mesh")
     assert isinstance(widget, WorkflowWidget)
-    assert [widget.tabs.tabText(i) for i in range(4)] == ["Samples", "RES", "Classify", "Mesh"]
+    assert [widget.tabs.tabText(i) for i in range(widget.tabs.count())] == [
+        "Samples", "RES", "Classify", "Mesh", "Simulate"]
 
 
 def test_nifti_reader_keeps_the_voxel_spacing(make_napari_viewer, tmp_path):
