@@ -6,13 +6,13 @@
 * checks: :func:`check_mesh`, :func:`rasterize_materials`;
 * quality: :func:`radius_edge_ratio`, :func:`min_angle`, :func:`dihedral_angles`,
   :func:`signed_volumes`, :data:`QUALITY_METRICS`, and the method's proven bounds,
-  :func:`quality_table`;
+  :func:`quality_table` and the ranges they prove per metric, :func:`quality_bounds`;
 * export: :func:`write_mesh`, :func:`read_mesh`, :func:`to_meshio`;
 * memory: :func:`estimate_mesh_memory`, :func:`count_boundary_voxels`.
 """
 
 from ._balance import balance_tree
-from ._bounds import format_quality_table, quality_table
+from ._bounds import format_quality_table, quality_bounds, quality_table
 from ._checks import check_mesh, rasterize_materials
 from ._export import read_mesh, to_meshio, write_mesh
 from ._imesh import mesh_labels, mesh_tree
@@ -30,6 +30,6 @@ from ._types import Mesh
 __all__ = [
     "Mesh", "balance_tree", "mesh_labels", "mesh_tree", "check_mesh", "rasterize_materials",
     "QUALITY_METRICS", "dihedral_angles", "max_angle", "min_angle", "radius_edge_ratio",
-    "signed_volumes", "quality_table", "format_quality_table", "read_mesh", "to_meshio",
-    "write_mesh", "estimate_mesh_memory", "count_boundary_voxels",
+    "signed_volumes", "quality_bounds", "quality_table", "format_quality_table", "read_mesh",
+    "to_meshio", "write_mesh", "estimate_mesh_memory", "count_boundary_voxels",
 ]
