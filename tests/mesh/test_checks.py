@@ -14,6 +14,8 @@ LABELS = {2: blobs((12, 10), 3, seed=1, sigma=1.5), 3: blobs((6, 7, 8), 3, seed=
 
 
 def _broken(mesh, **changes):
+    if len(changes.get("cells", mesh.cells)) != mesh.n_cells:  # per-cell data no longer fit
+        changes.setdefault("cell_data", {})
     return dataclasses.replace(mesh, **changes)
 
 

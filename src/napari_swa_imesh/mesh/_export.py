@@ -70,35 +70,14 @@ def _orient_positive(points: np.ndarray, cells: np.ndarray) -> np.ndarray:
 
 
 def _check_mesh_arg(mesh) -> None:
+    """A `Mesh` (which checked its own arrays when built) with something to write."""
     if not isinstance(mesh, Mesh):
         raise TypeError(
             f"expected a napari_swa_imesh Mesh (from mesh_labels or read_mesh); got "
             f"{type(mesh).__name__}."
         )
-    shape = np.shape(mesh.points)
-    d = shape[1] if len(shape) == 2 else None
-    if d not in (2, 3):
-        raise ValueError(
-            f"can only export triangle (2-D) or tetrahedron (3-D) meshes; points have "
-            f"shape {shape}."
-        )
-    if np.ndim(mesh.cells) != 2 or np.shape(mesh.cells)[1] != d + 1:
-        raise ValueError(
-            f"cells of a {d}-D mesh need {d + 1} corners each; got shape {np.shape(mesh.cells)}."
-        )
     if mesh.n_cells == 0:
         raise ValueError("the mesh has no elements; there is nothing to write.")
-    if np.shape(mesh.material) != (mesh.n_cells,):
-        raise ValueError(
-            f"material must hold one id per element ({mesh.n_cells}); got shape "
-            f"{np.shape(mesh.material)}."
-        )
-    for key, values in mesh.cell_data.items():
-        if np.shape(values)[:1] != (mesh.n_cells,):
-            raise ValueError(
-                f"cell_data[{key!r}] must hold one value per element ({mesh.n_cells}); "
-                f"got shape {np.shape(values)}."
-            )
 
 
 def _material_names(mesh: Mesh, materials: np.ndarray) -> dict[int, str]:

@@ -194,9 +194,9 @@ def mesh_tree(tree: RegionTree, *, method: str = "template", exclude=(), spacing
     cell_data = {"quality": cell_data.pop("quality"), "level": bal.level[leaf],
                  "leaf": leaf, **cell_data}
     seconds["assemble"] = time.perf_counter() - t
-    mesh = Mesh(points=points, cells=cells, material=material, cell_data=cell_data,
-                spacing=spacing_t, shape=tuple(tree.shape),
-                material_names=dict(material_names or {}), info=info)
+    mesh = Mesh._trusted(points, cells, material, cell_data, spacing=spacing_t,
+                         shape=tuple(tree.shape), material_names=dict(material_names or {}),
+                         info=info)
 
     t = time.perf_counter()
     n_el = mesh.n_cells
