@@ -119,8 +119,14 @@ def _excluded(values: np.ndarray, exclude: np.ndarray) -> np.ndarray:
     return np.isin(values, exclude) if exclude.size else np.zeros(values.shape, bool)
 
 
-def _count_excluded(lab: np.ndarray, exclude: np.ndarray) -> int:
-    """Pixels holding an excluded label, in slabs (no image-size mask)."""
+def count_excluded(lab: np.ndarray, exclude: np.ndarray) -> int:
+    """Pixels of `lab` holding a label of `exclude`, counted in slabs (no image-size mask).
+
+    Examples
+    --------
+    >>> count_excluded(np.array([[0, 1], [0, 2]]), np.array([0, 2]))
+    3
+    """
     if not exclude.size:
         return 0
     step = max(1, _SLAB_VOXELS // max(1, math.prod(lab.shape[1:])))
@@ -369,7 +375,7 @@ def _check_mesh(mesh: Mesh, lab: np.ndarray, exclude: np.ndarray,
     points = _index_points(mesh)
     # int32 ids halve the memory of the facet arrays (4 per tetrahedron)
     cells = np.asarray(mesh.cells, dtype=np.int32 if len(mesh.points) < 2**31 else np.int64)
-    n_excluded = _count_excluded(lab, exclude)
+    n_excluded = count_excluded(lab, exclude)
     voxel = float(np.prod(mesh.spacing)) if mesh.spacing else 1.0
     if tree is None:
         tree = _build_tree(lab)

@@ -149,15 +149,14 @@ def _run_mesh(args: argparse.Namespace) -> int:
     from ._imesh import _mesh_labels
 
     with timer("mesh"):
-        mesh = _mesh_labels(labels, method=args.method, exclude=exclude, spacing=spacing,
-                            material_names=names)
+        mesh, tree = _mesh_labels(labels, method=args.method, exclude=exclude,
+                                  spacing=spacing, material_names=names)
     if args.no_check:
         checks = {"skipped": True}
     else:
         with timer("check"):
-            checks = _check_mesh(mesh, labels, exclude)
-        checks = {k: (bool(v) if isinstance(v, (bool, np.bool_)) else v)
-                  for k, v in checks.items()}
+            checks = _check_mesh(mesh, labels, exclude, tree).to_dict()
+    del tree
     with timer("write"):
         written = write_mesh(mesh, args.output, force=args.force)
 
@@ -245,7 +244,7 @@ def _mesh_report(args, mesh, checks, written, seconds) -> dict:
         "dim": mesh.ndim,
         "shape": list(mesh.shape),
         "spacing": list(mesh.spacing),
-        "exclude": sorted(set(args.exclude)),
+        "exclude": list(mesh.info["exclude"]),
         "leaves_before_balance": info.get("n_leaves_tree"),
         "leaves_after_balance": info.get("n_leaves_balanced"),
         "leaves_meshed": info.get("n_leaves_meshed"),

@@ -29,6 +29,7 @@ from .._tree import RegionTree, _build_tree
 from .._validation import as_labels, normalize_spacing
 from . import _templates_luts as luts
 from ._balance import balance_tree, count_balanced_leaves
+from ._checks import _check_mesh, count_excluded
 from ._quality import dihedral_angles, radius_edge_ratio, signed_volumes, triangle_angles
 from ._types import Mesh
 
@@ -94,8 +95,23 @@ def mesh_labels(labels, *, method: str = "template", exclude=(), spacing=None,
     """
     lab, spacing_t, exclude_arr = _mesh_arguments(labels, method=method, exclude=exclude,
                                                    spacing=spacing)
-    return _mesh_labels(lab, method=method, exclude=exclude_arr, spacing=spacing_t,
-                        material_names=material_names)
+    mesh, tree = _mesh_labels(lab, method=method, exclude=exclude_arr, spacing=spacing_t,
+                              material_names=material_names)
+    if method == "delaunay":  # report the reference's step as it is
+        t = time.perf_counter()
+        checks = _check_mesh(mesh, lab, exclude_arr, tree)
+        mesh.info["checks"] = checks.to_dict()
+        mesh.info["conforming"] = checks.conforming
+        mesh.info["seconds"]["checks"] = round(time.perf_counter() - t, 6)
+    return mesh
+
+
+def _exclude_array(exclude) -> np.ndarray:
+    """`exclude` (an id or ids) as a sorted unique int64 array, or TypeError."""
+    arr = np.unique(np.asarray(list(exclude) if not np.isscalar(exclude) else [exclude]))
+    if arr.size and arr.dtype.kind not in "iu":
+        raise TypeError(f"exclude must hold integer material ids; got {exclude!r}.")
+    return arr.astype(np.int64)
 
 
 def _mesh_arguments(labels, *, method, exclude, spacing, name: str = "labels"):
@@ -108,75 +124,123 @@ def _mesh_arguments(labels, *, method, exclude, spacing, name: str = "labels"):
     if method not in METHODS:
         raise ValueError(f"method must be one of {', '.join(METHODS)}; got {method!r}.")
     spacing_t = normalize_spacing(spacing, lab.ndim)
-    exclude_arr = np.unique(np.asarray(list(exclude) if not np.isscalar(exclude) else [exclude]))
-    if exclude_arr.size and exclude_arr.dtype.kind not in "iu":
-        raise TypeError(f"exclude must hold integer material ids; got {exclude!r}.")
-    if exclude_arr.size and np.isin(lab, exclude_arr).all():
+    exclude_arr = _exclude_array(exclude)
+    if exclude_arr.size and count_excluded(lab, exclude_arr) == lab.size:
         raise ValueError(
             f"every pixel is excluded (labels present: {np.unique(lab).tolist()}, "
             f"exclude={exclude_arr.tolist()}); nothing is left to mesh. Exclude fewer materials."
         )
-    return lab, spacing_t, exclude_arr.astype(np.int64)
+    return lab, spacing_t, exclude_arr
 
 
 def _mesh_labels(lab: np.ndarray, *, method: str, exclude: np.ndarray, spacing: tuple,
-                 material_names: dict | None = None) -> Mesh:
-    """The worker behind :func:`mesh_labels`; arguments come from :func:`_mesh_arguments`."""
-    names = {int(k): str(v) for k, v in (material_names or {}).items()}
+                 material_names: dict | None = None) -> tuple[Mesh, RegionTree]:
+    """The worker behind :func:`mesh_labels`; arguments come from :func:`_mesh_arguments`.
+
+    Returns the mesh and the region tree of `lab`, which the checks can reuse.
+    """
     t0 = time.perf_counter()
     tree = _build_tree(lab)
     seconds = {"tree": time.perf_counter() - t0}
-    return mesh_tree(tree, method=method, exclude=exclude, spacing=spacing,
-                     material_names=names, _seconds=seconds,
-                     _labels=lab if method == "delaunay" else None)
+    mesh = _mesh_tree(tree, method=method, exclude=exclude, spacing=spacing,
+                      material_names=_names(material_names), connectivity=None,
+                      report_face_balance=False, seconds=seconds)
+    return mesh, tree
+
+
+def _names(material_names) -> dict[int, str]:
+    return {int(k): str(v) for k, v in (material_names or {}).items()}
 
 
 def mesh_tree(tree: RegionTree, *, method: str = "template", exclude=(), spacing=None,
               material_names: dict[int, str] | None = None, connectivity: int | None = None,
-              report_face_balance: bool = True, _seconds: dict | None = None,
-              _labels: np.ndarray | None = None) -> Mesh:
-    """Mesh the leaves of an (unbalanced) region tree; the worker behind :func:`mesh_labels`.
+              report_face_balance: bool = False) -> Mesh:
+    """Mesh the leaves of an (unbalanced) region tree.
 
-    `connectivity` overrides the balance used (templates need at least ``d - 1``: faces
-    and, in 3-D, edges; ``d`` adds corners). Inputs are trusted.
+    Parameters
+    ----------
+    tree : RegionTree
+        From :func:`~napari_swa_imesh.build_tree` of a 2-D or 3-D label image.
+    method, exclude, spacing, material_names
+        As for :func:`mesh_labels`.
+    connectivity : int, optional
+        Balance used (scipy's convention): templates need at least ``d - 1`` (faces and,
+        in 3-D, edges; the default), ``d`` adds corners; the Delaunay method defaults to
+        faces (1).
+    report_face_balance : bool
+        Also count the leaves a face-only balance would give (a second balance pass) and
+        report them in ``info["n_leaves_face_balanced"]``, with the extra leaves and
+        elements the stronger balance costs. Off by default: these fields are then None
+        unless the balance used is the face balance itself.
+
+    Returns
+    -------
+    Mesh
+        As :func:`mesh_labels` returns (``info["seconds"]`` without the tree).
+
+    Examples
+    --------
+    >>> from napari_swa_imesh import build_tree
+    >>> mesh_tree(build_tree(np.array([[1, 1], [1, 2]]))).n_cells
+    8
     """
+    if not isinstance(tree, RegionTree):
+        raise TypeError(f"tree must be a RegionTree (from build_tree); got {type(tree).__name__}.")
     d = tree.ndim
-    seconds = dict(_seconds or {})
-    spacing_t = tuple(spacing) if spacing is not None else (1.0,) * d
-    exclude_arr = np.asarray(exclude, dtype=np.int64).ravel()
+    if d not in (2, 3):
+        raise ValueError(f"the mesher takes 2-D or 3-D trees; got a {d}-D tree.")
+    if method not in METHODS:
+        raise ValueError(f"method must be one of {', '.join(METHODS)}; got {method!r}.")
+    if connectivity is not None and connectivity not in range(1, d + 1):
+        raise ValueError(f"connectivity must be 1..{d} for a {d}-D tree; got {connectivity!r}.")
+    if method == "template" and connectivity is not None and connectivity < d - 1:
+        raise ValueError(f"templates need balance across faces and edges (connectivity >= {d - 1}).")
+    return _mesh_tree(tree, method=method, exclude=_exclude_array(exclude),
+                      spacing=normalize_spacing(spacing, d), material_names=_names(material_names),
+                      connectivity=connectivity, report_face_balance=bool(report_face_balance),
+                      seconds={})
+
+
+def _mesh_tree(tree: RegionTree, *, method: str, exclude: np.ndarray, spacing: tuple,
+               material_names: dict[int, str], connectivity: int | None,
+               report_face_balance: bool, seconds: dict) -> Mesh:
+    """The worker behind :func:`mesh_tree` and :func:`mesh_labels`: trusted arguments;
+    `seconds` holds the steps already timed (the tree) and receives the others."""
+    d = tree.ndim
     if connectivity is None:
         connectivity = 1 if method == "delaunay" else max(1, d - 1)
-    if method == "template" and connectivity < d - 1:
-        raise ValueError(f"templates need balance across faces and edges (connectivity >= {d - 1}).")
 
     t = time.perf_counter()
     bal = balance_tree(tree, connectivity=connectivity)
     seconds["balance"] = time.perf_counter() - t
-    meshed = bal.inside & ~np.isin(bal.label, exclude_arr)
+    meshed = bal.inside & ~np.isin(bal.label, exclude)
     info = {
         "method": method,
         "dim": d,
         "shape": list(tree.shape),
-        "spacing": list(spacing_t),
-        "exclude": exclude_arr.tolist(),
+        "spacing": list(spacing),
+        "exclude": exclude.tolist(),
         "balance": {1: "faces", 2: "faces+edges", 3: "faces+edges+corners"}.get(
             connectivity, f"connectivity {connectivity}"),
         "n_leaves_tree": int(np.count_nonzero(tree.inside)),
         "n_leaves_balanced": int(np.count_nonzero(bal.inside)),
         "n_leaves_meshed": int(np.count_nonzero(meshed)),
     }
-    if report_face_balance and connectivity > 1:
+    # a second balance pass, only to say what the stronger balance cost: opt-in
+    if connectivity == 1:
+        info["n_leaves_face_balanced"] = info["n_leaves_balanced"]
+    elif report_face_balance:
         t = time.perf_counter()
         info["n_leaves_face_balanced"] = count_balanced_leaves(tree, connectivity=1)
         seconds["face_balance_count"] = time.perf_counter() - t
     else:
-        info["n_leaves_face_balanced"] = info["n_leaves_balanced"]
+        info["n_leaves_face_balanced"] = None
 
     if method == "template":
         points, cells, leaf, template_id, vseconds = _template_mesh(bal, meshed)
         seconds.update(vseconds)
         t = time.perf_counter()
-        table = _template_quality(d, spacing_t)
+        table = _template_quality(d, spacing)
         template_id = template_id.astype(np.intp)  # once, not once per look-up
         cell_data = {name: values[template_id] for name, values in table.items()}
         del template_id
@@ -189,12 +253,13 @@ def mesh_tree(tree: RegionTree, *, method: str = "template", exclude=(), spacing
         info.update(dinfo)
 
     t = time.perf_counter()
-    points = points * np.asarray(spacing_t)
+    if any(s != 1.0 for s in spacing):
+        points *= np.asarray(spacing)  # points is the mesher's own array: scale in place
     material = bal.label[leaf]
     cell_data = {"quality": cell_data.pop("quality"), "level": bal.level[leaf],
                  "leaf": leaf, **cell_data}
     seconds["assemble"] = time.perf_counter() - t
-    mesh = Mesh._trusted(points, cells, material, cell_data, spacing=spacing_t,
+    mesh = Mesh._trusted(points, cells, material, cell_data, spacing=spacing,
                          shape=tuple(tree.shape), material_names=dict(material_names or {}),
                          info=info)
 
@@ -203,10 +268,13 @@ def mesh_tree(tree: RegionTree, *, method: str = "template", exclude=(), spacing
     info["n_vertices"] = int(len(points))
     info["n_elements"] = n_el
     info["elements_per_leaf"] = n_el / max(1, info["n_leaves_meshed"])
-    extra = info["n_leaves_balanced"] - info["n_leaves_face_balanced"]
-    info["balance_extra_leaves"] = extra
-    # estimate: leaves added by the stronger balance times the mean elements per leaf
-    info["balance_element_cost"] = int(round(extra * info["elements_per_leaf"]))
+    if info["n_leaves_face_balanced"] is None:
+        info["balance_extra_leaves"] = info["balance_element_cost"] = None
+    else:
+        extra = info["n_leaves_balanced"] - info["n_leaves_face_balanced"]
+        info["balance_extra_leaves"] = extra
+        # estimate: leaves added by the stronger balance times the mean elements per leaf
+        info["balance_element_cost"] = int(round(extra * info["elements_per_leaf"]))
     info["worst_ratio"] = float(np.max(mesh.quality, initial=0.0))
     if d == 2:
         info["min_angle"] = float(np.nanmin(cell_data["min_angle"]))
@@ -217,14 +285,6 @@ def mesh_tree(tree: RegionTree, *, method: str = "template", exclude=(), spacing
         info["max_dihedral"] = float(np.nanmax(cell_data["max_dihedral"]))
         info["angle_range"] = [info["min_dihedral"], info["max_dihedral"]]
     seconds["stats"] = time.perf_counter() - t
-    if method == "delaunay" and _labels is not None:
-        from ._checks import check_mesh
-
-        t = time.perf_counter()
-        info["checks"] = {k: (bool(v) if isinstance(v, (bool, np.bool_)) else float(v))
-                          for k, v in check_mesh(mesh, _labels, exclude=exclude_arr).items()}
-        info["conforming"] = info["checks"]["conforming"]
-        seconds["checks"] = time.perf_counter() - t
     info["seconds"] = {k: round(v, 6) for k, v in seconds.items()}
     info["seconds_total"] = round(sum(v for k, v in seconds.items() if k != "checks"), 6)
     return mesh
