@@ -8,7 +8,9 @@
   :func:`signed_volumes`, :data:`QUALITY_METRICS`, and the method's proven bounds,
   :func:`quality_table` and the ranges they prove per metric, :func:`quality_bounds`;
 * export: :func:`write_mesh`, :func:`read_mesh`, :func:`to_meshio`;
-* memory: :func:`estimate_mesh_memory`, :func:`count_boundary_voxels`.
+* memory: :func:`estimate_mesh_memory`, :func:`count_boundary_voxels`;
+* display: :func:`shown_faces` (boundary and material-interface faces),
+  :func:`mesh_surface` (per-triangle vertices and values for a surface view).
 """
 
 from ._balance import balance_tree
@@ -25,6 +27,7 @@ from ._quality import (
     radius_edge_ratio,
     signed_volumes,
 )
+from ._surface import mesh_surface, shown_faces
 from ._types import Mesh
 
 __all__ = [
@@ -32,4 +35,5 @@ __all__ = [
     "QUALITY_METRICS", "dihedral_angles", "max_angle", "min_angle", "radius_edge_ratio",
     "signed_volumes", "quality_bounds", "quality_table", "format_quality_table", "read_mesh",
     "to_meshio", "write_mesh", "estimate_mesh_memory", "count_boundary_voxels",
+    "mesh_surface", "shown_faces",
 ]
