@@ -225,6 +225,19 @@ def _signed_labels(lab: np.ndarray) -> np.ndarray:
     return lab.view(signed)
 
 
+def _fold_pairs(op, blocks: np.ndarray, d: int) -> np.ndarray:
+    """(c0, 2, c1, 2, ...) -> (c0, c1, ...): `op` of the two children, one axis at a time.
+
+    A fold over axes on views: no copy of the level (a transpose-and-reshape to put the
+    2^d children last would copy it), and each step halves the data.
+    """
+    out = blocks
+    for a in range(d):
+        lead = (slice(None),) * (a + 1)  # axes a already folded sit before the pair axis
+        out = op(out[lead + (0,)], out[lead + (1,)])
+    return out
+
+
 def _build_tree(lab: np.ndarray, *, top_level: int | None = None) -> RegionTree:
     """The worker behind :func:`build_tree`; `lab` comes from ``as_labels`` (trusted)."""
     shape = tuple(lab.shape)
@@ -238,17 +251,17 @@ def _build_tree(lab: np.ndarray, *, top_level: int | None = None) -> RegionTree:
     cur = padded
     for k in range(1, top + 1):
         coarse = tuple(n // 2 for n in cur.shape)
-        # (c0, 2, c1, 2, ...) -> (c0, c1, ..., 2**d): the children of each parent last
-        blocks = cur.reshape(sum(((c, 2) for c in coarse), ()))
-        blocks = blocks.transpose(tuple(range(0, 2 * d, 2)) + tuple(range(1, 2 * d, 2)))
-        blocks = blocks.reshape(coarse + (-1,))
-        lo = blocks.min(axis=-1)
-        hi = blocks.max(axis=-1)
+        pairs = sum(((c, 2) for c in coarse), ())  # (c0, 2, c1, 2, ...): children per axis
+        blocks = cur.reshape(pairs)
+        lo = _fold_pairs(np.minimum, blocks, d)
+        hi = _fold_pairs(np.maximum, blocks, d)
         homog = (lo == hi) & (lo != mixed)
         # homogeneous children of a mixed parent are leaves at level k-1
-        child_leaf = (cur != mixed).reshape(sum(((c, 2) for c in coarse), ()))
-        child_leaf = child_leaf & ~homog.reshape(sum(((c, 1) for c in coarse), ()))
-        idx = np.nonzero(child_leaf.reshape(cur.shape))
+        child_leaf = cur != mixed
+        np.logical_and(child_leaf.reshape(pairs), ~homog.reshape(sum(((c, 1) for c in coarse), ())),
+                       out=child_leaf.reshape(pairs))
+        idx = np.nonzero(child_leaf)
+        del child_leaf
         if idx[0].size:
             origins.append(np.stack(idx, axis=1).astype(np.int64) << (k - 1))
             levels.append(np.full(idx[0].size, k - 1, np.int8))

@@ -460,7 +460,7 @@ def _pixels(points, cells, material, lab: np.ndarray, exclude: np.ndarray,
             n_excluded: int) -> dict:
     """The label image recovered at pixel centres, excluded pixels left uncovered."""
     covered, _, n_wrong_hits = _rasterize(points, cells, material, lab.shape, labels=lab)
-    uncovered = np.flatnonzero(~covered)
+    uncovered = np.flatnonzero(np.logical_not(covered, out=covered))
     del covered
     excluded_uncovered = int(np.count_nonzero(_excluded(_at(lab, uncovered), exclude)))
     missed = len(uncovered) - excluded_uncovered
