@@ -7,8 +7,8 @@ with the four midpoints of that face's edges (the neighbour across the face is s
 leaves of half size, all inside the image). :func:`leaf_configurations` lists every subset
 of sites obeying that rule (a superset of what trees produce, so the bound is safe),
 :func:`quality_table` cuts each one with the same code the mesher runs
-(:func:`~napari_swa_imesh.mesh._imesh.cut_leaves`) and returns the distinct simplices up
-to the symmetries of the cube, with their quality. Every element of every template mesh
+(``_templates.cut_leaves``) and returns the distinct simplices up to the symmetries of
+the cube, with their quality. Every element of every template mesh
 is a translated, uniformly scaled copy of one of them (isotropic spacing), so the table's
 worst values are the mesh's bounds.
 """
@@ -22,7 +22,7 @@ import math
 import numpy as np
 
 from . import _templates_luts as luts
-from ._imesh import cut_leaves
+from ._templates import cut_leaves
 from ._quality import dihedral_angles, radius_edge_ratio, signed_volumes, triangle_angles
 
 __all__ = ["format_quality_table", "leaf_configurations", "quality_bounds", "quality_table"]

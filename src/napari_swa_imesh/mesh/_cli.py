@@ -9,10 +9,10 @@ when the mesh was written but one of its checks failed (a bug to report, not bad
 from __future__ import annotations
 
 import argparse
-
-import numpy as np
 import sys
 from pathlib import Path
+
+import numpy as np
 
 from .._cli_util import StepTimer, print_json
 from .._validation import normalize_spacing
@@ -106,8 +106,6 @@ def parse_material_names(items) -> dict[int, str]:
 
 
 def _run_mesh(args: argparse.Namespace) -> int:
-    import numpy as np
-
     from ..io import image_suffix, read_image
     from ._export import mesh_output_paths, write_mesh
     from ._imesh import _mesh_arguments
@@ -232,8 +230,6 @@ def _peek_shape_dtype(path):
 
 def _mesh_report(args, mesh, checks, written, seconds) -> dict:
     """The ``--json`` object: counts, quality, checks and seconds per step."""
-    import numpy as np
-
     info = mesh.info
     materials, counts = np.unique(mesh.material, return_counts=True)
     report = {

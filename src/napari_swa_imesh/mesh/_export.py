@@ -2,9 +2,9 @@
 
 This module picks a writer by suffix and sends every write through ``io.atomic_write``;
 each awkward format keeps its workarounds in a module of its own (``_gmsh``, ``_abaqus``,
-``_xdmf``, ``_triangle_tetgen``), the rest is a plain meshio call. Exported coordinates are x, y(, z) = column, row(, plane), the
-reverse of the numpy axis order the ``Mesh`` keeps; each cell is reordered so that its
-signed volume stays positive in those coordinates.
+``_xdmf``, ``_triangle_tetgen``), the rest is a plain meshio call. Exported coordinates
+are x, y(, z) = column, row(, plane), the reverse of the numpy axis order the ``Mesh``
+keeps; each cell is reordered so that its signed volume stays positive there.
 
 What each format holds
 ----------------------

@@ -17,7 +17,7 @@ from dataclasses import dataclass
 import numpy as np
 
 __all__ = ["QUALITY_METRICS", "QualityMetric", "dihedral_angles", "max_angle", "min_angle",
-           "radius_edge_ratio", "signed_volumes", "triangle_angles"]
+           "quality_data", "radius_edge_ratio", "signed_volumes", "triangle_angles"]
 
 _CHUNK = 1 << 20
 
@@ -255,6 +255,16 @@ def dihedral_angles(points, cells) -> tuple[np.ndarray, np.ndarray]:
         lo[start:start + len(p)] = angles.min(axis=1)
         hi[start:start + len(p)] = angles.max(axis=1)
     return lo, hi
+
+
+def quality_data(points: np.ndarray, cells: np.ndarray) -> dict[str, np.ndarray]:
+    """Per-cell quality arrays: radius-to-edge plus angles (2-D) or dihedral angles (3-D)."""
+    data = {"quality": radius_edge_ratio(points, cells)}
+    if points.shape[1] == 2:
+        data["min_angle"], data["max_angle"] = triangle_angles(points, cells)
+    else:
+        data["min_dihedral"], data["max_dihedral"] = dihedral_angles(points, cells)
+    return data
 
 
 def _pairs(n: int):
