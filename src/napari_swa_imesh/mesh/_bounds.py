@@ -237,7 +237,19 @@ def quality_bounds(dim: int) -> dict[str, tuple[float, float]]:
 
 
 def format_quality_table(rows: list[dict]) -> str:
-    """Render :func:`quality_table` rows as a text table with the bounds they prove."""
+    """Render :func:`quality_table` rows as a text table with the bounds they prove.
+
+    Parameters
+    ----------
+    rows : list of dict
+        From :func:`quality_table` (one dimension).
+
+    Returns
+    -------
+    str
+        A title line, one line per simplex, and a last line with the bound: the worst
+        radius-to-edge ratio (beside the reference's claim) and the angle range.
+    """
     if not rows:
         return "(no template simplices)"
     d = rows[0]["dim"]

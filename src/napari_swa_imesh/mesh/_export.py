@@ -149,6 +149,18 @@ def mesh_output_paths(path, *, force: bool = False) -> list[Path]:
 
     Lets a caller fail fast (before meshing) on a bad suffix or an existing file.
 
+    Parameters
+    ----------
+    path : str or Path
+        As for :func:`write_mesh`.
+    force : bool
+        Whether existing files may be replaced.
+
+    Returns
+    -------
+    list of Path
+        One path, or two (``.node`` and ``.ele``; ``.xdmf`` and its ``.h5``).
+
     Raises
     ------
     ValueError

@@ -209,7 +209,24 @@ def min_angle(points, cells) -> np.ndarray:
 
 
 def max_angle(points, cells) -> np.ndarray:
-    """Largest interior angle of each triangle, in degrees (see :func:`triangle_angles`)."""
+    """Largest interior angle of each triangle, in degrees.
+
+    Parameters
+    ----------
+    points : (N, 2) array_like of float
+    cells : (M, 3) array_like of int
+
+    Returns
+    -------
+    (M,) ndarray of float64
+        60 for an equilateral triangle, 90 for a right one; ``nan`` where an edge has
+        zero length.
+
+    Examples
+    --------
+    >>> max_angle([[0, 0], [2, 0], [0, 1]], [[0, 1, 2]]).round(3)
+    array([90.])
+    """
     return triangle_angles(points, cells)[1]
 
 

@@ -96,6 +96,11 @@ def per_triangle_surface(points: np.ndarray, faces: np.ndarray, face_values: np.
 def mesh_surface(mesh) -> dict[str, np.ndarray]:
     """Everything a Surface layer needs to show `mesh`, in both colourings.
 
+    Parameters
+    ----------
+    mesh : Mesh
+        Triangles or tetrahedra with ``quality`` in ``cell_data``.
+
     Returns
     -------
     dict
