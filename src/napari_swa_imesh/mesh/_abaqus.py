@@ -44,17 +44,7 @@ def _set_names(names: dict[int, str]) -> dict[int, str]:
 
 
 def write_abaqus(names: dict[int, str], m, path: str) -> None:
-    """Write the meshio mesh `m` (one block, ``material`` cell data) as Abaqus ``.inp``.
-
-    Parameters
-    ----------
-    names : dict of int to str
-        Material names (missing ones become ``material_<id>``).
-    m : meshio.Mesh
-        From :func:`~napari_swa_imesh.mesh.to_meshio`.
-    path : str
-        File to write (the caller's temporary name).
-    """
+    """Write `m` as Abaqus ``.inp`` (arguments: see ``_common``, "Format writers")."""
     import meshio
 
     material = m.cell_data["material"][0]

@@ -3,6 +3,13 @@
 Conventions written once for the writers (``_export`` and one module per awkward format):
 exported coordinates are x, y(, z) = column, row(, plane), the reverse of the numpy axis
 order a ``Mesh`` keeps, and a material without a name is called ``material_<id>``.
+
+Format writers
+--------------
+A writer of one format (``write_gmsh``, ``write_abaqus``) takes ``names`` (the mesh's
+material names, dict of int to str), ``m`` (the ``meshio.Mesh`` from ``to_meshio``: one
+cell block, ``material`` and the other per-cell arrays as cell data) and ``path`` (the
+temporary file ``io.atomic_write`` gave for the target).
 """
 
 from __future__ import annotations

@@ -98,17 +98,7 @@ def _append_element_data(path: str, element_data: dict[str, np.ndarray]) -> None
 
 
 def write_gmsh(names: dict[int, str], m, path: str) -> None:
-    """Write the meshio mesh `m` (one block, ``material`` cell data) as ASCII Gmsh 4.1.
-
-    Parameters
-    ----------
-    names : dict of int to str
-        Material names (missing ones become ``material_<id>``).
-    m : meshio.Mesh
-        From :func:`~napari_swa_imesh.mesh.to_meshio`.
-    path : str
-        File to write (the caller's temporary name).
-    """
+    """Write `m` as ASCII Gmsh 4.1 (arguments: see ``_common``, "Format writers")."""
     import meshio
 
     tagged, element_data = _tagged_mesh(names, m)

@@ -209,18 +209,10 @@ def min_angle(points, cells) -> np.ndarray:
 
 
 def max_angle(points, cells) -> np.ndarray:
-    """Largest interior angle of each triangle, in degrees.
+    """Largest interior angle of each triangle, in degrees: the other end of :func:`min_angle`.
 
-    Parameters
-    ----------
-    points : (N, 2) array_like of float
-    cells : (M, 3) array_like of int
-
-    Returns
-    -------
-    (M,) ndarray of float64
-        60 for an equilateral triangle, 90 for a right one; ``nan`` where an edge has
-        zero length.
+    Takes the same ``points (N, 2)`` and ``cells (M, 3)``; returns ``(M,)`` float64, 60
+    for an equilateral triangle, 90 for a right one, ``nan`` where an edge has zero length.
 
     Examples
     --------
