@@ -122,11 +122,16 @@ def _morton(coords: np.ndarray) -> np.ndarray:
     d = coords.shape[1]
     first, steps = _SPREAD[d]
     code = np.zeros(len(coords), np.uint64)
+    x, tmp = np.empty_like(code), np.empty_like(code)  # in place: three buffers in all
     for a in range(d):
-        x = coords[:, a].astype(np.uint64) & np.uint64(first)
+        x[:] = coords[:, a]
+        x &= np.uint64(first)
         for shift, mask in steps:
-            x = (x | (x << np.uint64(shift))) & np.uint64(mask)
-        code |= x << np.uint64(d - 1 - a)
+            np.left_shift(x, np.uint64(shift), out=tmp)
+            x |= tmp
+            x &= np.uint64(mask)
+        np.left_shift(x, np.uint64(d - 1 - a), out=tmp)
+        code |= tmp
     return code
 
 
