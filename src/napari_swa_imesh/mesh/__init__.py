@@ -33,7 +33,7 @@ from ._types import Mesh
 __all__ = [
     "Mesh", "balance_tree", "mesh_labels", "mesh_tree", "check_mesh", "MeshChecks",
     "rasterize_materials", "QUALITY_METRICS", "dihedral_angles", "max_angle", "min_angle",
-    "radius_edge_ratio", "signed_volumes", "quality_bounds", "quality_table", "format_quality_table", "read_mesh",
-    "to_meshio", "write_mesh", "estimate_mesh_memory", "count_boundary_voxels",
-    "mesh_surface", "shown_faces",
+    "radius_edge_ratio", "signed_volumes", "quality_bounds", "quality_table",
+    "format_quality_table", "read_mesh", "to_meshio", "write_mesh", "estimate_mesh_memory",
+    "count_boundary_voxels", "mesh_surface", "shown_faces",
 ]
