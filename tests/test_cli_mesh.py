@@ -379,3 +379,20 @@ def test_spacing_that_overflows_or_underflows_exit_2(tmp_path, capsys):
                               tmp_path / "m.vtu", "--spacing", value)
         assert code == 2 and "other units" in stderr and "np.float64" not in stderr
         assert not (tmp_path / "m.vtu").exists()
+
+
+def test_mesh_command_builds_one_tree_and_one_balance(tmp_path, capsys, monkeypatch):
+    # the checks reuse the mesher's region tree, and the face-only balance count (a
+    # second balance pass) is not made just to fill a report field
+    from napari_swa_imesh.mesh import _checks, _imesh
+
+    monkeypatch.setattr(_checks, "_build_tree", lambda *a, **k: pytest.fail("second tree"))
+    monkeypatch.setattr(_imesh, "count_balanced_leaves",
+                        lambda *a, **k: pytest.fail("second balance pass"))
+    np.save(tmp_path / "labels.npy", blob_3d())
+    code, stdout, stderr = run(capsys, "mesh", tmp_path / "labels.npy", "-o",
+                               tmp_path / "m.vtu", "--json", "--exclude", "0", "0")
+    assert code == 0, stderr
+    report = one_json(stdout)
+    assert report["checks"]["all_passed"] is True and report["exclude"] == [0]
+    assert "face_balance_count" not in report["seconds"]["mesh_steps"]

@@ -23,7 +23,7 @@ import numpy as np
 
 from ._validation import as_labels
 
-__all__ = ["PAD_LABEL", "RegionTree", "build_tree", "pad_to_multiple"]
+__all__ = ["PAD_LABEL", "RegionTree", "build_tree", "leaf_finder", "pad_to_multiple"]
 
 PAD_LABEL = -1
 
@@ -106,6 +106,68 @@ class RegionTree:
         return out
 
 
+# Morton (Z-order) bit spreading: every aligned 2^k block is one interval of codes, so a
+# pixel's leaf is the last leaf whose code is <= the pixel's. (shift, mask) per step.
+_SPREAD = {
+    2: (0xFFFFFFFF, ((16, 0x0000FFFF0000FFFF), (8, 0x00FF00FF00FF00FF), (4, 0x0F0F0F0F0F0F0F0F),
+                     (2, 0x3333333333333333), (1, 0x5555555555555555))),
+    3: (0x1FFFFF, ((32, 0x1F00000000FFFF), (16, 0x1F0000FF0000FF), (8, 0x100F00F00F00F00F),
+                   (4, 0x10C30C30C30C30C3), (2, 0x1249249249249249))),
+}
+_MORTON_BITS = {2: 31, 3: 21}
+
+
+def _morton(coords: np.ndarray) -> np.ndarray:
+    """(K, d) non-negative ints -> (K,) uint64 Z-order codes (d = 2, 3)."""
+    d = coords.shape[1]
+    first, steps = _SPREAD[d]
+    code = np.zeros(len(coords), np.uint64)
+    x, tmp = np.empty_like(code), np.empty_like(code)  # in place: three buffers in all
+    for a in range(d):
+        x[:] = coords[:, a]
+        x &= np.uint64(first)
+        for shift, mask in steps:
+            np.left_shift(x, np.uint64(shift), out=tmp)
+            x |= tmp
+            x &= np.uint64(mask)
+        np.left_shift(x, np.uint64(d - 1 - a), out=tmp)
+        code |= tmp
+    return code
+
+
+def leaf_finder(tree: RegionTree):
+    """A function from pixels to the leaves that hold them.
+
+    Parameters
+    ----------
+    tree : RegionTree
+
+    Returns
+    -------
+    callable
+        ``find(pixels)`` with pixels ``(K, d)`` int in the padded grid returns ``(K,)``
+        intp leaf indices. In 2-D and 3-D it searches the leaves' Morton codes (O(K log L),
+        nothing of image size); otherwise it reads a painted leaf-index image.
+
+    Examples
+    --------
+    >>> t = build_tree(np.array([[1, 1], [1, 2]]))
+    >>> int(t.label[leaf_finder(t)(np.array([[1, 1]]))[0]])
+    2
+    """
+    d = tree.ndim
+    if d in _MORTON_BITS and max(tree.padded_shape) <= 1 << _MORTON_BITS[d]:
+        codes = _morton(tree.origin)
+        order = np.argsort(codes, kind="stable")
+        sorted_codes = codes[order]
+
+        def find(pixels):
+            return order[np.searchsorted(sorted_codes, _morton(pixels), side="right") - 1]
+        return find
+    leaf_map = tree.to_image(values=np.arange(len(tree)), crop=False)
+    return lambda pixels: leaf_map[tuple(np.asarray(pixels).T)]
+
+
 def pad_to_multiple(array: np.ndarray, block: int, value) -> np.ndarray:
     """Pad every axis at its far end to a multiple of `block` with `value`."""
     pad = [(0, (-n) % block) for n in array.shape]
@@ -168,6 +230,19 @@ def _signed_labels(lab: np.ndarray) -> np.ndarray:
     return lab.view(signed)
 
 
+def _fold_pairs(op, blocks: np.ndarray, d: int) -> np.ndarray:
+    """(c0, 2, c1, 2, ...) -> (c0, c1, ...): `op` of the two children, one axis at a time.
+
+    A fold over axes on views: no copy of the level (a transpose-and-reshape to put the
+    2^d children last would copy it), and each step halves the data.
+    """
+    out = blocks
+    for a in range(d):
+        lead = (slice(None),) * (a + 1)  # axes a already folded sit before the pair axis
+        out = op(out[lead + (0,)], out[lead + (1,)])
+    return out
+
+
 def _build_tree(lab: np.ndarray, *, top_level: int | None = None) -> RegionTree:
     """The worker behind :func:`build_tree`; `lab` comes from ``as_labels`` (trusted)."""
     shape = tuple(lab.shape)
@@ -181,17 +256,17 @@ def _build_tree(lab: np.ndarray, *, top_level: int | None = None) -> RegionTree:
     cur = padded
     for k in range(1, top + 1):
         coarse = tuple(n // 2 for n in cur.shape)
-        # (c0, 2, c1, 2, ...) -> (c0, c1, ..., 2**d): the children of each parent last
-        blocks = cur.reshape(sum(((c, 2) for c in coarse), ()))
-        blocks = blocks.transpose(tuple(range(0, 2 * d, 2)) + tuple(range(1, 2 * d, 2)))
-        blocks = blocks.reshape(coarse + (-1,))
-        lo = blocks.min(axis=-1)
-        hi = blocks.max(axis=-1)
+        pairs = sum(((c, 2) for c in coarse), ())  # (c0, 2, c1, 2, ...): children per axis
+        blocks = cur.reshape(pairs)
+        lo = _fold_pairs(np.minimum, blocks, d)
+        hi = _fold_pairs(np.maximum, blocks, d)
         homog = (lo == hi) & (lo != mixed)
         # homogeneous children of a mixed parent are leaves at level k-1
-        child_leaf = (cur != mixed).reshape(sum(((c, 2) for c in coarse), ()))
-        child_leaf = child_leaf & ~homog.reshape(sum(((c, 1) for c in coarse), ()))
-        idx = np.nonzero(child_leaf.reshape(cur.shape))
+        child_leaf = cur != mixed
+        np.logical_and(child_leaf.reshape(pairs), ~homog.reshape(sum(((c, 1) for c in coarse), ())),
+                       out=child_leaf.reshape(pairs))
+        idx = np.nonzero(child_leaf)
+        del child_leaf
         if idx[0].size:
             origins.append(np.stack(idx, axis=1).astype(np.int64) << (k - 1))
             levels.append(np.full(idx[0].size, k - 1, np.int8))

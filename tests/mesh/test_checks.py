@@ -14,6 +14,8 @@ LABELS = {2: blobs((12, 10), 3, seed=1, sigma=1.5), 3: blobs((6, 7, 8), 3, seed=
 
 
 def _broken(mesh, **changes):
+    if len(changes.get("cells", mesh.cells)) != mesh.n_cells:  # per-cell data no longer fit
+        changes.setdefault("cell_data", {})
     return dataclasses.replace(mesh, **changes)
 
 
@@ -149,3 +151,31 @@ def test_nan_or_inf_quality_fails_the_checks(good, bad):
     assert not checks["finite"] and checks["n_nonfinite_values"] == 1
     assert not checks["all_passed"]
     assert check_mesh(mesh, lab)["finite"]
+
+
+def test_report_is_typed_and_reads_like_the_old_dict(good):
+    from napari_swa_imesh.mesh._checks import MeshChecks
+
+    mesh, lab = good
+    checks = check_mesh(mesh, lab)
+    assert isinstance(checks, MeshChecks) and checks.all_passed is True
+    with pytest.raises(dataclasses.FrozenInstanceError, match="cannot assign"):
+        checks.conforming = False
+    keys = ["n_unused_points", "min_volume", "positive_volume", "volume_error", "volume_sum",
+            "n_facets_shared_3plus", "n_misoriented_facets", "n_boundary_facets_off_box",
+            "n_unmatched_facets", "conforming", "n_outside_leaf", "inside_one_leaf",
+            "n_pixels_wrong", "labels_recovered", "n_nonfinite_values", "finite", "all_passed"]
+    assert list(checks) == list(checks.to_dict()) == keys  # the --json keys, in order
+    assert dict(checks) == checks.to_dict() and checks["conforming"] is checks.conforming
+    assert all(type(v) in (bool, int, float) for v in checks.to_dict().values())
+
+
+def test_a_given_tree_is_used_and_must_match_the_labels(good):
+    from napari_swa_imesh import build_tree
+
+    mesh, lab = good
+    assert check_mesh(mesh, lab, tree=build_tree(lab)) == check_mesh(mesh, lab)
+    with pytest.raises(ValueError, match="tree was built from an image of shape"):
+        check_mesh(mesh, lab, tree=build_tree(lab[:-1]))
+    with pytest.raises(TypeError, match="tree must be a RegionTree"):
+        check_mesh(mesh, lab, tree=lab)

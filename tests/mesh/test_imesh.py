@@ -6,7 +6,8 @@ import numpy as np
 import pytest
 
 from napari_swa_imesh.mesh._checks import check_mesh, rasterize_materials
-from napari_swa_imesh.mesh._imesh import mesh_labels
+from napari_swa_imesh import build_tree
+from napari_swa_imesh.mesh._imesh import mesh_labels, mesh_tree
 from napari_swa_imesh.mesh._quality import dihedral_angles, radius_edge_ratio, triangle_angles
 
 from imesh_cases import blobs, cases, noise
@@ -72,8 +73,15 @@ def test_info_counts():
     mesh = mesh_labels(lab, material_names={1: "bone"})
     info = mesh.info
     assert info["n_elements"] == mesh.n_cells and info["n_vertices"] == len(mesh.points)
-    assert info["n_leaves_tree"] <= info["n_leaves_face_balanced"] <= info["n_leaves_balanced"]
     assert info["balance"] == "faces+edges"
+    # the face-balance count needs a second balance pass: only on request
+    assert info["n_leaves_face_balanced"] is None and info["balance_element_cost"] is None
+    assert "face_balance_count" not in info["seconds"]
+    full = mesh_tree(build_tree(lab), report_face_balance=True).info
+    assert info["n_leaves_tree"] <= full["n_leaves_face_balanced"] <= info["n_leaves_balanced"]
+    assert full["balance_extra_leaves"] == info["n_leaves_balanced"] - full["n_leaves_face_balanced"]
+    assert mesh_labels(lab[0]).info["n_leaves_face_balanced"] == mesh_labels(lab[0]).info[
+        "n_leaves_balanced"]  # 2-D: the balance used is the face balance
     assert info["worst_ratio"] == pytest.approx(mesh.quality.max())
     assert {"tree", "balance", "vertices", "simplices", "quality"} <= set(info["seconds"])
     assert mesh.material_names == {1: "bone"}
@@ -114,6 +122,28 @@ def test_delaunay_3d_is_reported_honestly():
 def test_bad_input(labels, kwargs, error, match):
     with pytest.raises(error, match=match):
         mesh_labels(labels, **kwargs)
+
+
+@pytest.mark.parametrize("kwargs,error,match", [
+    ({"method": "qhull"}, ValueError, "method must be one of"),
+    ({"connectivity": 4}, ValueError, "connectivity must be 1..3"),
+    ({"connectivity": 1}, ValueError, "templates need balance across faces and edges"),
+    ({"spacing": (1, 2)}, ValueError, "spacing must be one number or 3"),
+    ({"exclude": ("a",)}, TypeError, "integer material ids"),
+])
+def test_mesh_tree_checks_its_arguments(kwargs, error, match):
+    tree = build_tree(blobs((6, 5, 7), 3, seed=2, sigma=1.0))
+    with pytest.raises(error, match=match):
+        mesh_tree(tree, **kwargs)
+    with pytest.raises(TypeError, match="tree must be a RegionTree"):
+        mesh_tree(np.ones((4, 4), int))
+
+
+def test_mesh_tree_equals_mesh_labels():
+    lab = blobs((9, 7, 6), 3, seed=5, sigma=1.0)
+    a, b = mesh_labels(lab, exclude=(0,)), mesh_tree(build_tree(lab), exclude=[0])
+    np.testing.assert_array_equal(a.cells, b.cells)
+    np.testing.assert_array_equal(a.points, b.points)
 
 
 def test_whole_valued_floats_and_bools_are_accepted():

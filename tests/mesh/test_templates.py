@@ -6,7 +6,9 @@ import numpy as np
 import pytest
 
 from napari_swa_imesh.mesh import _templates_luts as luts
-from napari_swa_imesh.mesh._bounds import format_quality_table, leaf_configurations, quality_table
+from napari_swa_imesh.mesh._bounds import (format_quality_table, leaf_configurations, quality_bounds,
+                                           quality_table)
+from napari_swa_imesh.mesh._quality import QUALITY_METRICS
 from napari_swa_imesh.mesh._quality import signed_volumes
 
 
@@ -110,6 +112,34 @@ def test_quality_table_3d_bound():
     assert len(text.splitlines()) == len(rows) + 4
 
 
+@pytest.mark.parametrize("d", [2, 3])
+def test_quality_bounds_are_what_the_table_proves(d):
+    # the GUI shades these ranges: the bound end is the table's worst value, the other
+    # end the regular simplex, and every template simplex lies inside
+    rows = quality_table(d)
+    bounds = quality_bounds(d)
+    angles = ("min_angle", "max_angle") if d == 2 else ("min_dihedral", "max_dihedral")
+    assert set(bounds) == {"quality", *angles}
+    ratios = [r["radius_edge_ratio"] for r in rows]
+    assert bounds["quality"][1] == pytest.approx(max(ratios))
+    assert bounds[angles[0]][0] == pytest.approx(min(r[angles[0]] for r in rows))
+    assert bounds[angles[1]][1] == pytest.approx(max(r[angles[1]] for r in rows))
+    for name, (lo, hi) in bounds.items():
+        column = "radius_edge_ratio" if name == "quality" else name
+        assert all(lo - 1e-9 <= r[column] <= hi + 1e-9 for r in rows), name
+        metric = next(m for m in QUALITY_METRICS if m.name == name and m.dim == d)
+        assert metric.optimal_range == pytest.approx((lo, hi)), name
+
+
+def test_2d_bounds_are_the_proven_ones_not_the_papers():
+    bounds = quality_bounds(2)
+    assert bounds["quality"][1] == pytest.approx(1 / math.sqrt(2))  # not sqrt(5)/2
+    assert bounds["min_angle"] == pytest.approx((45.0, 60.0))  # not 26.6 deg
+    assert bounds["max_angle"] == pytest.approx((60.0, 90.0))
+
+
 def test_bad_dim():
     with pytest.raises(ValueError, match="dim 2 or 3"):
         quality_table(4)
+    with pytest.raises(ValueError, match="dim 2 or 3"):
+        quality_bounds(1)

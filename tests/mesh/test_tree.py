@@ -35,3 +35,15 @@ def test_padding_is_separate():
     assert tree.padded_shape == (8, 8)
     assert set(tree.label[~tree.inside].tolist()) == {PAD_LABEL}
     assert (tree.to_image(values=tree.label) == 1).all()
+
+
+@pytest.mark.parametrize("shape", [(13, 7), (5, 6, 9), (16, 16, 16), (3, 40), (4, 3, 5, 2)])
+def test_leaf_finder_agrees_with_the_painted_leaf_image(shape):
+    from napari_swa_imesh._tree import leaf_finder
+
+    rng = np.random.default_rng(len(shape))
+    lab = (rng.random(shape) < 0.1).astype(np.uint8)
+    tree = build_tree(lab)
+    painted = tree.to_image(values=np.arange(len(tree)), crop=False)
+    pixels = np.stack(np.unravel_index(np.arange(painted.size), painted.shape), axis=1)
+    np.testing.assert_array_equal(leaf_finder(tree)(pixels), painted.ravel())

@@ -3,17 +3,19 @@
 * tree and balance: :func:`napari_swa_imesh.build_tree`, :func:`balance_tree`;
 * meshing: :func:`mesh_labels` (``method="template"`` by default, or the reference's
   ``"delaunay"``), returning a :class:`Mesh`;
-* checks: :func:`check_mesh`, :func:`rasterize_materials`;
+* checks: :func:`check_mesh` (a :class:`MeshChecks` report), :func:`rasterize_materials`;
 * quality: :func:`radius_edge_ratio`, :func:`min_angle`, :func:`dihedral_angles`,
   :func:`signed_volumes`, :data:`QUALITY_METRICS`, and the method's proven bounds,
-  :func:`quality_table`;
+  :func:`quality_table` and the ranges they prove per metric, :func:`quality_bounds`;
 * export: :func:`write_mesh`, :func:`read_mesh`, :func:`to_meshio`;
-* memory: :func:`estimate_mesh_memory`, :func:`count_boundary_voxels`.
+* memory: :func:`estimate_mesh_memory`, :func:`count_boundary_voxels`;
+* display: :func:`shown_faces` (boundary and material-interface faces),
+  :func:`mesh_surface` (per-triangle vertices and values for a surface view).
 """
 
 from ._balance import balance_tree
-from ._bounds import format_quality_table, quality_table
-from ._checks import check_mesh, rasterize_materials
+from ._bounds import format_quality_table, quality_bounds, quality_table
+from ._checks import MeshChecks, check_mesh, rasterize_materials
 from ._export import read_mesh, to_meshio, write_mesh
 from ._imesh import mesh_labels, mesh_tree
 from ._memory import count_boundary_voxels, estimate_mesh_memory
@@ -25,11 +27,13 @@ from ._quality import (
     radius_edge_ratio,
     signed_volumes,
 )
+from ._surface import mesh_surface, shown_faces
 from ._types import Mesh
 
 __all__ = [
-    "Mesh", "balance_tree", "mesh_labels", "mesh_tree", "check_mesh", "rasterize_materials",
-    "QUALITY_METRICS", "dihedral_angles", "max_angle", "min_angle", "radius_edge_ratio",
-    "signed_volumes", "quality_table", "format_quality_table", "read_mesh", "to_meshio",
-    "write_mesh", "estimate_mesh_memory", "count_boundary_voxels",
+    "Mesh", "balance_tree", "mesh_labels", "mesh_tree", "check_mesh", "MeshChecks",
+    "rasterize_materials", "QUALITY_METRICS", "dihedral_angles", "max_angle", "min_angle",
+    "radius_edge_ratio", "signed_volumes", "quality_bounds", "quality_table",
+    "format_quality_table", "read_mesh", "to_meshio", "write_mesh", "estimate_mesh_memory",
+    "count_boundary_voxels", "mesh_surface", "shown_faces",
 ]

@@ -7,24 +7,25 @@ with the four midpoints of that face's edges (the neighbour across the face is s
 leaves of half size, all inside the image). :func:`leaf_configurations` lists every subset
 of sites obeying that rule (a superset of what trees produce, so the bound is safe),
 :func:`quality_table` cuts each one with the same code the mesher runs
-(:func:`~napari_swa_imesh.mesh._imesh.cut_leaves`) and returns the distinct simplices up
-to the symmetries of the cube, with their quality. Every element of every template mesh
+(``_templates.cut_leaves``) and returns the distinct simplices up to the symmetries of
+the cube, with their quality. Every element of every template mesh
 is a translated, uniformly scaled copy of one of them (isotropic spacing), so the table's
 worst values are the mesh's bounds.
 """
 
 from __future__ import annotations
 
+import functools
 import itertools
 import math
 
 import numpy as np
 
 from . import _templates_luts as luts
-from ._imesh import cut_leaves
+from ._templates import cut_leaves
 from ._quality import dihedral_angles, radius_edge_ratio, signed_volumes, triangle_angles
 
-__all__ = ["format_quality_table", "leaf_configurations", "quality_table"]
+__all__ = ["format_quality_table", "leaf_configurations", "quality_bounds", "quality_table"]
 
 
 def _check_dim(dim) -> int:
@@ -190,8 +191,65 @@ def quality_table(dim: int) -> list[dict]:
     return rows
 
 
+#: Value of each metric on the regular simplex, by dimension: the good end of a range.
+_IDEAL = {2: {"quality": 1 / math.sqrt(3), "min_angle": 60.0, "max_angle": 60.0},
+          3: {"quality": math.sqrt(6) / 4, "min_dihedral": math.degrees(math.acos(1 / 3)),
+              "max_dihedral": math.degrees(math.acos(1 / 3))}}
+
+
+@functools.lru_cache(maxsize=None)
+def _bounds(d: int) -> tuple:
+    rows = quality_table(d)
+    out = {}
+    for name, ideal in _IDEAL[d].items():
+        column = "radius_edge_ratio" if name == "quality" else name
+        values = [r[column] for r in rows]
+        worst = min(values) if name.startswith("min") else max(values)
+        out[name] = (worst, ideal) if name.startswith("min") else (ideal, worst)
+    return tuple(out.items())
+
+
+def quality_bounds(dim: int) -> dict[str, tuple[float, float]]:
+    """The range every element of a template mesh lies in, per metric (the IMESH bound).
+
+    Derived from :func:`quality_table`: each range runs from the regular simplex's value
+    to the worst value over all template simplices, which is the proven bound (isotropic
+    spacing). ``QUALITY_METRICS[...].optimal_range`` holds the same numbers in closed form.
+
+    Parameters
+    ----------
+    dim : {2, 3}
+
+    Returns
+    -------
+    dict of str to (float, float)
+        ``(lo, hi)`` for ``"quality"`` (radius-to-edge ratio) and ``"min_angle"``,
+        ``"max_angle"`` (2-D) or ``"min_dihedral"``, ``"max_dihedral"`` (3-D, degrees):
+        the keys of the mesh's ``cell_data``. A GUI shades these on its histograms.
+
+    Examples
+    --------
+    >>> b = quality_bounds(2)
+    >>> [round(x, 4) for x in b["quality"] + b["min_angle"]]
+    [0.5774, 0.7071, 45.0, 60.0]
+    """
+    return dict(_bounds(_check_dim(dim)))
+
+
 def format_quality_table(rows: list[dict]) -> str:
-    """Render :func:`quality_table` rows as a text table with the bounds they prove."""
+    """Render :func:`quality_table` rows as a text table with the bounds they prove.
+
+    Parameters
+    ----------
+    rows : list of dict
+        From :func:`quality_table` (one dimension).
+
+    Returns
+    -------
+    str
+        A title line, one line per simplex, and a last line with the bound: the worst
+        radius-to-edge ratio (beside the reference's claim) and the angle range.
+    """
     if not rows:
         return "(no template simplices)"
     d = rows[0]["dim"]

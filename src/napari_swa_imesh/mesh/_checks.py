@@ -9,40 +9,145 @@ point; the tolerance only matters for meshes made elsewhere.
 from __future__ import annotations
 
 import math
+from collections.abc import Mapping
+from dataclasses import asdict, dataclass
 
 import numpy as np
 
-from .._tree import _build_tree
+from .._tree import RegionTree, _build_tree, leaf_finder
 from .._validation import as_labels
 from ._quality import _det, signed_volumes
 from ._types import Mesh
 
-__all__ = ["check_mesh", "rasterize_materials"]
+__all__ = ["MeshChecks", "check_mesh", "rasterize_materials"]
 
 _TOL = 1e-9
 _CANDIDATES_PER_CHUNK = 1 << 22
 _CELLS_PER_CHUNK = 1 << 20
 _FACETS_PER_PASS = 1 << 23
+_SLAB_VOXELS = 1 << 22
+
+
+@dataclass(frozen=True)
+class MeshChecks(Mapping):
+    """What :func:`check_mesh` found: one flag per check and the counts behind it.
+
+    Also reads as a read-only mapping with the same keys (``checks["all_passed"]``,
+    ``dict(checks)``), the form the command line prints with ``--json``.
+
+    Attributes
+    ----------
+    conforming : bool
+        Every facet shared by at most two elements, from opposite sides; facets seen once
+        lie on the image box or next to an excluded material.
+    positive_volume : bool
+        No element of zero or negative volume.
+    volume_sum : bool
+        Element volumes add up to the included pixels times the voxel volume.
+    inside_one_leaf : bool
+        Every element inside one maximal homogeneous block of the labels.
+    labels_recovered : bool
+        Element materials rasterised at pixel centres give the labels back, excluded
+        pixels uncovered.
+    finite : bool
+        Every point coordinate and float value in ``cell_data`` is a number (NaN or inf
+        means the spacing over- or underflowed).
+    n_unused_points, n_facets_shared_3plus, n_misoriented_facets, n_boundary_facets_off_box,
+    n_unmatched_facets, n_outside_leaf, n_nonfinite_values : int
+        The counts behind the flags.
+    n_pixels_wrong : int
+        Missed or wrongly covered pixels plus covering elements of a wrong material.
+    min_volume, volume_error : float
+        Smallest element volume and (sum of volumes - included volume), physical units.
+    """
+
+    # in the order the command line has always printed them
+    n_unused_points: int
+    min_volume: float
+    positive_volume: bool
+    volume_error: float
+    volume_sum: bool
+    n_facets_shared_3plus: int
+    n_misoriented_facets: int
+    n_boundary_facets_off_box: int
+    n_unmatched_facets: int
+    conforming: bool
+    n_outside_leaf: int
+    inside_one_leaf: bool
+    n_pixels_wrong: int
+    labels_recovered: bool
+    n_nonfinite_values: int
+    finite: bool
+
+    @property
+    def all_passed(self) -> bool:
+        return all((self.conforming, self.positive_volume, self.volume_sum,
+                    self.inside_one_leaf, self.labels_recovered, self.finite))
+
+    def to_dict(self) -> dict:
+        """Plain JSON-ready dict: every field, then ``all_passed``."""
+        return {**asdict(self), "all_passed": self.all_passed}
+
+    def __getitem__(self, key):
+        if key == "all_passed" or key in self.__dataclass_fields__:
+            return getattr(self, key)
+        raise KeyError(key)
+
+    def __iter__(self):
+        return iter((*self.__dataclass_fields__, "all_passed"))
+
+    def __len__(self) -> int:
+        return len(self.__dataclass_fields__) + 1
 
 
 def _index_points(mesh: Mesh) -> np.ndarray:
+    """Points in pixel units: the mesh's own array when the spacing is 1 (no copy)."""
     spacing = np.asarray(mesh.spacing if mesh.spacing else (1.0,) * mesh.ndim, dtype=float)
-    return np.asarray(mesh.points, dtype=float) / spacing
+    if (spacing == 1).all():
+        return mesh.points
+    return mesh.points / spacing
+
+
+def _at(lab: np.ndarray, flat: np.ndarray) -> np.ndarray:
+    """Labels at flat pixel indices, without a flat copy of a non-contiguous array."""
+    if lab.flags.c_contiguous:
+        return lab.reshape(-1)[flat]
+    return lab[np.unravel_index(flat, lab.shape)]
+
+
+def _excluded(values: np.ndarray, exclude: np.ndarray) -> np.ndarray:
+    return np.isin(values, exclude) if exclude.size else np.zeros(values.shape, bool)
+
+
+def count_excluded(lab: np.ndarray, exclude: np.ndarray) -> int:
+    """Pixels of `lab` holding a label of `exclude`, counted in slabs (no image-size mask).
+
+    Examples
+    --------
+    >>> count_excluded(np.array([[0, 1], [0, 2]]), np.array([0, 2]))
+    3
+    """
+    if not exclude.size:
+        return 0
+    step = max(1, _SLAB_VOXELS // max(1, math.prod(lab.shape[1:])))
+    return sum(int(np.count_nonzero(np.isin(lab[i:i + step], exclude)))
+               for i in range(0, lab.shape[0], step))
 
 
 def _rasterize(points: np.ndarray, cells: np.ndarray, material: np.ndarray, shape,
                labels: np.ndarray | None = None):
-    """Which elements cover each pixel centre.
+    """Which pixel centres the elements cover.
 
-    Returns flat arrays over the pixels: the number of covering elements and the material
-    of the last one; with `labels` (flat), also how many covering elements disagree with
-    the label of the pixel. Elements are bucketed by their bounding box, each axis rounded
-    up to a power of two, and tested in batches of a few million candidate centres.
+    Returns flat arrays over the pixels: whether some element covers it, and (without
+    `labels`) the material of the last one; with `labels`, instead, how many covering
+    elements disagree with the label of their pixel. Elements are bucketed by their
+    bounding box, each axis rounded up to a power of two, and tested in batches of a few
+    million candidate centres.
     """
     d = len(shape)
     n_pix = math.prod(shape)
-    hits = np.zeros(n_pix, np.int64)
-    last = np.full(n_pix, -1, np.int64)
+    covered = np.zeros(n_pix, bool)
+    last = np.full(n_pix, -1, np.int64) if labels is None else None
     n_wrong = 0
     for start in range(0, len(cells), _CELLS_PER_CHUNK):
         cc = cells[start:start + _CELLS_PER_CHUNK]
@@ -72,11 +177,12 @@ def _rasterize(points: np.ndarray, cells: np.ndarray, material: np.ndarray, shap
                 which, k = np.nonzero(inside)
                 flat = np.ravel_multi_index(tuple(pix[which, k].T), shape)
                 mats = mat[e[which]]
-                hits += np.bincount(flat, minlength=n_pix)
-                last[flat] = mats
-                if labels is not None:
-                    n_wrong += int(np.count_nonzero(mats != labels[flat]))
-    return hits, last, n_wrong
+                covered[flat] = True
+                if labels is None:
+                    last[flat] = mats
+                else:
+                    n_wrong += int(np.count_nonzero(mats != _at(labels, flat)))
+    return covered, last, n_wrong
 
 
 def rasterize_materials(mesh: Mesh, *, fill: int = -1) -> np.ndarray:
@@ -101,10 +207,10 @@ def rasterize_materials(mesh: Mesh, *, fill: int = -1) -> np.ndarray:
     >>> rasterize_materials(mesh_labels(lab, exclude=[0])).tolist()
     [[1, -1], [2, 2]]
     """
-    hits, last, _ = _rasterize(_index_points(mesh), np.asarray(mesh.cells),
-                               np.asarray(mesh.material, dtype=np.int64), tuple(mesh.shape))
-    out = np.where(hits > 0, last, fill)
-    return out.reshape(mesh.shape)
+    covered, last, _ = _rasterize(_index_points(mesh), mesh.cells, mesh.material,
+                                  tuple(mesh.shape))
+    last[~covered] = fill
+    return last.reshape(mesh.shape)
 
 
 def _inv(m: np.ndarray) -> np.ndarray:
@@ -201,7 +307,7 @@ def _outward_normal(points, facets, opposite) -> np.ndarray:
         return n / np.linalg.norm(n, axis=1, keepdims=True)
 
 
-def check_mesh(mesh: Mesh, labels, *, exclude=()) -> dict:
+def check_mesh(mesh: Mesh, labels, *, exclude=(), tree: RegionTree | None = None) -> MeshChecks:
     """Check that a mesh represents a label image faithfully.
 
     Parameters
@@ -213,79 +319,102 @@ def check_mesh(mesh: Mesh, labels, *, exclude=()) -> dict:
         The label image that was meshed.
     exclude : iterable of int
         Materials that were not meshed.
+    tree : RegionTree, optional
+        The region tree of `labels` (``build_tree(labels)``) when the caller has it
+        already; built here otherwise.
 
     Returns
     -------
-    dict
-        Booleans ``conforming`` (every facet shared by at most two elements, from opposite
-        sides; facets seen once lie on the image box or next to an excluded material),
-        ``positive_volume`` (no element of zero or negative volume), ``volume_sum``
-        (element volumes add up to the included pixels times the voxel volume),
-        ``inside_one_leaf`` (every element inside one maximal homogeneous block of the
-        labels), ``labels_recovered`` (rasterising element materials at pixel centres gives
-        the labels back, excluded pixels uncovered), ``finite`` (every point coordinate
-        and every float value in ``cell_data``, such as the quality and the angles, is a
-        number: NaN or inf means the spacing over- or underflowed) and ``all_passed``;
-        and the numbers
-        behind them (``n_facets_shared_3plus``, ``n_misoriented_facets``,
-        ``n_boundary_facets_off_box``, ``n_unmatched_facets``, ``min_volume``,
-        ``volume_error``, ``n_outside_leaf``, ``n_pixels_wrong`` (missed or wrongly
-        covered pixels plus covering elements of a wrong material), ``n_unused_points``,
-        ``n_nonfinite_values``).
+    MeshChecks
+        Flags ``conforming``, ``positive_volume``, ``volume_sum``, ``inside_one_leaf``,
+        ``labels_recovered``, ``finite`` and ``all_passed``, and the numbers behind them
+        (see :class:`MeshChecks`).
+
+    Raises
+    ------
+    TypeError
+        For a `mesh` that is not a Mesh, or a `tree` that is not a RegionTree.
+    ValueError
+        For labels that are not a 2-D or 3-D label image of the mesh's dimension, or a
+        `tree` built from an image of another shape.
 
     Notes
     -----
     Works in chunks (elements, and facets in passes over vertex-id ranges), so memory stays
-    at a few hundred MB beyond the mesh itself; time is O(M log M) plus one barycentric test
-    per pixel centre in each element's bounding box.
+    at a few hundred MB beyond the mesh itself plus one byte per pixel; time is
+    O(M log M) plus one barycentric test per pixel centre in each element's bounding box.
 
     Examples
     --------
     >>> from napari_swa_imesh.mesh._imesh import mesh_labels
     >>> lab = np.array([[1, 1], [1, 2]])
-    >>> check_mesh(mesh_labels(lab), lab)["all_passed"]
+    >>> check_mesh(mesh_labels(lab), lab).all_passed
     True
     """
+    if not isinstance(mesh, Mesh):
+        raise TypeError(f"expected a napari_swa_imesh Mesh; got {type(mesh).__name__}.")
     lab = as_labels(labels, min_ndim=2, max_ndim=3)
-    exclude_arr = np.asarray(list(exclude) if not np.isscalar(exclude) else [exclude], dtype=np.int64)
-    return _check_mesh(mesh, lab, exclude_arr)
-
-
-def _check_mesh(mesh: Mesh, lab: np.ndarray, exclude_arr: np.ndarray) -> dict:
-    """The worker behind :func:`check_mesh`: `lab` from ``as_labels``, exclusions int64."""
     d = lab.ndim
-    if mesh.ndim != d or mesh.cells.ndim != 2 or mesh.cells.shape[1] != d + 1:
+    if mesh.ndim != d:
         raise ValueError(f"a {d}-D label image needs a {d}-D mesh of {d + 1}-vertex cells; got points "
                          f"{mesh.points.shape} and cells {mesh.cells.shape}.")
-    included = ~np.isin(lab, exclude_arr)
+    exclude_arr = np.asarray(list(exclude) if not np.isscalar(exclude) else [exclude], dtype=np.int64)
+    if tree is not None:
+        if not isinstance(tree, RegionTree):
+            raise TypeError(f"tree must be a RegionTree (from build_tree); got {type(tree).__name__}.")
+        if tuple(tree.shape) != lab.shape:
+            raise ValueError(f"tree was built from an image of shape {tuple(tree.shape)}, but the "
+                             f"labels have shape {lab.shape}; pass build_tree(labels) or no tree.")
+    return _check_mesh(mesh, lab, exclude_arr, tree)
+
+
+def _check_mesh(mesh: Mesh, lab: np.ndarray, exclude: np.ndarray,
+                tree: RegionTree | None = None) -> MeshChecks:
+    """The worker behind :func:`check_mesh`: `lab` from ``as_labels``, `exclude` int64,
+    `tree` the region tree of `lab` or None (then built here)."""
     points = _index_points(mesh)
     # int32 ids halve the memory of the facet arrays (4 per tetrahedron)
     cells = np.asarray(mesh.cells, dtype=np.int32 if len(mesh.points) < 2**31 else np.int64)
-    material = np.asarray(mesh.material, dtype=np.int64)
+    n_excluded = count_excluded(lab, exclude)
     voxel = float(np.prod(mesh.spacing)) if mesh.spacing else 1.0
-    out: dict = {}
+    if tree is None:
+        tree = _build_tree(lab)
+    parts = {
+        "n_unused_points": _unused_points(cells, len(points)),
+        **_volumes(points, cells, lab.size - n_excluded, voxel),
+        **_facets(points, cells, lab, exclude),
+        **_leaves(points, cells, tree),
+        **_pixels(points, cells, mesh.material, lab, exclude, n_excluded),
+        **_finite(mesh),
+    }
+    return MeshChecks(**{name: parts[name] for name in MeshChecks.__dataclass_fields__})
 
-    used = np.zeros(len(points), dtype=bool)
+
+def _unused_points(cells: np.ndarray, n_points: int) -> int:
+    used = np.zeros(n_points, dtype=bool)
     used[cells.ravel()] = True
-    out["n_unused_points"] = int((~used).sum())
+    return int(n_points - np.count_nonzero(used))
 
-    # volumes, in voxels
+
+def _volumes(points, cells, n_included: int, voxel: float) -> dict:
+    """Positive volumes that add up to the included pixels (computed in pixel units)."""
     vol = signed_volumes(points, cells)
-    out["min_volume"] = float(vol.min() * voxel) if vol.size else 0.0
-    out["positive_volume"] = bool((vol > _TOL).all())
-    n_inc = int(included.sum())
-    out["volume_error"] = float((vol.sum() - n_inc) * voxel)
-    out["volume_sum"] = bool(abs(vol.sum() - n_inc) <= 1e-9 * max(1, n_inc))
+    total = float(vol.sum())
+    return {"min_volume": float(vol.min() * voxel) if vol.size else 0.0,
+            "positive_volume": bool((vol > _TOL).all()),
+            "volume_error": (total - n_included) * voxel,
+            "volume_sum": abs(total - n_included) <= 1e-9 * max(1, n_included)}
 
-    # facets: shared by at most two cells, from opposite sides; the rest on the boundary
+
+def _facets(points, cells, lab: np.ndarray, exclude: np.ndarray) -> dict:
+    """Facets shared by at most two cells, from opposite sides; the rest on the boundary."""
     box = np.array(lab.shape, dtype=float)
     shared_3plus = misoriented = off_box = unmatched = 0
     for facets, opposite in _facet_passes(np.sort(cells, axis=1), len(points)):
         inverse, counts = _group_rows(facets)
         per_occurrence = counts[inverse]
         shared_3plus += int((counts >= 3).sum())
-        twice = per_occurrence == 2
-        twice = np.flatnonzero(twice)
+        twice = np.flatnonzero(per_occurrence == 2)
         side_sum = np.bincount(inverse[twice], weights=_side(points, facets[twice], opposite[twice]),
                                minlength=len(counts))
         misoriented += int(((counts == 2) & (side_sum != 0)).sum())
@@ -302,48 +431,49 @@ def _check_mesh(mesh: Mesh, lab: np.ndarray, exclude_arr: np.ndarray) -> dict:
         pix = np.floor(probe).astype(np.int64)
         in_image = ((pix >= 0) & (pix < np.array(lab.shape))).all(axis=1)
         probe_included = np.zeros(len(pix), dtype=bool)
-        probe_included[in_image] = included[tuple(pix[in_image].T)]
+        probe_included[in_image] = ~_excluded(lab[tuple(pix[in_image].T)], exclude)
         unmatched += int((probe_included | ~np.isfinite(normal).all(axis=1)).sum())
-    out["n_facets_shared_3plus"] = shared_3plus
-    out["n_misoriented_facets"] = misoriented
-    out["n_boundary_facets_off_box"] = off_box
-    out["n_unmatched_facets"] = unmatched
-    out["conforming"] = shared_3plus == 0 and misoriented == 0 and unmatched == 0
+    return {"n_facets_shared_3plus": shared_3plus, "n_misoriented_facets": misoriented,
+            "n_boundary_facets_off_box": off_box, "n_unmatched_facets": unmatched,
+            "conforming": shared_3plus == 0 and misoriented == 0 and unmatched == 0}
 
-    # every element inside one maximal homogeneous block of the labels
-    tree = _build_tree(lab)
-    leaf_map = tree.to_image(values=np.arange(len(tree)))
+
+def _leaves(points, cells, tree: RegionTree) -> dict:
+    """Every element inside one maximal homogeneous block: the leaf under its centroid."""
+    find = leaf_finder(tree)
+    shape = np.array(tree.shape)
     outside = 0
     for start in range(0, len(cells), _CELLS_PER_CHUNK):
         corner_pts = points[cells[start:start + _CELLS_PER_CHUNK]]  # (m, d+1, d)
         centroid = np.floor(corner_pts.mean(axis=1)).astype(np.int64)
-        in_image = ((centroid >= 0) & (centroid < np.array(lab.shape))).all(axis=1)
-        leaf = np.zeros(len(corner_pts), dtype=np.int64)
-        leaf[in_image] = leaf_map[tuple(centroid[in_image].T)]
+        in_image = ((centroid >= 0) & (centroid < shape)).all(axis=1)
+        leaf = np.zeros(len(corner_pts), dtype=np.intp)
+        leaf[in_image] = find(centroid[in_image])
         lo = tree.origin[leaf][:, None, :]
         hi = lo + tree.size[leaf][:, None, None]
         inside = ((corner_pts >= lo - _TOL) & (corner_pts <= hi + _TOL)).all(axis=(1, 2)) & in_image
         outside += int((~inside).sum())
-    out["n_outside_leaf"] = outside
-    out["inside_one_leaf"] = outside == 0
+    return {"n_outside_leaf": outside, "inside_one_leaf": outside == 0}
 
-    # the label image recovered at pixel centres
-    hits, _, n_wrong_hits = _rasterize(points, cells, material, lab.shape, labels=lab.ravel())
-    flat_inc = included.ravel()
-    missed = int(np.count_nonzero(flat_inc & (hits == 0)))
-    covered_excluded = int(np.count_nonzero(~flat_inc & (hits > 0)))
-    out["n_pixels_wrong"] = missed + covered_excluded + n_wrong_hits
-    out["labels_recovered"] = out["n_pixels_wrong"] == 0
 
-    # a NaN compares false everywhere above, so it must fail on its own
-    bad = int(np.count_nonzero(~np.isfinite(np.asarray(mesh.points, dtype=float))))
-    for values in (mesh.cell_data or {}).values():
+def _pixels(points, cells, material, lab: np.ndarray, exclude: np.ndarray,
+            n_excluded: int) -> dict:
+    """The label image recovered at pixel centres, excluded pixels left uncovered."""
+    covered, _, n_wrong_hits = _rasterize(points, cells, material, lab.shape, labels=lab)
+    uncovered = np.flatnonzero(np.logical_not(covered, out=covered))
+    del covered
+    excluded_uncovered = int(np.count_nonzero(_excluded(_at(lab, uncovered), exclude)))
+    missed = len(uncovered) - excluded_uncovered
+    covered_excluded = n_excluded - excluded_uncovered
+    wrong = missed + covered_excluded + n_wrong_hits
+    return {"n_pixels_wrong": wrong, "labels_recovered": wrong == 0}
+
+
+def _finite(mesh: Mesh) -> dict:
+    """A NaN compares false everywhere above, so it must fail on its own."""
+    bad = int(np.count_nonzero(~np.isfinite(mesh.points)))
+    for values in mesh.cell_data.values():
         values = np.asarray(values)
         if values.dtype.kind in "fc":
             bad += int(np.count_nonzero(~np.isfinite(values)))
-    out["n_nonfinite_values"] = bad
-    out["finite"] = bad == 0
-
-    out["all_passed"] = all(out[k] for k in ("conforming", "positive_volume", "volume_sum",
-                                             "inside_one_leaf", "labels_recovered", "finite"))
-    return out
+    return {"n_nonfinite_values": bad, "finite": bad == 0}

@@ -9,10 +9,10 @@ when the mesh was written but one of its checks failed (a bug to report, not bad
 from __future__ import annotations
 
 import argparse
-
-import numpy as np
 import sys
 from pathlib import Path
+
+import numpy as np
 
 from .._cli_util import StepTimer, print_json
 from .._validation import normalize_spacing
@@ -106,8 +106,6 @@ def parse_material_names(items) -> dict[int, str]:
 
 
 def _run_mesh(args: argparse.Namespace) -> int:
-    import numpy as np
-
     from ..io import image_suffix, read_image
     from ._export import mesh_output_paths, write_mesh
     from ._imesh import _mesh_arguments
@@ -149,15 +147,14 @@ def _run_mesh(args: argparse.Namespace) -> int:
     from ._imesh import _mesh_labels
 
     with timer("mesh"):
-        mesh = _mesh_labels(labels, method=args.method, exclude=exclude, spacing=spacing,
-                            material_names=names)
+        mesh, tree = _mesh_labels(labels, method=args.method, exclude=exclude,
+                                  spacing=spacing, material_names=names)
     if args.no_check:
         checks = {"skipped": True}
     else:
         with timer("check"):
-            checks = _check_mesh(mesh, labels, exclude)
-        checks = {k: (bool(v) if isinstance(v, (bool, np.bool_)) else v)
-                  for k, v in checks.items()}
+            checks = _check_mesh(mesh, labels, exclude, tree).to_dict()
+    del tree
     with timer("write"):
         written = write_mesh(mesh, args.output, force=args.force)
 
@@ -233,8 +230,6 @@ def _peek_shape_dtype(path):
 
 def _mesh_report(args, mesh, checks, written, seconds) -> dict:
     """The ``--json`` object: counts, quality, checks and seconds per step."""
-    import numpy as np
-
     info = mesh.info
     materials, counts = np.unique(mesh.material, return_counts=True)
     report = {
@@ -245,7 +240,7 @@ def _mesh_report(args, mesh, checks, written, seconds) -> dict:
         "dim": mesh.ndim,
         "shape": list(mesh.shape),
         "spacing": list(mesh.spacing),
-        "exclude": sorted(set(args.exclude)),
+        "exclude": list(mesh.info["exclude"]),
         "leaves_before_balance": info.get("n_leaves_tree"),
         "leaves_after_balance": info.get("n_leaves_balanced"),
         "leaves_meshed": info.get("n_leaves_meshed"),

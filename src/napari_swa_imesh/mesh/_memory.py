@@ -34,7 +34,6 @@ measured peak (``benchmarks/bench_mesh_memory.py`` repeats the measurement).
 from __future__ import annotations
 
 import math
-import os
 import resource
 
 import numpy as np

@@ -17,7 +17,7 @@ from dataclasses import dataclass
 import numpy as np
 
 __all__ = ["QUALITY_METRICS", "QualityMetric", "dihedral_angles", "max_angle", "min_angle",
-           "radius_edge_ratio", "signed_volumes", "triangle_angles"]
+           "quality_data", "radius_edge_ratio", "signed_volumes", "triangle_angles"]
 
 _CHUNK = 1 << 20
 
@@ -27,7 +27,10 @@ class QualityMetric:
     """Description of one per-element metric.
 
     ``valid_range`` is what the metric can take on non-degenerate elements of dimension
-    `dim`; ``optimal_range`` is what this project calls good (the IMESH bound).
+    `dim`; ``optimal_range`` runs from the regular simplex's value to the bound the
+    template mesher proves (isotropic spacing): every template element lies in it.
+    ``mesh._bounds.quality_bounds`` derives the same ranges from the quality table, and
+    a test holds the two equal.
     """
 
     name: str
@@ -38,20 +41,26 @@ class QualityMetric:
     description: str
 
 
+_REGULAR_DIHEDRAL = math.degrees(math.acos(1 / 3))  # 70.53 deg
+# the proven template bounds (``swa-imesh bounds --dim d``): 2-D right isosceles
+# triangles only; 3-D worst ratio sqrt(5)/2, dihedral angles atan(1/sqrt 2) = 35.26 deg
+# to 90 + 35.26 deg
+_WORST_DIHEDRAL = math.degrees(math.atan(1 / math.sqrt(2)))
+
 QUALITY_METRICS: tuple[QualityMetric, ...] = (
-    QualityMetric("quality", 2, "1", (1 / math.sqrt(3), math.inf), (1 / math.sqrt(3), math.sqrt(5) / 2),
+    QualityMetric("quality", 2, "1", (1 / math.sqrt(3), math.inf), (1 / math.sqrt(3), 1 / math.sqrt(2)),
                   "radius-to-edge ratio: circumradius / shortest edge (equilateral: 0.577)"),
     QualityMetric("quality", 3, "1", (math.sqrt(6) / 4, math.inf), (math.sqrt(6) / 4, math.sqrt(5) / 2),
                   "radius-to-edge ratio: circumradius / shortest edge (regular: 0.612)"),
-    QualityMetric("min_angle", 2, "deg", (0.0, 60.0), (math.degrees(math.atan(0.5)), 60.0),
+    QualityMetric("min_angle", 2, "deg", (0.0, 60.0), (45.0, 60.0),
                   "smallest interior angle of the triangle"),
     QualityMetric("max_angle", 2, "deg", (60.0, 180.0), (60.0, 90.0),
                   "largest interior angle of the triangle"),
-    QualityMetric("min_dihedral", 3, "deg", (0.0, math.degrees(math.acos(1 / 3))),
-                  (35.0, math.degrees(math.acos(1 / 3))),
+    QualityMetric("min_dihedral", 3, "deg", (0.0, _REGULAR_DIHEDRAL),
+                  (_WORST_DIHEDRAL, _REGULAR_DIHEDRAL),
                   "smallest dihedral angle of the tetrahedron (regular: 70.53)"),
-    QualityMetric("max_dihedral", 3, "deg", (math.degrees(math.acos(1 / 3)), 180.0),
-                  (math.degrees(math.acos(1 / 3)), 126.0),
+    QualityMetric("max_dihedral", 3, "deg", (_REGULAR_DIHEDRAL, 180.0),
+                  (_REGULAR_DIHEDRAL, 90.0 + _WORST_DIHEDRAL),
                   "largest dihedral angle of the tetrahedron (regular: 70.53)"),
 )
 
@@ -200,7 +209,16 @@ def min_angle(points, cells) -> np.ndarray:
 
 
 def max_angle(points, cells) -> np.ndarray:
-    """Largest interior angle of each triangle, in degrees (see :func:`triangle_angles`)."""
+    """Largest interior angle of each triangle, in degrees: the other end of :func:`min_angle`.
+
+    Takes the same ``points (N, 2)`` and ``cells (M, 3)``; returns ``(M,)`` float64, 60
+    for an equilateral triangle, 90 for a right one, ``nan`` where an edge has zero length.
+
+    Examples
+    --------
+    >>> max_angle([[0, 0], [2, 0], [0, 1]], [[0, 1, 2]]).round(3)
+    array([90.])
+    """
     return triangle_angles(points, cells)[1]
 
 
@@ -246,6 +264,16 @@ def dihedral_angles(points, cells) -> tuple[np.ndarray, np.ndarray]:
         lo[start:start + len(p)] = angles.min(axis=1)
         hi[start:start + len(p)] = angles.max(axis=1)
     return lo, hi
+
+
+def quality_data(points: np.ndarray, cells: np.ndarray) -> dict[str, np.ndarray]:
+    """Per-cell quality arrays: radius-to-edge plus angles (2-D) or dihedral angles (3-D)."""
+    data = {"quality": radius_edge_ratio(points, cells)}
+    if points.shape[1] == 2:
+        data["min_angle"], data["max_angle"] = triangle_angles(points, cells)
+    else:
+        data["min_dihedral"], data["max_dihedral"] = dihedral_angles(points, cells)
+    return data
 
 
 def _pairs(n: int):

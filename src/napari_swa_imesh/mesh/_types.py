@@ -23,25 +23,42 @@ __all__ = ["Mesh"]
 class Mesh:
     """A simplicial mesh with one material per element.
 
+    Built from arrays, a mesh checks and normalises them once (O(N + M), no copy when the
+    dtypes already match), so every function that takes a ``Mesh`` can trust it.
+
     Attributes
     ----------
     points : (N, d) ndarray of float64
-        Vertex coordinates, physical units, axis order of the image.
+        Vertex coordinates, physical units, axis order of the image; finite.
     cells : (M, d+1) ndarray of intp
-        Triangles (d=2) or tetrahedra (d=3), positively oriented.
+        Triangles (d=2) or tetrahedra (d=3), positively oriented; every id in ``0..N-1``.
     material : (M,) ndarray of int64
         Label of the leaf each element lies in.
     cell_data : dict of str to (M,) ndarray
         Per-element data: at least ``quality`` (radius-to-edge ratio) and ``level`` (leaf
         level); the mesher adds angle metrics.
     spacing : tuple of float
-        Voxel spacing used to place the points.
+        Voxel spacing used to place the points (empty when unknown).
     shape : tuple of int
-        Shape of the label image that was meshed.
+        Shape of the label image that was meshed (empty when unknown).
     material_names : dict of int to str
         Optional names for material ids (used by Gmsh physical groups and Abaqus sets).
     info : dict
         Counts and timings of the run that made the mesh (for reports and ``--json``).
+
+    Raises
+    ------
+    TypeError
+        For non-numeric points or non-integer cells or materials.
+    ValueError
+        For arrays of the wrong shape, non-finite points, cell ids out of range, or
+        per-cell arrays whose length is not the number of cells.
+
+    Examples
+    --------
+    >>> m = Mesh([[0, 0], [0, 1], [1, 0]], [[0, 2, 1]], [1])
+    >>> m.points.dtype, m.cells.dtype == np.intp, m.n_cells
+    (dtype('float64'), True, 1)
     """
 
     points: np.ndarray
@@ -52,6 +69,33 @@ class Mesh:
     shape: tuple[int, ...] = ()
     material_names: dict[int, str] = field(default_factory=dict)
     info: dict = field(default_factory=dict)
+
+    def __post_init__(self):
+        self.points = _as_points(self.points)
+        d = self.points.shape[1]
+        self.cells = _as_cells(self.cells, d, len(self.points))
+        m = len(self.cells)
+        self.material = _as_ids(self.material, "material", m)
+        self.cell_data = {str(k): _per_cell(v, f"cell_data[{k!r}]", m)
+                          for k, v in dict(self.cell_data or {}).items()}
+        self.spacing = tuple(float(s) for s in self.spacing)
+        self.shape = tuple(int(n) for n in self.shape)
+        for name, value in (("spacing", self.spacing), ("shape", self.shape)):
+            if len(value) not in (0, d):
+                raise ValueError(f"{name} must be empty or hold {d} values (one per axis); "
+                                 f"got {value}.")
+        self.material_names = {int(k): str(v) for k, v in dict(self.material_names or {}).items()}
+        self.info = dict(self.info or {})
+
+    @classmethod
+    def _trusted(cls, points, cells, material, cell_data, *, spacing, shape,
+                 material_names, info) -> "Mesh":
+        """A mesh from arrays the mesher made (already of the right dtypes and shapes)."""
+        mesh = cls.__new__(cls)
+        mesh.points, mesh.cells, mesh.material, mesh.cell_data = points, cells, material, cell_data
+        mesh.spacing, mesh.shape = spacing, shape
+        mesh.material_names, mesh.info = material_names, info
+        return mesh
 
     @property
     def ndim(self) -> int:
@@ -65,3 +109,51 @@ class Mesh:
     def quality(self) -> np.ndarray:
         """(M,) radius-to-edge ratio of each element."""
         return self.cell_data["quality"]
+
+
+def _as_points(points) -> np.ndarray:
+    arr = np.asarray(points)
+    if arr.dtype.kind not in "biuf":
+        raise TypeError(f"mesh points must be real numbers; got dtype {arr.dtype}.")
+    if arr.ndim != 2 or arr.shape[1] not in (2, 3):
+        raise ValueError(f"mesh points must have shape (N, 2) or (N, 3); got {arr.shape}.")
+    arr = np.asarray(arr, dtype=np.float64)
+    if not np.isfinite(arr).all():
+        bad = int(np.count_nonzero(~np.isfinite(arr).all(axis=1)))
+        raise ValueError(f"{bad} mesh point(s) have NaN or infinite coordinates; every "
+                         "vertex needs a finite position.")
+    return arr
+
+
+def _as_cells(cells, d: int, n_points: int) -> np.ndarray:
+    arr = np.asarray(cells)
+    if arr.size == 0 and arr.ndim < 2:
+        arr = arr.reshape(0, d + 1)
+    if arr.dtype.kind not in "iu" and arr.size:
+        raise TypeError(f"cells must hold integer vertex ids; got dtype {arr.dtype}.")
+    if arr.ndim != 2 or arr.shape[1] != d + 1:
+        raise ValueError(f"cells of a {d}-D mesh need {d + 1} corners each; got shape "
+                         f"{arr.shape}.")
+    if arr.size:
+        lo, hi = int(arr.min()), int(arr.max())
+        if lo < 0 or hi >= n_points:
+            raise ValueError(f"cells refer to vertices {lo}..{hi}, but the mesh has "
+                             f"{n_points} points (ids 0..{n_points - 1}).")
+    return np.asarray(arr, dtype=np.intp)
+
+
+def _as_ids(values, name: str, m: int) -> np.ndarray:
+    arr = _per_cell(values, name, m)
+    if arr.dtype.kind not in "iub" and arr.size:
+        raise TypeError(f"{name} must hold integer ids; got dtype {arr.dtype}.")
+    if arr.ndim != 1:
+        raise ValueError(f"{name} must hold one id per element ({m}); got shape {arr.shape}.")
+    return np.asarray(arr, dtype=np.int64)
+
+
+def _per_cell(values, name: str, m: int) -> np.ndarray:
+    arr = np.asarray(values)
+    if arr.shape[:1] != (m,):
+        what = "id" if name == "material" else "value"
+        raise ValueError(f"{name} must hold one {what} per element ({m}); got shape {arr.shape}.")
+    return arr

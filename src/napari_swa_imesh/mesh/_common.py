@@ -1,0 +1,53 @@
+"""What every file format shares: meshio's cell-type names and the material names.
+
+Conventions written once for the writers (``_export`` and one module per awkward format):
+exported coordinates are x, y(, z) = column, row(, plane), the reverse of the numpy axis
+order a ``Mesh`` keeps, and a material without a name is called ``material_<id>``.
+
+Format writers
+--------------
+A writer of one format (``write_gmsh``, ``write_abaqus``) takes ``names`` (the mesh's
+material names, dict of int to str), ``m`` (the ``meshio.Mesh`` from ``to_meshio``: one
+cell block, ``material`` and the other per-cell arrays as cell data) and ``path`` (the
+temporary file ``io.atomic_write`` gave for the target).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+__all__ = ["CELL_TYPE", "material_names"]
+
+#: meshio's name of the linear simplex of each dimension.
+CELL_TYPE = {2: "triangle", 3: "tetra"}
+
+
+def material_names(names: dict[int, str], materials: np.ndarray) -> dict[int, str]:
+    """Name of each material present: from `names` (a mesh's) or ``material_<id>``.
+
+    Raises
+    ------
+    ValueError
+        For an empty name, one with quotes or line breaks, or two materials with one name
+        (the formats that name groups could not tell them apart).
+
+    Examples
+    --------
+    >>> material_names({1: "bone"}, np.array([1, 2]))
+    {1: 'bone', 2: 'material_2'}
+    """
+    out = {int(m): str(names.get(int(m), f"material_{int(m)}")) for m in materials}
+    seen: dict[str, int] = {}
+    for m, name in out.items():
+        if not name.strip() or '"' in name or "\n" in name:
+            raise ValueError(
+                f"material {m} has name {name!r}; names must be non-empty text without "
+                "quotes or line breaks."
+            )
+        if name in seen:
+            raise ValueError(
+                f"materials {seen[name]} and {m} share the name {name!r}; give each "
+                "material its own name."
+            )
+        seen[name] = m
+    return out

@@ -1,0 +1,205 @@
+"""The template (dictionary) mesher: every balanced leaf cut by look-up tables.
+
+Each leaf is cut according to which of its edge midpoints and face centres are vertices
+(``_templates_luts.py`` holds the tables and their conventions). Everything is integer
+arithmetic on the lattice of pixel corners of the padded grid: a point is its lattice
+key ``coords @ strides``; leaf centres and new face centres of leaves of level >= 1 are
+lattice points too (level-0 leaves never carry sites), so vertices are deduplicated by
+their keys and no floating-point predicate is evaluated. Every element is a scaled copy
+of a template, so its quality is a table look-up.
+"""
+
+from __future__ import annotations
+
+import itertools
+import math
+import time
+
+import numpy as np
+
+from .._tree import RegionTree
+from . import _templates_luts as luts
+from ._quality import quality_data
+
+__all__ = ["cut_leaves", "lattice", "mark_corners", "template_mesh", "template_quality"]
+
+
+def lattice(tree: RegionTree):
+    """Shape and strides of the lattice of pixel corners of the padded grid.
+
+    Keys are intp: numpy would convert any other index dtype on every gather.
+    """
+    shape = tuple(n + 1 for n in tree.padded_shape)
+    strides = np.array([math.prod(shape[a + 1:]) for a in range(len(shape))], dtype=np.intp)
+    return shape, strides
+
+
+def mark_corners(tree: RegionTree, select: np.ndarray, shape, strides) -> np.ndarray:
+    """Flat bool lattice: True at every corner of the selected leaves (one pass per level)."""
+    d = tree.ndim
+    is_vertex = np.zeros(math.prod(shape), dtype=bool)
+    corner_keys = np.array(list(itertools.product((0, 1), repeat=d)), strides.dtype) @ strides
+    for lev in np.unique(tree.level[select]):
+        sel = select & (tree.level == lev)
+        okey = tree.origin[sel].astype(strides.dtype) @ strides
+        is_vertex[(okey[:, None] + (corner_keys << int(lev))[None]).ravel()] = True
+    return is_vertex
+
+
+def template_mesh(bal: RegionTree, meshed: np.ndarray):
+    """Cut every meshed leaf by the look-up tables.
+
+    Returns points (index space), cells, leaf index and template id per element, and the
+    seconds spent per step.
+    """
+    d = bal.ndim
+    seconds = {}
+    t = time.perf_counter()
+    shape, strides = lattice(bal)
+    # vertices are the corners of every leaf inside the image, whatever its material:
+    # then a face centre that is a vertex always comes with its four edge midpoints
+    is_vertex = mark_corners(bal, bal.inside, shape, strides)
+    leaves = np.flatnonzero(meshed)
+    kd = strides.dtype
+    level = bal.level[leaves].astype(kd)
+    okey = bal.origin[leaves].astype(kd) @ strides  # (L,) lattice key of each leaf's lowest corner
+    size = np.left_shift(kd.type(1), level)
+    half = size >> 1
+    site_keys = luts.SITES[d].astype(kd) @ strides  # (n_sites,)
+    hanging = np.zeros((len(leaves), len(site_keys)), dtype=bool)
+    coarse = np.flatnonzero(level >= 1)  # level-0 leaves have no sites: no leaf is smaller
+    site_of_coarse = okey[coarse, None] + half[coarse, None] * site_keys[None]  # (Lc, n_sites)
+    hanging[coarse] = is_vertex[site_of_coarse]
+    kuhn = ~hanging.any(axis=1)
+    # the points elements use: corners of meshed leaves, the sites they carry, and the
+    # new points of the templates (marked without scattering every element's keys)
+    used = is_vertex if meshed.sum() == bal.inside.sum() else mark_corners(bal, meshed, shape, strides)
+    used[site_of_coarse[hanging[coarse]]] = True
+    del site_of_coarse
+    seconds["vertices"] = time.perf_counter() - t
+
+    t = time.perf_counter()
+    cells, which, template_of, _ = cut_leaves(okey, size, hanging, strides, used=used)
+    leaf_of = leaves[which]  # intp: it indexes the leaf arrays again below
+    del which
+    seconds["simplices"] = time.perf_counter() - t
+
+    t = time.perf_counter()
+    points = np.stack(np.unravel_index(np.flatnonzero(used), shape), axis=1).astype(np.float64)
+    seconds["numbering"] = time.perf_counter() - t
+    seconds["_n_kuhn"] = int(kuhn.sum())
+    return points, cells, leaf_of, template_of, seconds
+
+
+def cut_leaves(okey: np.ndarray, size: np.ndarray, hanging: np.ndarray, strides: np.ndarray,
+               *, used: np.ndarray | None = None):
+    """Cut leaves by the look-up tables; the dictionary step, shared with the quality table.
+
+    Parameters
+    ----------
+    okey : (L,) ndarray of int32 or int64
+        Lattice key (``coords @ strides``) of each leaf's lowest corner.
+    size : (L,) ndarray of the same dtype
+        Leaf side in lattice units; leaves with a site present must have an even side.
+    hanging : (L, n_sites) ndarray of bool
+        Which of ``SITES[d]`` are vertices, per leaf.
+    strides : (d,) ndarray of the same dtype
+        Strides of the lattice; keys are linear, so a template's key is
+        ``okey + scale * (local @ strides)``.
+    used : (n_lattice,) ndarray of bool, optional
+        Flat lattice marking the corners and sites present. When given, the templates' new
+        points are marked in it, and elements come back as vertex numbers (the rank of the
+        key among the marked points, i.e. ``cumsum(used) - 1``) instead of keys, so the
+        big key array is never built.
+
+    Returns
+    -------
+    keys : (M, d+1) ndarray of intp
+        Lattice key (or vertex number, with `used`) of every element vertex, positively
+        oriented.
+    which : (M,) ndarray of int32 (int64 for 2^31 leaves or more)
+        Index (into the L leaves) of the leaf each element cuts.
+    template_id : (M,) ndarray of int16
+        Index into ``TEMPLATES[d]``.
+    new_points : (K,) ndarray of the keys' dtype
+        Keys of the points the templates add (leaf centres, face centres of fans), with
+        repeats; every other element vertex is a leaf corner or a site present.
+    """
+    d = len(strides)
+    kd = strides.dtype
+    wd = np.int32 if len(okey) < 2**31 else np.int64
+    half = size >> 1
+    kuhn = ~hanging.any(axis=1)
+    nk = np.flatnonzero(kuhn)
+    other = np.flatnonzero(~kuhn)
+    # group the other leaves by the case of each face: (face, case, members)
+    groups = []
+    for f, fsites in enumerate(luts.FACE_SITES[d]):
+        # uint8 codes: numpy's stable sort is a radix sort for them
+        code = np.zeros(len(other), dtype=np.uint8)
+        for bit, site in enumerate(fsites):
+            code |= hanging[other, site].astype(np.uint8) << np.uint8(bit)
+        order = np.argsort(code, kind="stable")
+        bounds = np.searchsorted(code[order], np.arange((1 << len(fsites)) + 1), side="left")
+        for case in range(1 << len(fsites)):
+            if bounds[case + 1] > bounds[case]:
+                if len(luts.FACE_LUT[d][f][case]) == 0:
+                    raise RuntimeError(f"leaf configuration outside the look-up table (face {f}, "
+                                       f"case {case}); the tree is not balanced as assumed.")
+                groups.append((f, case, other[order[bounds[case]:bounds[case + 1]]]))
+    n_kuhn = len(luts.KUHN[d])
+    total = len(nk) * n_kuhn + sum(len(sel) * len(luts.FACE_LUT[d][f][c]) for f, c, sel in groups)
+    new_points = []
+    for f, case, sel in groups:
+        new_local = _new_points(d, f, case)
+        if len(new_local):
+            new_keys = new_local.astype(kd) @ strides
+            new_points.append((okey[sel, None] + half[sel, None] * new_keys[None]).ravel())
+    new_points = np.concatenate(new_points) if new_points else np.zeros(0, kd)
+    vertex_id = None
+    if used is not None:
+        used[new_points] = True
+        vertex_id = np.cumsum(used, dtype=np.intp)
+        vertex_id -= 1
+    # write every block straight into its slice of the outputs (no concatenation copies)
+    keys = np.empty((total, d + 1), dtype=kd)
+    which = np.empty(total, dtype=wd)
+    template_of = np.empty(total, dtype=np.int16)
+
+    def emit(start, sel, scale, local_keys, first_template):
+        n, t = len(sel), len(local_keys)
+        block = keys[start:start + n * t].reshape(n, t, d + 1)
+        if vertex_id is None:
+            np.multiply(scale[sel, None, None], local_keys[None], out=block)
+            block += okey[sel, None, None]
+        else:
+            lattice_keys = scale[sel, None, None] * local_keys[None]
+            lattice_keys += okey[sel, None, None]
+            np.take(vertex_id, lattice_keys, out=block)
+        which[start:start + n * t].reshape(n, t)[:] = sel[:, None]
+        template_of[start:start + n * t].reshape(n, t)[:] = np.arange(first_template, first_template + t)
+        return start + n * t
+
+    # Kuhn leaves: d! simplices in units of the leaf side
+    start = emit(0, nk, size, luts.KUHN[d].astype(kd) @ strides, 0)
+    # other leaves: every face by its own case, coned to the leaf centre (unit: half side)
+    for f, case, sel in groups:
+        lut = luts.FACE_LUT[d][f][case]
+        start = emit(start, sel, half, lut.astype(kd) @ strides, luts.FACE_TEMPLATE_ID[d][f][case])
+    return keys, which, template_of, new_points
+
+
+def _new_points(d: int, face: int, case: int) -> np.ndarray:
+    """(k, d) local points of a face case that are neither corners nor sites present."""
+    present = {tuple(luts.SITES[d][s]) for i, s in enumerate(luts.FACE_SITES[d][face]) if case >> i & 1}
+    pts = {tuple(p) for p in luts.FACE_LUT[d][face][case].reshape(-1, d).tolist()}
+    new = [p for p in sorted(pts) if p not in present and any(c == 1 for c in p)]
+    return np.array(new, dtype=np.int64).reshape(-1, d)
+
+
+def template_quality(d: int, spacing: tuple[float, ...]) -> dict[str, np.ndarray]:
+    """Quality of every template simplex once scaled by `spacing`: (n_templates,) arrays."""
+    tpl = luts.TEMPLATES[d] * np.asarray(spacing)  # (n, d+1, d)
+    pts = tpl.reshape(-1, d)
+    cells = np.arange(len(pts)).reshape(-1, d + 1)
+    return quality_data(pts, cells)
