@@ -34,11 +34,9 @@ def add_command(subparsers) -> None:
 
 
 def run_demo(args) -> int:
-    from .io import check_writable
     from .data import texture_mosaic, texture_training
-    from .io import write_figure, write_labels
-    from .segmentation import (evaluate, plot_res_scales, save_samples, segment,
-                               write_signatures_csv)
+    from .io import check_writable, write_figure, write_labels
+    from .segmentation import evaluate, plot_res_scales, save_samples, segment, write_signatures_csv
 
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
@@ -73,7 +71,7 @@ def run_demo(args) -> int:
         "files": str(out),
     }
     try:
-        from .mesh._checks import check_mesh
+        from .mesh import check_mesh
         from .mesh._export import write_mesh
         from .mesh._imesh import mesh_labels
     except ImportError:  # pragma: no cover - the mesher ships with the package
@@ -86,7 +84,7 @@ def run_demo(args) -> int:
         seconds["mesh"] = time.perf_counter() - t
         summary["mesh"] = {"vertices": int(mesh.points.shape[0]), "elements": mesh.n_cells,
                            "worst_ratio": float(mesh.quality.max()),
-                           "checks_passed": bool(checks["all_passed"])}
+                           "checks_passed": bool(checks.all_passed)}
     summary["seconds"] = seconds
     if args.json:
         print_json(summary)

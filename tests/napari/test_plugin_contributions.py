@@ -1,13 +1,12 @@
-"""What napari sees of the plugin: samples, menus, dock widgets, reader; the mesh surface."""
+"""What napari sees of the plugin: samples, menus, dock widgets, reader.
 
-from collections import Counter
+(The faces drawn for a mesh are tested headless in tests/mesh/test_surface.py.)"""
 
 import numpy as np
 import pytest
 
-from napari_swa_imesh._napari._surface import mesh_surface, shown_faces
 from napari_swa_imesh._napari._workflow import WorkflowWidget
-from napari_swa_imesh.mesh._imesh import mesh_labels
+from napari_swa_imesh.mesh import mesh_labels, mesh_surface
 
 PLUGIN = "napari-swa-imesh"
 
@@ -61,41 +60,6 @@ def test_nifti_reader_keeps_the_voxel_spacing(make_napari_viewer, tmp_path):
     assert layer.name == "vol"
     np.testing.assert_array_equal(layer.data, data)
     assert tuple(layer.scale) == (2.0, 0.5, 1.5)
-
-
-def _brute_force_faces(cells, material):
-    """Faces of tetrahedra bounding the mesh or two materials, by counting (small meshes)."""
-    owners = {}
-    for i, tet in enumerate(cells.tolist()):
-        for k in range(4):
-            owners.setdefault(tuple(sorted(tet[:k] + tet[k + 1:])), []).append(i)
-    return {f for f, o in owners.items()
-            if len(o) == 1 or material[o[0]] != material[o[1]]}
-
-
-@pytest.mark.parametrize("seed", [0, 1])
-def test_shown_faces_are_the_boundary_and_the_interfaces(seed):
-    rng = np.random.default_rng(seed)
-    labels = rng.integers(1, 4, (6, 7, 5))
-    mesh = mesh_labels(labels, spacing=(2.0, 1.0, 1.0), exclude=[3])
-    faces, owners = shown_faces(mesh.cells, mesh.material)
-    keys = [tuple(sorted(f)) for f in faces.tolist()]
-    assert Counter(keys).most_common(1)[0][1] == 1
-    assert set(keys) == _brute_force_faces(mesh.cells, mesh.material)
-    # each face is drawn from its first owner, as that element oriented it (outward)
-    for f, (a, _) in zip(faces.tolist(), owners.tolist()):
-        assert set(f) < set(mesh.cells[a].tolist())
-
-
-def test_surface_gives_each_triangle_its_own_vertices_and_value():
-    labels = np.array([[1, 1, 2], [1, 2, 2]])
-    mesh = mesh_labels(labels)
-    surface = mesh_surface(mesh)
-    assert surface["n_faces"] == mesh.n_cells
-    assert surface["vertices"].shape == (3 * mesh.n_cells, 2)
-    np.testing.assert_array_equal(surface["triangles"].ravel(), np.arange(3 * mesh.n_cells))
-    np.testing.assert_allclose(surface["vertices"].reshape(-1, 3, 2), mesh.points[mesh.cells])
-    np.testing.assert_array_equal(surface["material"], np.repeat(mesh.material, 3))
 
 
 @pytest.mark.parametrize("suffix", [".vtu", ".vtk", ".msh", ".xdmf", ".inp", ".node"])

@@ -160,3 +160,23 @@ def test_bad_transient_input_exits_2(labels_file, capsys, args, message):
     rc, _, err = _run(capsys, *argv)
     assert rc == 2 and message in err and err.count("\n") == 1
     assert sorted(p.name for p in path.parent.iterdir()) == ["labels.npy"]
+
+
+def test_a_mesh_file_without_materials_is_refused(tmp_path, capsys):
+    import meshio
+
+    points = np.array([[0, 0], [1, 0], [0, 1], [1, 1]], dtype=float)
+    meshio.write(tmp_path / "plain.vtu", meshio.Mesh(points, [("triangle", [[0, 1, 2],
+                                                                            [1, 3, 2]])]))
+    rc, _, err = _run(capsys, "simulate", tmp_path / "plain.vtu", "-k", "0=1",
+                      "-o", tmp_path / "f.vtu")
+    assert rc == 2 and "has no material per element" in err
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["plain.vtu"]
+
+
+def test_a_mesh_file_with_voids_warns_that_its_box_is_its_extent(labels_file, capsys):
+    path, labels = labels_file
+    mesh_path = path.parent / "holes.vtu"
+    assert _run(capsys, "mesh", path, "-o", mesh_path, "--exclude", "3")[0] == 0
+    rc, out, err = _run(capsys, "simulate", mesh_path, "-k", "1=1", "2=2", "--axes", "y")
+    assert rc == 0 and "warning: the mesh has voids" in err

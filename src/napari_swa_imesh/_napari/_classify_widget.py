@@ -10,8 +10,15 @@ from magicgui.widgets import ComboBox, Container, SpinBox
 from qtpy.QtCore import Signal
 from qtpy.QtWidgets import QFileDialog, QTableWidget, QTableWidgetItem, QWidget
 
-from ..segmentation import (CLASSIFIERS, FEATURE_SETS, MOMENT_NAMES, dice_scores, load_model,
-                            segment_steps, tile_placement)
+from ..segmentation import (
+    CLASSIFIERS,
+    FEATURE_SETS,
+    MOMENT_NAMES,
+    dice_scores,
+    load_model,
+    segment_steps,
+    tile_placement,
+)
 from . import _samples_layer as sl
 from ._dock import button, group, scroll_body, side_by_side, wrapped_label
 from ._layers import labels_colormap, layer_picker, layer_spacing, material_palette, pick

@@ -10,12 +10,11 @@ from magicgui.widgets import CheckBox, ComboBox, Container, PushButton
 from qtpy.QtCore import Qt, Signal
 from qtpy.QtWidgets import QFileDialog, QLabel, QListWidget, QListWidgetItem, QWidget
 
-from ..mesh import QUALITY_METRICS, check_mesh, mesh_labels, quality_table, write_mesh
+from ..mesh import QUALITY_METRICS, check_mesh, mesh_labels, mesh_surface, quality_table, write_mesh
 from ..mesh._export import MESH_SUFFIXES
 from ._dock import scroll_body, wrapped_label
 from ._layers import MESH_KEY, default_color, layer_picker, layer_spacing, mesh_translate, pick
 from ._plots import ThemedFigure, dark_theme, theme_text_color
-from ._surface import mesh_surface
 from ._tasks import TaskPanel, notify_error, notify_info
 
 if TYPE_CHECKING:

@@ -22,10 +22,15 @@ import numpy as np
 import pandas as pd
 
 from ..segmentation import Material, Samples
-from ._boxes import (BoxReport, box_flags, box_to_rectangle, rectangles_to_boxes,
-                     window_flags)
-from ._layers import (EXTENT_KEY, MATERIALS_KEY, SAMPLES_KEY, SCALE_KEY, default_color,
-                      index_to_layer_data)
+from ._boxes import BoxReport, box_flags, box_to_rectangle, rectangles_to_boxes, window_flags
+from ._layers import (
+    EXTENT_KEY,
+    MATERIALS_KEY,
+    SAMPLES_KEY,
+    SCALE_KEY,
+    default_color,
+    index_to_layer_data,
+)
 
 if TYPE_CHECKING:
     import napari

@@ -16,11 +16,11 @@ from magicgui.widgets import CheckBox, ComboBox, Container, PushButton
 from qtpy.QtCore import Qt, Signal
 from qtpy.QtWidgets import QFileDialog, QLabel, QTableWidget, QTableWidgetItem, QWidget
 
+from ..mesh import shown_faces
 from ..simulate import simulate_steps, write_field
 from ._dock import scroll_body, side_by_side, wrapped_label
 from ._layers import MESH_KEY, layer_picker, pick
 from ._plots import ThemedFigure
-from ._surface import shown_faces
 from ._tasks import TaskPanel, notify_error, notify_info
 
 if TYPE_CHECKING:

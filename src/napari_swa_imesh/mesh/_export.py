@@ -277,7 +277,8 @@ def read_mesh(path) -> Mesh:
         Points back in numpy axis order (plane, row, col), 2-D when the file holds
         triangles with z = 0; cells positively oriented there; ``material`` from the
         ``material`` array, Gmsh physical groups, Abaqus element sets or the
-        Triangle/TetGen region attribute; other per-cell arrays as stored. ``spacing``
+        Triangle/TetGen region attribute (0 for every element when the file has none,
+        and then ``info["has_material"]`` is False); other per-cell arrays as stored. ``spacing``
         and ``shape`` are unknown (empty). Cell order may differ from the written mesh
         (Gmsh groups cells by material).
     """
@@ -293,7 +294,7 @@ def read_mesh(path) -> Mesh:
     names: dict[int, str] = {}
     if suffix in (".node", ".ele"):
         points, cells, attributes = read_node_ele(p)
-        material = attributes.pop("material", np.zeros(len(cells)))
+        material = attributes.pop("material", None)
         cell_data = attributes
     else:
         points, cells, material, cell_data, names = _read_meshio(p, suffix)
@@ -305,13 +306,16 @@ def read_mesh(path) -> Mesh:
         points = points[:, :2]
     points = np.ascontiguousarray(points[:, ::-1], dtype=np.float64)
     cells = _orient_positive(points, cells)
+    has_material = material is not None
+    if material is None:
+        material = np.zeros(len(cells), dtype=np.int64)
     return Mesh(
         points=points,
         cells=cells,
         material=np.rint(material).astype(np.int64),
         cell_data={k: np.asarray(v) for k, v in cell_data.items()},
         material_names=names,
-        info={"source": str(p)},
+        info={"source": str(p), "has_material": has_material},
     )
 
 
@@ -343,8 +347,6 @@ def _read_meshio(p: Path, suffix: str):
         names, physical_material = gmsh_materials(m, keep)
         if material is None:
             material = physical_material
-    elif fmt == "abaqus":
+    elif fmt == "abaqus" and m.cell_sets:
         names, material = abaqus_materials(p, m, keep, len(cells))
-    if material is None:
-        material = np.zeros(len(cells), dtype=np.int64)
     return np.asarray(m.points, dtype=np.float64), cells, material, cell_data, names
