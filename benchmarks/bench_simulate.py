@@ -32,6 +32,7 @@ from pathlib import Path
 import numpy as np
 from scipy import ndimage, sparse
 
+from bench_pipeline import CHILD  # the whole command in a fresh process, with its peak
 from napari_swa_imesh.simulate import simulate
 from napari_swa_imesh.simulate._solve import solve_dirichlet
 
@@ -185,16 +186,6 @@ def accuracy_case(name: str, labels: np.ndarray, k: dict, axis: int, quick: bool
     for r in (1, 2):
         value, n = fv_keff(refine(labels, r), k, axis)
         row(f"finite volumes, {r}x", value, n)
-
-
-CHILD = (
-    "import json, resource, sys\n"
-    "from napari_swa_imesh.cli import main\n"
-    "rc = main(sys.argv[1:])\n"
-    "sys.stdout.flush()\n"
-    "print('PEAK ' + json.dumps({'rc': rc, 'peak': resource.getrusage("
-    "resource.RUSAGE_SELF).ru_maxrss * 1024}), file=sys.stderr)\n"
-)
 
 
 def speed(n: int, orders=(1,)) -> None:
