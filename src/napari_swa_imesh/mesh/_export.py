@@ -33,7 +33,9 @@ from ..io import atomic_write, check_writable
 from ._abaqus import abaqus_materials, write_abaqus
 from ._common import CELL_TYPE
 from ._gmsh import gmsh_materials, write_gmsh
+from ._quality import signed_volumes
 from ._triangle_tetgen import read_node_ele, write_node_ele
+from ._vtu import write_vtu
 from ._types import Mesh
 from ._xdmf import require_h5py, write_xdmf
 
@@ -55,10 +57,13 @@ MESH_SUFFIXES = {
 
 
 def _orient_positive(points: np.ndarray, cells: np.ndarray) -> np.ndarray:
-    """Copy of `cells` with the first two corners swapped where the volume is negative."""
+    """Copy of `cells` with the first two corners swapped where the volume is negative.
+
+    The volumes are computed in chunks (:func:`signed_volumes`): the corners of ten
+    million tetrahedra at once would take a gigabyte.
+    """
     cells = np.array(cells, dtype=np.intp, copy=True)
-    corners = points[cells]  # (M, d+1, d)
-    flip = np.linalg.det(corners[:, 1:, :] - corners[:, :1, :]) < 0
+    flip = signed_volumes(points, cells) < 0
     cells[flip, 0], cells[flip, 1] = cells[flip, 1], cells[flip, 0].copy()
     return cells
 
@@ -219,17 +224,24 @@ def write_mesh_to(mesh: Mesh, temps: list[Path]) -> None:
     of :func:`mesh_output_paths` (same names, so twins name each other right)."""
     import meshio
 
+    suffix = temps[0].suffix.lower()
+    if suffix == ".vtu":                      # our own writer: no meshio copy of the mesh
+        _write_vtu(mesh, str(temps[0]))
+        return
     m = to_meshio(mesh)
     try:
-        _WRITERS[temps[0].suffix.lower()](mesh, m, [str(t) for t in temps])
+        _WRITERS[suffix](mesh, m, [str(t) for t in temps])
     except (meshio.WriteError, KeyError) as exc:  # meshio's own failures, as one clear line
         raise ValueError(f"meshio could not write {temps[0].name}: {exc}") from exc
 
 
-def _write_vtu(mesh: Mesh, m, temps: list[str]) -> None:
-    import meshio
-
-    meshio.write(temps[0], _padded(m), file_format="vtu")
+def _write_vtu(mesh: Mesh, path: str, point_data: dict | None = None,
+               cell_data: dict | None = None) -> None:
+    """The mesh in x, y(, z) order, arrays in their own dtypes, raw binary (:mod:`._vtu`)."""
+    points = mesh.points[:, ::-1]
+    data = {"material": mesh.material, **mesh.cell_data, **(cell_data or {})}
+    write_vtu(path, points, _orient_positive(points, mesh.cells), cell_data=data,
+              point_data=point_data)
 
 
 def _write_vtk(mesh: Mesh, m, temps: list[str]) -> None:
@@ -256,7 +268,7 @@ def _write_node_ele(mesh: Mesh, m, temps: list[str]) -> None:
 
 
 #: suffix -> writer(mesh, the meshio mesh in x, y(, z) order, temporary paths of targets)
-_WRITERS = {".vtu": _write_vtu, ".vtk": _write_vtk, ".xdmf": _write_xdmf, ".msh": _write_gmsh,
+_WRITERS = {".vtk": _write_vtk, ".xdmf": _write_xdmf, ".msh": _write_gmsh,
             ".inp": _write_abaqus, ".node": _write_node_ele, ".ele": _write_node_ele}
 
 
