@@ -4,9 +4,9 @@ Run under a display, or under Xvfb on a headless machine::
 
     xvfb-run -a -s "-screen 0 1600x1000x24" python docs/screenshots.py
 
-It opens the plugin's two samples, runs samples -> RES -> classify -> mesh through the
-workflow widget exactly as a user's clicks would (the same methods the buttons call), and
-writes PNGs (palette-quantised to stay small) to ``docs/images/``.
+It opens the plugin's two samples, runs samples -> RES -> classify -> mesh -> simulate
+through the workflow widget exactly as a user's clicks would (the same methods the buttons
+call), and writes PNGs (palette-quantised to stay small) to ``docs/images/``.
 """
 
 from __future__ import annotations
@@ -16,6 +16,8 @@ import time
 from pathlib import Path
 
 import numpy as np
+
+from napari_swa_imesh._napari._layers import pick
 
 OUT = Path(__file__).resolve().parent / "images"
 WINDOW = (1500, 940)
@@ -73,9 +75,9 @@ def mosaic_steps(viewer) -> None:
     truth.visible = False
     flow = open_workflow(viewer)
     samples = flow.samples
-    samples.image_combo.select(image)
-    samples.truth_combo.select(truth)
-    samples.per_material_spin.setValue(16)
+    pick(samples.image_combo, image)
+    pick(samples.truth_combo, truth)
+    samples.per_material_spin.value = 16
     samples.samples_from_truth()
     wait(samples)
     viewer.layers.selection.active = samples.samples_layer()
@@ -88,7 +90,7 @@ def mosaic_steps(viewer) -> None:
     save(viewer, "02_res_2d.png")
 
     flow.tabs.setCurrentIndex(2)
-    flow.classify.truth_combo.select(truth)
+    pick(flow.classify.truth_combo, truth)
     flow.classify.classify()
     wait(flow.classify)
     samples.samples_layer().visible = False
@@ -101,6 +103,14 @@ def mosaic_steps(viewer) -> None:
     flow.mesh.surface_layer.opacity = 0.6       # the texture shows through the elements
     save(viewer, "04_mesh_2d.png")
 
+    # simulate: grass conducts ten times better than brick
+    flow.tabs.setCurrentIndex(4)
+    flow.simulate.table.set_value(2, "10")
+    flow.simulate.run()
+    wait(flow.simulate)
+    flow.mesh.surface_layer.visible = False
+    save(viewer, "08_simulate_2d.png")
+
 
 def phantom_steps(viewer) -> None:
     viewer.open_sample("napari-swa-imesh", "tissue_phantom")
@@ -108,9 +118,9 @@ def phantom_steps(viewer) -> None:
     truth.visible = False
     flow = open_workflow(viewer)
     samples = flow.samples
-    samples.truth_combo.select(truth)
-    samples.per_material_spin.setValue(8)
-    samples.scale_spin.setValue(2)
+    pick(samples.truth_combo, truth)
+    samples.per_material_spin.value = 8
+    samples.scale_spin.value = 2
     samples.samples_from_truth()
     wait(samples)
     box = samples.current_samples().boxes[-1]
@@ -122,7 +132,7 @@ def phantom_steps(viewer) -> None:
     wait(flow.res)
     flow.res.choose_scale(2)          # 4-voxel tiles: the grey-matter shell is thin
     flow.tabs.setCurrentIndex(2)
-    flow.classify.truth_combo.select(truth)
+    pick(flow.classify.truth_combo, truth)
     flow.classify.classify()
     wait(flow.classify)
 
@@ -139,7 +149,7 @@ def phantom_steps(viewer) -> None:
     camera.angles = (-25, 40, 135)
     camera.zoom *= 0.9
     save(viewer, "06_mesh_3d.png")
-    flow.mesh.color_combo.setCurrentText("material")
+    flow.mesh.color_combo.value = "material"
     save(viewer, "07_mesh_3d_materials.png")
 
 
