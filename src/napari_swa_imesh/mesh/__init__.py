@@ -8,6 +8,8 @@
   :func:`signed_volumes`, :data:`QUALITY_METRICS`, and the method's proven bounds,
   :func:`quality_table` and the ranges they prove per metric, :func:`quality_bounds`;
 * export: :func:`write_mesh`, :func:`read_mesh`, :func:`to_meshio`;
+* facet groups for boundary conditions: :func:`facet_groups` (box sides, material
+  interfaces, exteriors);
 * memory: :func:`estimate_mesh_memory`, :func:`count_boundary_voxels`;
 * display: :func:`shown_faces` (boundary and material-interface faces),
   :func:`mesh_surface` (per-triangle vertices and values for a surface view).
@@ -17,6 +19,7 @@ from ._balance import balance_tree
 from ._bounds import format_quality_table, quality_bounds, quality_table
 from ._checks import MeshChecks, check_mesh, rasterize_materials
 from ._export import read_mesh, to_meshio, write_mesh
+from ._facets import FacetGroup, facet_groups
 from ._imesh import mesh_labels, mesh_tree
 from ._memory import count_boundary_voxels, estimate_mesh_memory
 from ._quality import (
@@ -31,7 +34,7 @@ from ._surface import mesh_surface, shown_faces
 from ._types import Mesh
 
 __all__ = [
-    "Mesh", "balance_tree", "mesh_labels", "mesh_tree", "check_mesh", "MeshChecks",
+    "FacetGroup", "facet_groups", "Mesh", "balance_tree", "mesh_labels", "mesh_tree", "check_mesh", "MeshChecks",
     "rasterize_materials", "QUALITY_METRICS", "dihedral_angles", "max_angle", "min_angle",
     "radius_edge_ratio", "signed_volumes", "quality_bounds", "quality_table",
     "format_quality_table", "read_mesh", "to_meshio", "write_mesh", "estimate_mesh_memory",
