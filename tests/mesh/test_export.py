@@ -4,8 +4,10 @@ from __future__ import annotations
 
 import importlib.util
 import itertools
+import re
 import shutil
 import sys
+
 import meshio
 import numpy as np
 import pytest
@@ -198,7 +200,19 @@ def test_abaqus_has_one_element_set_per_material(tmp_path, ndim):
     m = meshio.read(path)
     sets = {name: np.concatenate(v) for name, v in m.cell_sets.items()}
     np.testing.assert_array_equal(np.sort(sets["bone"]), np.flatnonzero(mesh.material == 1))
-    assert sum(len(v) for v in sets.values()) == mesh.n_cells
+    materials = ("bone", "soft_tissue", "material_3", "material_0")
+    assert sum(len(v) for k, v in sets.items() if k in materials) == mesh.n_cells
+    # the other element sets hold the faces of the facet groups (<group>_S<k>)
+    assert all(re.fullmatch(r"\w+_S[1-4]", k) for k in sets if k not in materials)
+    assert "*SURFACE, NAME=xmin, TYPE=ELEMENT" in text and "*NSET, NSET=ymax" in text
+
+
+def test_abaqus_heat_elements_on_request(tmp_path):
+    path = write_mesh(sample_mesh(3), tmp_path / "mesh.inp", abaqus_elements="heat")[0]
+    assert "*ELEMENT, TYPE=DC3D4" in path.read_text()
+    with pytest.raises(ValueError, match="abaqus_elements must be one of mechanical, heat"):
+        write_mesh(sample_mesh(3), tmp_path / "other.inp", abaqus_elements="thermal")
+    assert not (tmp_path / "other.inp").exists()
 
 
 def test_material_zero_and_unnamed_materials(tmp_path):

@@ -22,8 +22,8 @@ import math
 import numpy as np
 
 from . import _templates_luts as luts
-from ._templates import cut_leaves
 from ._quality import dihedral_angles, radius_edge_ratio, signed_volumes, triangle_angles
+from ._templates import cut_leaves
 
 __all__ = ["format_quality_table", "leaf_configurations", "quality_bounds", "quality_table"]
 

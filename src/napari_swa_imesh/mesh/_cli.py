@@ -52,6 +52,9 @@ def add_commands(subparsers) -> None:
     p.add_argument("--material-names", nargs="+", action="extend", default=[],
                    metavar="ID=NAME", help="names for materials, e.g. 1=bone 2=soft "
                                            "(Gmsh physical groups, Abaqus element sets)")
+    p.add_argument("--abaqus-elements", choices=("mechanical", "heat"), default="mechanical",
+                   help="element types of an .inp: mechanical (CPS3/C3D4, default) or heat "
+                        "(DC2D3/DC3D4, for *HEAT TRANSFER)")
     p.add_argument("--force", action="store_true", help="replace an existing output file")
     p.add_argument("--no-check", action="store_true",
                    help="skip the conformity/volume/label checks (they take about 10 us per "
@@ -156,7 +159,8 @@ def _run_mesh(args: argparse.Namespace) -> int:
             checks = _check_mesh(mesh, labels, exclude, tree).to_dict()
     del tree
     with timer("write"):
-        written = write_mesh(mesh, args.output, force=args.force)
+        written = write_mesh(mesh, args.output, force=args.force,
+                             abaqus_elements=args.abaqus_elements)
 
     report = _mesh_report(args, mesh, checks, written, timer.seconds)
     report["memory_estimate_bytes"] = estimate

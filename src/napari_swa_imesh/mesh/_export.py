@@ -30,13 +30,14 @@ from pathlib import Path
 import numpy as np
 
 from ..io import atomic_write, check_writable
-from ._abaqus import abaqus_materials, write_abaqus
+from ._abaqus import ABAQUS_ELEMENTS, abaqus_materials, write_abaqus
 from ._common import CELL_TYPE
+from ._facets import facet_groups
 from ._gmsh import gmsh_materials, write_gmsh
 from ._quality import signed_volumes
 from ._triangle_tetgen import read_node_ele, write_node_ele
-from ._vtu import write_vtu
 from ._types import Mesh
+from ._vtu import write_vtu
 from ._xdmf import require_h5py, write_xdmf
 
 __all__ = ["to_meshio", "write_mesh", "read_mesh", "mesh_output_paths", "MESH_SUFFIXES"]
@@ -181,7 +182,8 @@ def mesh_output_paths(path, *, force: bool = False) -> list[Path]:
     return targets
 
 
-def write_mesh(mesh: Mesh, path, *, force: bool = False) -> list[Path]:
+def write_mesh(mesh: Mesh, path, *, force: bool = False,
+               abaqus_elements: str = "mechanical") -> list[Path]:
     """Write `mesh` in the format named by the suffix of `path`.
 
     Parameters
@@ -194,6 +196,9 @@ def write_mesh(mesh: Mesh, path, *, force: bool = False) -> list[Path]:
     force : bool
         Replace existing files. Without it, any existing target is an error and nothing
         is written.
+    abaqus_elements : {"mechanical", "heat"}
+        Element types of an ``.inp``: continuum (``CPS3``/``C3D4``) or heat transfer
+        (``DC2D3``/``DC3D4``, for ``*HEAT TRANSFER``).
 
     Returns
     -------
@@ -213,13 +218,17 @@ def write_mesh(mesh: Mesh, path, *, force: bool = False) -> list[Path]:
     into place, so a failed write never leaves a half file where the user's was.
     """
     _check_mesh_arg(mesh)
+    if abaqus_elements not in ABAQUS_ELEMENTS:
+        raise ValueError(f"abaqus_elements must be one of {', '.join(ABAQUS_ELEMENTS)}, not "
+                         f"{abaqus_elements!r}.")
     targets = mesh_output_paths(path, force=force)
     with atomic_write(targets, force=force) as temps:
-        write_mesh_to(mesh, temps)
+        write_mesh_to(mesh, temps, abaqus_elements=abaqus_elements)
     return targets
 
 
-def write_mesh_to(mesh: Mesh, temps: list[Path]) -> None:
+def write_mesh_to(mesh: Mesh, temps: list[Path], *, abaqus_elements: str = "mechanical"
+                  ) -> None:
     """Write `mesh` to the temporary paths that :func:`atomic_write` gave for the targets
     of :func:`mesh_output_paths` (same names, so twins name each other right)."""
     import meshio
@@ -230,6 +239,10 @@ def write_mesh_to(mesh: Mesh, temps: list[Path]) -> None:
         return
     m = to_meshio(mesh)
     try:
+        if suffix == ".inp":
+            write_abaqus(mesh.material_names, m, str(temps[0]), groups=facet_groups(mesh),
+                         cells_mesh=mesh.cells, elements=abaqus_elements)
+            return
         _WRITERS[suffix](mesh, m, [str(t) for t in temps])
     except (meshio.WriteError, KeyError) as exc:  # meshio's own failures, as one clear line
         raise ValueError(f"meshio could not write {temps[0].name}: {exc}") from exc
@@ -258,10 +271,6 @@ def _write_gmsh(mesh: Mesh, m, temps: list[str]) -> None:
     write_gmsh(mesh.material_names, m, temps[0])
 
 
-def _write_abaqus(mesh: Mesh, m, temps: list[str]) -> None:
-    write_abaqus(mesh.material_names, m, temps[0])
-
-
 def _write_node_ele(mesh: Mesh, m, temps: list[str]) -> None:
     write_node_ele(temps[0], temps[1], m.points, m.cells[0].data, m.cell_data["material"][0],
                    mesh.cell_data.get("quality"))
@@ -269,7 +278,7 @@ def _write_node_ele(mesh: Mesh, m, temps: list[str]) -> None:
 
 #: suffix -> writer(mesh, the meshio mesh in x, y(, z) order, temporary paths of targets)
 _WRITERS = {".vtk": _write_vtk, ".xdmf": _write_xdmf, ".msh": _write_gmsh,
-            ".inp": _write_abaqus, ".node": _write_node_ele, ".ele": _write_node_ele}
+            ".node": _write_node_ele, ".ele": _write_node_ele}
 
 
 # ----------------------------------------------------------------------------- reading
