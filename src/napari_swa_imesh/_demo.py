@@ -47,9 +47,13 @@ def run_demo(args) -> int:
     textures = ("brick", "grass")
     train, samples = texture_training(textures)
     mosaic, truth = texture_mosaic(textures, layout=args.layout)
-    write_labels(out / "training.tif", (train * 255).round(), force=args.force)
+    # the run uses the 8-bit images it leaves behind, so that model.npz applied to
+    # mosaic.tif (or refitted on training.tif) gives what the demo printed
+    train = (train * 255).round().astype("uint8")
+    mosaic = (mosaic * 255).round().astype("uint8")
+    write_labels(out / "training.tif", train, force=args.force)
     save_samples(samples, out / "samples.json", force=args.force)
-    write_labels(out / "mosaic.tif", (mosaic * 255).round(), force=args.force)
+    write_labels(out / "mosaic.tif", mosaic, force=args.force)
     write_labels(out / "truth.tif", truth, force=args.force)
     seconds["data"] = time.perf_counter() - t
 

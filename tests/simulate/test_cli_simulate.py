@@ -180,3 +180,17 @@ def test_a_mesh_file_with_voids_warns_that_its_box_is_its_extent(labels_file, ca
     assert _run(capsys, "mesh", path, "-o", mesh_path, "--exclude", "3")[0] == 0
     rc, out, err = _run(capsys, "simulate", mesh_path, "-k", "1=1", "2=2", "--axes", "y")
     assert rc == 0 and "warning: the mesh has voids" in err
+
+
+@pytest.mark.parametrize("flag", [["--steps", "5"], ["--save-every", "2"]])
+def test_transient_step_options_need_transient(labels_file, capsys, flag):
+    path, _ = labels_file
+    rc, _, err = _run(capsys, "simulate", path, "-k", "1=1", "2=1", "3=1", *flag)
+    assert rc == 2 and "add --transient" in err
+
+
+def test_a_grey_image_given_as_labels_is_named_as_such(tmp_path, capsys):
+    image = np.random.default_rng(0).integers(0, 200, (16, 16)).astype(np.uint8)
+    np.save(tmp_path / "grey.npy", image)
+    rc, _, err = _run(capsys, "simulate", tmp_path / "grey.npy", "-k", "1=1")
+    assert rc == 2 and "is it an image rather than a label image?" in err

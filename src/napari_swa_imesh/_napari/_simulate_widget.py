@@ -46,7 +46,7 @@ class Conductivity:
 
 
 def parse_conductivity(text: str) -> float | list[float]:
-    """``"2.5"`` -> 2.5; ``"1, 2, 3"`` -> the diagonal in x, y, z order.
+    """``"2.5"`` -> 2.5; ``"1, 2, 3"`` -> the diagonal in x, y(, z) order.
 
     Raises
     ------
@@ -75,7 +75,8 @@ class ConductivityTable(QTableWidget):
         self.verticalHeader().setVisible(False)
         self.setMaximumHeight(150)
         self.setToolTip("Conductivity (or diffusivity) per material: a positive number, or "
-                        "three numbers for a diagonal tensor in x, y, z order.")
+                        "one number per axis (x, y in 2-D; x, y, z in 3-D) for a diagonal "
+                        "tensor.")
         self.records: list[Conductivity] = []
         self.itemChanged.connect(self._on_item_changed)
 

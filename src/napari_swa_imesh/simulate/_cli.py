@@ -50,7 +50,7 @@ def add_commands(subparsers) -> None:
         "instead of k_eff; faces not fixed are insulated")
     t.add_argument("--transient", type=float, default=None, metavar="DURATION",
                    help="end time of a transient run")
-    t.add_argument("--steps", type=int, default=50, help="implicit Euler steps (default 50)")
+    t.add_argument("--steps", type=int, default=None, help="implicit Euler steps (default 50)")
     t.add_argument("--fixed", nargs="+", action="extend", default=[], metavar="FACE=VALUE",
                    help="fixed values on box faces: xmin=1 (faces xmin..zmax)")
     t.add_argument("--initial", nargs="+", action="extend", default=[],
@@ -59,7 +59,7 @@ def add_commands(subparsers) -> None:
     t.add_argument("--capacity", nargs="+", action="extend", default=[],
                    metavar="MATERIAL=C",
                    help="capacity c per material, by label or name (others 1)")
-    t.add_argument("--save-every", type=int, default=1, metavar="K",
+    t.add_argument("--save-every", type=int, default=None, metavar="K",
                    help="write every K-th step (and the last)")
     p.add_argument("-o", "--output", default=None, metavar="FIELD",
                    help=f"write the mesh with potential and flux per axis "
@@ -141,7 +141,10 @@ def _transient_options(args) -> dict | None:
     """The keyword arguments of simulate_transient, or None for a steady run."""
     if args.transient is None:
         given = [flag for flag, value in (("--fixed", args.fixed), ("--initial", args.initial),
-                                          ("--capacity", args.capacity)) if value]
+                                          ("--capacity", args.capacity),
+                                          ("--steps", args.steps is not None),
+                                          ("--save-every", args.save_every is not None))
+                 if value]
         if given:
             raise ValueError(f"{given[0]} applies to a transient run; add --transient "
                              "DURATION.")
@@ -160,10 +163,14 @@ def _transient_options(args) -> dict | None:
             raise ValueError(f"--fixed takes FACE=VALUE pairs such as xmin=1, not {item!r}.")
         if sum(other.partition("=")[0] == face for other in args.fixed) > 1:
             raise ValueError(f"--fixed gives face {face} twice; give each face one value.")
-    return {"duration": args.transient, "steps": args.steps, "fixed": fixed,
+    for flag, value in (("--steps", args.steps), ("--save-every", args.save_every)):
+        if value is not None and value < 1:
+            raise ValueError(f"{flag} must be a positive whole number, not {value}.")
+    return {"duration": args.transient, "steps": 50 if args.steps is None else args.steps,
+            "fixed": fixed,
             "initial": _numbers(args.initial, "--initial", 0.0),
             "capacity": _numbers(args.capacity, "--capacity", 1.0),
-            "save_every": args.save_every}
+            "save_every": 1 if args.save_every is None else args.save_every}
 
 
 def _numbers(items: list[str], flag: str, default: float) -> dict | float:

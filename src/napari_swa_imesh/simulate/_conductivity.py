@@ -108,6 +108,10 @@ def conductivity_tensors(conductivity: Mapping, materials, ndim: int,
         table[label] = _as_tensor(value, ndim, f"the conductivity of material {key}")
     materials = [int(m) for m in materials]
     missing = [m for m in materials if m not in table]
+    if len(materials) > 64 and len(missing) > 32:
+        raise ValueError(f"the input has {len(materials)} distinct values, {len(missing)} of "
+                         "them without a conductivity: is it an image rather than a label "
+                         "image? Segment it first (swa-imesh segment) and simulate the labels.")
     if missing:
         named = ", ".join(f"{m}" + (f" ({names[m]})" if names and m in names else "")
                           for m in missing)

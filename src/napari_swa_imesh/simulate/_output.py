@@ -30,6 +30,8 @@ def field_mesh(result):
     """A ``meshio.Mesh`` of the result: point data ``potential_<axis>``, cell data
     ``material``, ``flux_<axis>`` (vectors in x, y(, z) order) and the mesh's own arrays."""
     m = to_meshio(result.mesh)
+    if m.points.shape[1] == 2:               # VTK points are 3-D; say z = 0 ourselves
+        m.points = np.column_stack([m.points, np.zeros(len(m.points))])
     for axis, values in result.potential.items():
         m.point_data[f"potential_{axis}"] = np.asarray(values, dtype=np.float64)
     for axis, flux in result.flux.items():
