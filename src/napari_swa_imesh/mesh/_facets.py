@@ -54,14 +54,6 @@ class FacetGroup:
         return len(self.owner)
 
 
-def _box(mesh: Mesh) -> tuple[np.ndarray, np.ndarray]:
-    d = mesh.ndim
-    if len(mesh.shape) == d and len(mesh.spacing) == d:
-        extent = np.asarray(mesh.shape, float) * np.asarray(mesh.spacing, float)
-        return np.zeros(d), extent             # the mesher's convention: corner at 0
-    return mesh.points.min(axis=0), mesh.points.max(axis=0)
-
-
 def facet_groups(mesh: Mesh) -> dict[str, FacetGroup]:
     """Every boundary facet and every material interface of `mesh`, in named groups.
 
@@ -109,7 +101,7 @@ def facet_groups(mesh: Mesh) -> dict[str, FacetGroup]:
             groups[name] = FacetGroup(faces[rows], owner[rows], opposite[rows])
 
     boundary = a[count == 1]
-    lo, hi = _box(mesh)
+    lo, hi = mesh.image_box()
     coords = mesh.points[faces[boundary]]                      # (B, d, d)
     on_side = np.zeros(len(boundary), dtype=bool)
     tol = 1e-9 * (hi - lo)

@@ -110,6 +110,23 @@ class Mesh:
         """(M,) radius-to-edge ratio of each element."""
         return self.cell_data["quality"]
 
+    @property
+    def records_box(self) -> bool:
+        """Whether the mesh knows the image it was made from (`shape` and `spacing`)."""
+        return len(self.shape) == self.ndim and len(self.spacing) == self.ndim
+
+    def image_box(self) -> tuple[np.ndarray, np.ndarray]:
+        """Lower and upper corner of the image box, in the points' axis order.
+
+        ``[0, shape * spacing]`` when the mesh records its image, so that materials left
+        out of the mesh on a face do not shrink the box; else the extent of the points
+        (a mesh read from a file).
+        """
+        if self.records_box:
+            return (np.zeros(self.ndim),
+                    np.asarray(self.shape, dtype=np.float64) * np.asarray(self.spacing, float))
+        return self.points.min(axis=0), self.points.max(axis=0)
+
 
 def _as_points(points) -> np.ndarray:
     arr = np.asarray(points)

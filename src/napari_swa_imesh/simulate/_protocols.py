@@ -28,7 +28,7 @@ import numpy as np
 
 from ._solve import SolverInfo, check_constrained, solve_dirichlet
 
-__all__ = ["MixedResult", "box_bounds", "face_dofs", "face_names", "mixed_boundary",
+__all__ = ["MixedResult", "face_dofs", "face_names", "mixed_boundary",
            "voigt_reuss"]
 
 BOUND_SLACK = 1e-6               # relative; far above the solver's 1e-10 residual
@@ -56,20 +56,6 @@ class MixedResult:
     flux_in: float
     flux_out: float
     info: SolverInfo
-
-
-def box_bounds(points: np.ndarray, shape=(), spacing=(), origin=None
-               ) -> tuple[np.ndarray, np.ndarray]:
-    """Lower and upper corner of the image box in the mesh's coordinates.
-
-    The box of the label image (``origin + shape * spacing``) when the mesh knows it, so
-    that excluded materials on a face do not shrink the sample; else the points' extent.
-    """
-    d = points.shape[1]
-    if len(shape) == d and len(spacing) == d:
-        lo = np.zeros(d) if origin is None else np.asarray(origin, dtype=np.float64)
-        return lo, lo + np.asarray(shape, dtype=np.float64) * np.asarray(spacing, float)
-    return points.min(axis=0), points.max(axis=0)
 
 
 def face_names(ndim: int) -> tuple[str, ...]:

@@ -14,7 +14,7 @@ import numpy as np
 from ..mesh import Mesh, mesh_labels, signed_volumes
 from ._conductivity import axis_names, conductivity_tensors, is_isotropic
 from ._fe import cell_gradients, dissipation, fe_basis, stiffness_matrix, vertex_values
-from ._protocols import box_bounds, check_within_bounds, mixed_boundary, voigt_reuss
+from ._protocols import check_within_bounds, mixed_boundary, voigt_reuss
 from ._solve import DEFAULT_TOLERANCE, SolverInfo, connected_parts
 
 __all__ = ["SimulationResult", "simulate", "simulate_steps"]
@@ -174,13 +174,11 @@ def simulate_steps(mesh_or_labels, conductivity: Mapping, *, spacing=None, order
     basis = fe_basis(mesh, order)
     matrix = stiffness_matrix(basis, tensors, cell_material, is_isotropic(tensors))
     seconds["assemble"] = time.perf_counter() - t0
-    lo, hi = box_bounds(mesh.points, mesh.shape, mesh.spacing,
-                        getattr(mesh, "origin", None))
+    lo, hi = mesh.image_box()
     volumes = signed_volumes(mesh.points, mesh.cells)
     per_material = np.bincount(cell_material, weights=volumes, minlength=materials.size)
     fractions = per_material / float(np.prod(hi - lo))
-    if not (len(mesh.shape) == mesh.ndim and len(mesh.spacing) == mesh.ndim) \
-            and fractions.sum() < 1 - 1e-9:
+    if not mesh.records_box and fractions.sum() < 1 - 1e-9:
         warnings.warn("the mesh has voids and does not record the image box, so the box is "
                       "the extent of its points; if an excluded material covered a whole "
                       "face of the image, k_eff refers to a smaller box: simulate the label "

@@ -21,7 +21,7 @@ import numpy as np
 from ..mesh import Mesh
 from ._conductivity import conductivity_tensors, is_isotropic
 from ._fe import fe_basis, mass_matrix, stiffness_matrix, vertex_values
-from ._protocols import box_bounds, face_dofs, face_names
+from ._protocols import face_dofs, face_names
 from ._simulate import check_tolerance, prepare_mesh
 from ._solve import DEFAULT_TOLERANCE, SPDSolver, solve_spd
 
@@ -165,7 +165,7 @@ order, exclude, save_every, material_names, tol
     dt = duration / steps
     # the mass term keeps the system definite: a part with no fixed face is well posed
     system = (mass / dt + stiffness).tocsr()
-    lo, hi = box_bounds(mesh.points, mesh.shape, mesh.spacing, getattr(mesh, "origin", None))
+    lo, hi = mesh.image_box()
     fixed_dofs = []
     for face in fixed:
         dofs_on_face = face_dofs(basis.doflocs, lo, hi, face)
