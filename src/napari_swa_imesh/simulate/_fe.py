@@ -12,7 +12,8 @@ from scipy import sparse
 
 from ..mesh import Mesh
 
-__all__ = ["cell_gradients", "dissipation", "element_order", "fe_basis", "mass_matrix",
+__all__ = ["cell_gradients", "dissipation", "element_order", "fe_basis", "mass_basis",
+           "mass_matrix",
            "stiffness_matrix", "vertex_values"]
 
 
@@ -77,10 +78,16 @@ def stiffness_matrix(basis, tensors: np.ndarray, cell_material: np.ndarray,
     return skfem.asm(form, basis, c=np.ascontiguousarray(field)).tocsr()
 
 
-def mass_matrix(basis, capacity_per_cell: np.ndarray) -> sparse.csr_matrix:
-    """Consistent mass ``M[i, j] = sum_e c_e int_e phi_i phi_j`` (exact quadrature)."""
+def mass_basis(basis):
+    """The basis with a quadrature exact for ``phi_i phi_j`` (degree ``2 * order``), and so
+    for every lower-degree integrand: mass, loads and amounts of piecewise-constant data."""
     skfem = _skfem()
-    exact = skfem.Basis(basis.mesh, basis.elem, intorder=2 * element_order(basis))
+    return skfem.Basis(basis.mesh, basis.elem, intorder=2 * element_order(basis))
+
+
+def mass_matrix(exact, capacity_per_cell: np.ndarray) -> sparse.csr_matrix:
+    """Consistent mass ``M[i, j] = sum_e c_e int_e phi_i phi_j`` on a :func:`mass_basis`."""
+    skfem = _skfem()
     nqp = exact.X.shape[-1]
     field = np.broadcast_to(capacity_per_cell[:, None], (capacity_per_cell.size, nqp))
 

@@ -14,7 +14,7 @@ from scipy import sparse
 from scipy.sparse import csgraph
 
 __all__ = ["SPDSolver", "SolverInfo", "check_constrained", "connected_parts", "solve_dirichlet",
-           "solve_spd"]
+           "solve_spd", "split_fixed"]
 
 DEFAULT_TOLERANCE = 1e-10        # relative residual of the conjugate-gradient solve
 MAX_ITERATIONS = 2000
@@ -146,6 +146,19 @@ def solve_spd(matrix: sparse.csr_matrix, rhs: np.ndarray, *, x0: np.ndarray | No
                          info.seconds + solver.setup_seconds)
 
 
+def split_fixed(matrix: sparse.csr_matrix, fixed: np.ndarray
+                ) -> tuple[np.ndarray, sparse.csr_matrix, sparse.csr_matrix]:
+    """Rows of the free dofs, split by column: ``(free mask, A[free, free], A[free, ~free])``.
+
+    The reduced block stays symmetric positive definite; the coupling block times the
+    fixed values moves to the right-hand side.
+    """
+    free = np.ones(matrix.shape[0], dtype=bool)
+    free[fixed] = False
+    rows = matrix[free]
+    return free, rows[:, free].tocsr(), rows[:, ~free].tocsr()
+
+
 def solve_dirichlet(matrix: sparse.csr_matrix, fixed: np.ndarray, values: np.ndarray,
                     rhs: np.ndarray | None = None, *, tol: float = DEFAULT_TOLERANCE
                     ) -> tuple[np.ndarray, SolverInfo]:
@@ -153,14 +166,10 @@ def solve_dirichlet(matrix: sparse.csr_matrix, fixed: np.ndarray, values: np.nda
 
     Returns the full vector `u` (fixed entries included).
     """
-    n = matrix.shape[0]
-    u = np.zeros(n)
+    u = np.zeros(matrix.shape[0])
     u[fixed] = values
-    free = np.ones(n, dtype=bool)
-    free[fixed] = False
-    rows = matrix[free]
-    reduced = rows[:, free].tocsr()
-    b = -(rows[:, fixed] @ u[fixed])
+    free, reduced, coupling = split_fixed(matrix, fixed)
+    b = -(coupling @ u[~free])
     if rhs is not None:
         b = b + rhs[free]
     u[free], info = solve_spd(reduced, b, tol=tol)

@@ -20,10 +20,10 @@ import numpy as np
 
 from ..mesh import Mesh
 from ._conductivity import conductivity_tensors, is_isotropic
-from ._fe import fe_basis, mass_matrix, stiffness_matrix, vertex_values
+from ._fe import fe_basis, mass_basis, mass_matrix, stiffness_matrix, vertex_values
 from ._protocols import face_dofs, face_names
 from ._simulate import check_tolerance, prepare_mesh
-from ._solve import DEFAULT_TOLERANCE, SPDSolver, solve_spd
+from ._solve import DEFAULT_TOLERANCE, SPDSolver, solve_spd, split_fixed
 
 __all__ = ["TransientResult", "simulate_transient", "transient_steps"]
 
@@ -161,7 +161,8 @@ order, exclude, save_every, material_names, tol
 
     basis = fe_basis(mesh, order)
     stiffness = stiffness_matrix(basis, tensors, cell_material, is_isotropic(tensors))
-    mass = mass_matrix(basis, cap[cell_material])
+    exact = mass_basis(basis)                  # mass, start and amounts share it
+    mass = mass_matrix(exact, cap[cell_material])
     dt = duration / steps
     # the mass term keeps the system definite: a part with no fixed face is well posed
     system = (mass / dt + stiffness).tocsr()
@@ -177,26 +178,21 @@ order, exclude, save_every, material_names, tol
     dofs = np.concatenate(fixed_dofs) if fixed_dofs else np.zeros(0, dtype=np.intp)
     values = np.concatenate([np.full(d.size, float(fixed[f]))
                              for f, d in zip(fixed, fixed_dofs)]) if fixed_dofs else np.zeros(0)
-    free = np.ones(system.shape[0], dtype=bool)
-    free[dofs] = False
-    reduced = system[free][:, free].tocsr()
-    coupling = system[free][:, ~free] if dofs.size else None
+    free, reduced, coupling = split_fixed(system, dofs)
     solver = SPDSolver(reduced, tol=tol)
     seconds = {"mesh_and_assembly": time.perf_counter() - t0}
 
-    u = _initial_field(basis, order, mass, (cap * start)[cell_material], cap, start)
+    u = _initial_field(exact, order, mass, (cap * start)[cell_material])
     u[dofs] = values
     fixed_values = u[~free].copy()
-    cell_amount = _amount_per_cell_fn(basis, order, cap[cell_material])
+    cell_amount = _amount_per_cell_fn(exact, cap[cell_material])
 
     times, saved, amounts, iterations = [0.0], [vertex_values(u, len(mesh.points))], \
         [cell_amount(u)], []
     t0 = time.perf_counter()
     for k in range(1, steps + 1):
         yield k + 1, steps + 2, f"step {k} of {steps}"
-        b = (mass @ u)[free] / dt
-        if coupling is not None:
-            b = b - coupling @ fixed_values
+        b = (mass @ u)[free] / dt - coupling @ fixed_values
         u_free, info = solver.solve(b, u[free])
         u[free] = u_free
         iterations.append(info.iterations)
@@ -213,27 +209,25 @@ order, exclude, save_every, material_names, tol
                            int(system.shape[0]), np.array(iterations, dtype=int), seconds)
 
 
-def _initial_field(basis, order: int, mass, load_per_cell: np.ndarray, cap: np.ndarray,
-                   start: np.ndarray) -> np.ndarray:
+def _initial_field(exact, order: int, mass, load_per_cell: np.ndarray) -> np.ndarray:
     """The start as a finite-element field that keeps its amount ``int c u`` exactly.
 
     P1: the lumped (row-sum) projection, a weighted average of the neighbouring elements'
     values, so a 0/1 start stays within [0, 1]. P2: the consistent L2 projection (lumped
     P2 mass has non-positive vertex entries); its overshoot is small.
     """
-    if not np.any(start):
+    if not np.any(load_per_cell):
         return np.zeros(mass.shape[0])
-    rhs = _cell_load(basis, load_per_cell, order)
+    rhs = _cell_load(exact, load_per_cell)
     if order == 1:
         return rhs / np.asarray(mass.sum(axis=1)).ravel()
     return solve_spd(mass, rhs, tol=1e-12)[0]
 
 
-def _cell_load(basis, per_cell: np.ndarray, order: int) -> np.ndarray:
-    """``b_i = int c_e phi_i`` for a piecewise-constant c (exact quadrature)."""
+def _cell_load(exact, per_cell: np.ndarray) -> np.ndarray:
+    """``b_i = int c_e phi_i`` for a piecewise-constant c, on a :func:`mass_basis`."""
     import skfem
 
-    exact = skfem.Basis(basis.mesh, basis.elem, intorder=order)
     field = np.broadcast_to(per_cell[:, None], (per_cell.size, exact.X.shape[-1]))
 
     @skfem.LinearForm
@@ -242,11 +236,8 @@ def _cell_load(basis, per_cell: np.ndarray, order: int) -> np.ndarray:
     return skfem.asm(form, exact, c=np.ascontiguousarray(field))
 
 
-def _amount_per_cell_fn(basis, order: int, capacity_per_cell: np.ndarray):
-    """A function u -> (M,) ``int_e c u`` (exact for P1 and P2)."""
-    import skfem
-
-    exact = skfem.Basis(basis.mesh, basis.elem, intorder=order)
+def _amount_per_cell_fn(exact, capacity_per_cell: np.ndarray):
+    """A function u -> (M,) ``int_e c u`` on a :func:`mass_basis` (exact for P1 and P2)."""
     weights = exact.dx                                               # (M, nqp)
 
     def amount(u: np.ndarray) -> np.ndarray:
