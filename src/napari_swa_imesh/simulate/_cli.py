@@ -111,12 +111,12 @@ def _run_simulate(args: argparse.Namespace) -> int:
     if transient is not None:
         from ._transient import simulate_transient
 
-        result = simulate_transient(source, _keys(conductivity), spacing=spacing,
+        result = simulate_transient(source, conductivity, spacing=spacing,
                                     order=args.order, tol=args.tol,
                                     exclude=tuple(args.exclude), material_names=names,
                                     **transient)
     else:
-        result = simulate(source, _keys(conductivity), spacing=spacing, order=args.order,
+        result = simulate(source, conductivity, spacing=spacing, order=args.order,
                           axes=args.axes, tol=args.tol, exclude=tuple(args.exclude),
                           material_names=names)
     written = []
@@ -186,13 +186,7 @@ def _numbers(items: list[str], flag: str, default: float) -> dict | float:
         if not sep or not key or value is None:
             raise ValueError(f"{flag} takes MATERIAL=VALUE pairs (a label or a material "
                              f"name), such as 2=1.5, not {item!r}.")
-        key = int(key) if key.lstrip("-").isdigit() else key
         if key in out:
             raise ValueError(f"{flag} gives material {key} twice.")
         out[key] = value
     return out
-
-
-def _keys(conductivity: dict) -> dict:
-    """Material labels as ints where the key is a number, names otherwise."""
-    return {int(k) if k.lstrip("-").isdigit() else k: v for k, v in conductivity.items()}

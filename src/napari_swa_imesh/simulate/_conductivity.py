@@ -13,7 +13,7 @@ from collections.abc import Mapping
 import numpy as np
 
 __all__ = ["AXIS_NAMES", "axis_names", "conductivity_tensors", "is_isotropic",
-           "parse_conductivity_args"]
+           "material_label", "parse_conductivity_args"]
 
 AXIS_NAMES = ("x", "y", "z")
 
@@ -58,6 +58,25 @@ def _as_tensor(value, ndim: int, where: str) -> np.ndarray:
     return tensor
 
 
+def material_label(key, names: Mapping[int, str] | None = None) -> int | None:
+    """The material a key names: a material name, an integer label or its text; None for
+    anything else.
+
+    Examples
+    --------
+    >>> material_label("bone", {3: "bone"}), material_label("2"), material_label(True)
+    (3, 2, None)
+    """
+    if isinstance(key, str):
+        by_name = {str(v): int(k) for k, v in (names or {}).items()}
+        if key in by_name:
+            return by_name[key]
+        return int(key) if key.lstrip("-").isdigit() else None
+    if isinstance(key, (int, np.integer)) and not isinstance(key, bool):
+        return int(key)
+    return None
+
+
 def conductivity_tensors(conductivity: Mapping, materials, ndim: int,
                          names: Mapping[int, str] | None = None) -> np.ndarray:
     """Conductivity tensors of `materials`, in the image's axis order.
@@ -89,16 +108,10 @@ def conductivity_tensors(conductivity: Mapping, materials, ndim: int,
     if not isinstance(conductivity, Mapping) or not conductivity:
         raise ValueError("conductivity must map every material (label or name) to a value, "
                          "e.g. {1: 1.0, 2: 10.0}.")
-    by_name = {str(v): int(k) for k, v in (names or {}).items()}
     table: dict[int, np.ndarray] = {}
     for key, value in conductivity.items():
-        if isinstance(key, str) and key in by_name:
-            label = by_name[key]
-        elif isinstance(key, (int, np.integer)) and not isinstance(key, bool):
-            label = int(key)
-        elif isinstance(key, str) and key.lstrip("-").isdigit():
-            label = int(key)
-        else:
+        label = material_label(key, names)
+        if label is None:
             known = ", ".join(f"{k} ({v})" for k, v in sorted((names or {}).items())) or \
                 ", ".join(str(m) for m in materials)
             raise ValueError(f"conductivity names material {key!r}, which is not in the "

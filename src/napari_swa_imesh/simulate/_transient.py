@@ -19,7 +19,7 @@ from numbers import Real
 import numpy as np
 
 from ..mesh import Mesh
-from ._conductivity import conductivity_tensors, is_isotropic
+from ._conductivity import conductivity_tensors, is_isotropic, material_label
 from ._fe import fe_basis, mass_basis, mass_matrix, stiffness_matrix, vertex_values
 from ._protocols import face_dofs, face_names
 from ._simulate import check_tolerance, prepare_mesh
@@ -82,15 +82,9 @@ def _per_material(value, materials, names: Mapping[int, str], what: str,
     """A number, or a {material label or name: number} mapping with `default` for the
     materials it leaves out, as one value per material."""
     if isinstance(value, Mapping):
-        by_name = {str(v): int(k) for k, v in names.items()}
         table: dict[int, float] = {}
         for key, number in value.items():
-            if isinstance(key, str) and key in by_name:
-                label = by_name[key]
-            elif isinstance(key, (int, np.integer)) and not isinstance(key, bool):
-                label = int(key)
-            else:
-                label = None
+            label = material_label(key, names)
             if label is None or label not in set(int(m) for m in materials):
                 raise ValueError(f"{what} names material {key!r}, which is not in the mesh; "
                                  f"the materials are {', '.join(map(str, materials))}.")
