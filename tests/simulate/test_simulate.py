@@ -268,3 +268,18 @@ def test_a_given_mesh_is_not_modified():
     mesh = mesh_labels(labels)
     simulate(mesh, {"a": 1.0, "b": 2.0}, material_names={1: "a", 2: "b"})
     assert mesh.material_names == {}
+
+
+@pytest.mark.parametrize("suffix", [".vtu", ".xdmf"])
+def test_fields_are_written_with_the_mesh_in_both_formats(tmp_path, suffix):
+    import meshio
+
+    from napari_swa_imesh.simulate import write_field
+
+    labels = _blobs((10, 12), 4)
+    r = simulate(labels, {1: 1.0, 2: 10.0, 3: 0.1})
+    written = write_field(r, tmp_path / f"field{suffix}")
+    m = meshio.read(written[0])
+    np.testing.assert_allclose(m.point_data["potential_y"], r.potential["y"])
+    np.testing.assert_allclose(m.cell_data["flux_x"][0], r.flux["x"])
+    np.testing.assert_array_equal(m.cell_data["material"][0], r.mesh.material)

@@ -7,7 +7,8 @@
 * quality: :func:`radius_edge_ratio`, :func:`min_angle`, :func:`dihedral_angles`,
   :func:`signed_volumes`, :data:`QUALITY_METRICS`, and the method's proven bounds,
   :func:`quality_table` and the ranges they prove per metric, :func:`quality_bounds`;
-* export: :func:`write_mesh`, :func:`read_mesh`, :func:`to_meshio`;
+* export: :func:`write_mesh`, :func:`read_mesh`, :func:`to_meshio`, and
+  :func:`write_mesh_vtu` (the ``.vtu`` writer, with extra fields);
 * facet groups for boundary conditions: :func:`facet_groups` (box sides, material
   interfaces, exteriors);
 * memory: :func:`estimate_mesh_memory`, :func:`count_boundary_voxels`;
@@ -18,7 +19,7 @@
 from ._balance import balance_tree
 from ._bounds import format_quality_table, quality_bounds, quality_table
 from ._checks import MeshChecks, check_mesh, rasterize_materials
-from ._export import read_mesh, to_meshio, write_mesh
+from ._export import read_mesh, to_meshio, write_mesh, write_mesh_vtu
 from ._facets import FacetGroup, facet_groups
 from ._imesh import mesh_labels, mesh_tree
 from ._memory import count_boundary_voxels, estimate_mesh_memory
@@ -34,7 +35,7 @@ from ._surface import mesh_surface, shown_faces
 from ._types import Mesh
 
 __all__ = [
-    "FacetGroup", "facet_groups", "Mesh", "balance_tree", "mesh_labels", "mesh_tree", "check_mesh", "MeshChecks",
+    "FacetGroup", "facet_groups", "write_mesh_vtu", "Mesh", "balance_tree", "mesh_labels", "mesh_tree", "check_mesh", "MeshChecks",
     "rasterize_materials", "QUALITY_METRICS", "dihedral_angles", "max_angle", "min_angle",
     "radius_edge_ratio", "signed_volumes", "quality_bounds", "quality_table",
     "format_quality_table", "read_mesh", "to_meshio", "write_mesh", "estimate_mesh_memory",

@@ -40,7 +40,8 @@ from ._types import Mesh
 from ._vtu import write_vtu
 from ._xdmf import require_h5py, write_xdmf
 
-__all__ = ["to_meshio", "write_mesh", "read_mesh", "mesh_output_paths", "MESH_SUFFIXES"]
+__all__ = ["to_meshio", "write_mesh", "write_mesh_vtu", "read_mesh", "mesh_output_paths",
+           "MESH_SUFFIXES"]
 
 #: Suffix -> short description, in the order shown to users.
 MESH_SUFFIXES = {
@@ -235,7 +236,7 @@ def write_mesh_to(mesh: Mesh, temps: list[Path], *, abaqus_elements: str = "mech
 
     suffix = temps[0].suffix.lower()
     if suffix == ".vtu":                      # our own writer: no meshio copy of the mesh
-        _write_vtu(mesh, str(temps[0]))
+        write_mesh_vtu(mesh, temps[0])
         return
     m = to_meshio(mesh)
     try:
@@ -248,9 +249,15 @@ def write_mesh_to(mesh: Mesh, temps: list[Path], *, abaqus_elements: str = "mech
         raise ValueError(f"meshio could not write {temps[0].name}: {exc}") from exc
 
 
-def _write_vtu(mesh: Mesh, path: str, point_data: dict | None = None,
-               cell_data: dict | None = None) -> None:
-    """The mesh in x, y(, z) order, arrays in their own dtypes, raw binary (:mod:`._vtu`)."""
+def write_mesh_vtu(mesh: Mesh, path, *, point_data: dict | None = None,
+                   cell_data: dict | None = None) -> None:
+    """Write `mesh` to `path` as ``.vtu`` with extra per-point and per-cell arrays.
+
+    The writer behind :func:`write_mesh`'s ``.vtu`` (x, y(, z) order, cells positive
+    there, ``material`` and the mesh's own arrays in their dtypes; see :mod:`._vtu`), for
+    callers that add fields and write through :func:`~napari_swa_imesh.io.atomic_write`
+    themselves. Vectors in `cell_data`/`point_data` must already be in x, y(, z) order.
+    """
     points = mesh.points[:, ::-1]
     data = {"material": mesh.material, **mesh.cell_data, **(cell_data or {})}
     write_vtu(path, points, _orient_positive(points, mesh.cells), cell_data=data,

@@ -7,7 +7,7 @@ from pathlib import Path
 import numpy as np
 
 from ..io import atomic_write, check_writable
-from ..mesh import to_meshio
+from ..mesh import to_meshio, write_mesh_vtu
 
 __all__ = ["FIELD_SUFFIXES", "check_field_path", "check_series_path", "write_field",
            "write_series"]
@@ -26,21 +26,19 @@ def check_field_path(path, *, force: bool = False) -> list[Path]:
     return [check_writable(t, force=force) for t in targets]
 
 
-def field_mesh(result):
-    """A ``meshio.Mesh`` of the result: point data ``potential_<axis>``, cell data
-    ``material``, ``flux_<axis>`` (vectors in x, y(, z) order) and the mesh's own arrays."""
-    m = to_meshio(result.mesh)
-    if m.points.shape[1] == 2:               # VTK points are 3-D; say z = 0 ourselves
-        m.points = np.column_stack([m.points, np.zeros(len(m.points))])
-    for axis, values in result.potential.items():
-        m.point_data[f"potential_{axis}"] = np.asarray(values, dtype=np.float64)
-    for axis, flux in result.flux.items():
-        m.cell_data[f"flux_{axis}"] = [np.asarray(flux, dtype=np.float64)]
-    return m
+def _fields(result) -> tuple[dict[str, np.ndarray], dict[str, np.ndarray]]:
+    """Point data ``potential_<axis>`` and cell data ``flux_<axis>`` (vectors in x, y(, z)
+    order) of a result."""
+    return ({f"potential_{axis}": np.asarray(v, dtype=np.float64)
+             for axis, v in result.potential.items()},
+            {f"flux_{axis}": np.asarray(v, dtype=np.float64)
+             for axis, v in result.flux.items()})
 
 
 def write_field(result, path, *, force: bool = False) -> list[Path]:
-    """Write the mesh of `result` with its potentials and fluxes (``.vtu`` or ``.xdmf``).
+    """Write the mesh of `result` with its potentials and fluxes (``.vtu`` or ``.xdmf``):
+    point data ``potential_<axis>``, cell data ``flux_<axis>`` (vectors in x, y(, z)
+    order), ``material`` and the mesh's own arrays.
 
     Parameters
     ----------
@@ -58,11 +56,14 @@ def write_field(result, path, *, force: bool = False) -> list[Path]:
     import meshio
 
     targets = check_field_path(path, force=force)
-    m = field_mesh(result)
+    point_data, cell_data = _fields(result)
     with atomic_write(targets, force=force) as temps:
         if temps[0].suffix.lower() == ".vtu":
-            meshio.write(temps[0], m, file_format="vtu")
+            write_mesh_vtu(result.mesh, temps[0], point_data=point_data, cell_data=cell_data)
         else:
+            m = to_meshio(result.mesh)
+            m.point_data.update(point_data)
+            m.cell_data.update({k: [v] for k, v in cell_data.items()})
             meshio.write(temps[0], m, file_format="xdmf", data_format="HDF")
     return targets
 
