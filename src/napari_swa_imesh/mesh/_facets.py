@@ -21,7 +21,7 @@ import numpy as np
 from ._common import material_names
 from ._types import Mesh
 
-__all__ = ["FacetGroup", "facet_groups", "FACE_CORNERS"]
+__all__ = ["FacetGroup", "facet_groups", "paired_facets", "FACE_CORNERS"]
 
 #: Corners of the facet opposite corner k of a positively oriented simplex, ordered so
 #: that the facet's normal (right-hand rule) points out of the simplex.
@@ -54,6 +54,40 @@ class FacetGroup:
         return len(self.owner)
 
 
+def paired_facets(cells: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Every distinct facet of a simplex mesh once, with the one or two elements it bounds.
+
+    Parameters
+    ----------
+    cells : (M, d+1) ndarray of int
+        Positively oriented triangles or tetrahedra.
+
+    Returns
+    -------
+    facets : (G, d) ndarray of intp
+        Oriented out of its first owner.
+    owners : (G, 2) ndarray of intp
+        The elements on either side; the second is -1 on the boundary.
+    opposite : (G, 2) ndarray of intp
+        Each owner's corner opposite the facet (-1 where there is no second owner).
+    """
+    cells = np.asarray(cells, dtype=np.intp)
+    d = cells.shape[1] - 1
+    faces = cells[:, FACE_CORNERS[d]].reshape(-1, d)          # (M(d+1), d) outward
+    key = np.sort(faces, axis=1)                               # orientation-free
+    order = np.lexsort(key.T[::-1])
+    key = key[order]
+    new = np.ones(len(key), dtype=bool)
+    new[1:] = (key[1:] != key[:-1]).any(axis=1)
+    first = np.flatnonzero(new)                                # (G,) start of each facet
+    shared = np.diff(np.append(first, len(key))) == 2          # 1 boundary, 2 shared
+    one = order[first]                                         # rows of `faces`
+    two = np.where(shared, order[np.minimum(first + 1, len(key) - 1)], -1)
+    owners = np.stack([one // (d + 1), np.where(shared, two // (d + 1), -1)], axis=1)
+    opposite = np.stack([one % (d + 1), np.where(shared, two % (d + 1), -1)], axis=1)
+    return faces[one], owners, opposite
+
+
 def facet_groups(mesh: Mesh) -> dict[str, FacetGroup]:
     """Every boundary facet and every material interface of `mesh`, in named groups.
 
@@ -77,32 +111,22 @@ def facet_groups(mesh: Mesh) -> dict[str, FacetGroup]:
     {'xmin': 1, 'xmax': 1, 'ymin': 2, 'ymax': 2, 'interface_material_1_material_2': 1}
     """
     d = mesh.ndim
-    corners = FACE_CORNERS[d]
     cells = np.asarray(mesh.cells, dtype=np.intp)
-    m = len(cells)
-    faces = cells[:, corners].reshape(-1, d)                   # (M(d+1), d) outward
-    owner = np.repeat(np.arange(m), d + 1)                     # (M(d+1),)
-    opposite = np.tile(np.arange(d + 1), m)
-    key = np.sort(faces, axis=1)
-    order = np.lexsort(key.T[::-1])
-    key = key[order]
-    new = np.ones(len(key), dtype=bool)
-    new[1:] = (key[1:] != key[:-1]).any(axis=1)
-    first = np.flatnonzero(new)                                # (G,) one per distinct facet
-    count = np.diff(np.append(first, len(key)))                # 1 boundary, 2 shared
-    a = order[first]                                           # index into faces
-    b = order[np.minimum(first + 1, len(key) - 1)]
+    facets, owners, opposite = paired_facets(cells)
     material = np.asarray(mesh.material)
 
     groups: dict[str, FacetGroup] = {}
 
-    def add(name: str, rows: np.ndarray) -> None:
+    def add(name: str, rows: np.ndarray, side: np.ndarray | int = 0) -> None:
+        # side: which owner (0 or 1, per facet) the facet is seen from
         if rows.size:
-            groups[name] = FacetGroup(faces[rows], owner[rows], opposite[rows])
+            owner, corner = owners[rows, side], opposite[rows, side]
+            groups[name] = FacetGroup(cells[owner[:, None], FACE_CORNERS[d][corner]],
+                                      owner, corner)
 
-    boundary = a[count == 1]
+    boundary = np.flatnonzero(owners[:, 1] < 0)
     lo, hi = mesh.image_box()
-    coords = mesh.points[faces[boundary]]                      # (B, d, d)
+    coords = mesh.points[facets[boundary]]                     # (B, d, d)
     on_side = np.zeros(len(boundary), dtype=bool)
     tol = 1e-9 * (hi - lo)
     for axis_name, axis in zip("xyz"[:d], range(d - 1, -1, -1)):
@@ -113,18 +137,20 @@ def facet_groups(mesh: Mesh) -> dict[str, FacetGroup]:
             on_side |= hit
 
     names = material_names(mesh.material_names, np.unique(material))
-    shared = count == 2
-    fa, fb = a[shared], b[shared]
-    ma, mb = material[owner[fa]], material[owner[fb]]
+    shared = np.flatnonzero(owners[:, 1] >= 0)
+    ma, mb = material[owners[shared, 0]], material[owners[shared, 1]]
     differ = ma != mb
-    fa, fb, ma, mb = fa[differ], fb[differ], ma[differ], mb[differ]
-    side_a = np.where(ma < mb, fa, fb)                         # the facet as seen from A
+    shared, ma, mb = shared[differ], ma[differ], mb[differ]
     low, high = np.minimum(ma, mb), np.maximum(ma, mb)
     pairs = np.unique(np.stack([low, high], axis=1), axis=0) if len(low) else []
     for x, y in pairs:
-        add(f"interface_{names[int(x)]}_{names[int(y)]}", side_a[(low == x) & (high == y)])
+        pair = (low == x) & (high == y)
+        # each facet as seen from material A, the lower label
+        add(f"interface_{names[int(x)]}_{names[int(y)]}", shared[pair],
+            side=(ma[pair] != x).astype(np.intp))
 
     exterior = boundary[~on_side]
-    for mat in np.unique(material[owner[exterior]]):
-        add(f"exterior_{names[int(mat)]}", exterior[material[owner[exterior]] == mat])
+    outside = material[owners[exterior, 0]]
+    for mat in np.unique(outside):
+        add(f"exterior_{names[int(mat)]}", exterior[outside == mat])
     return groups

@@ -15,12 +15,9 @@ from __future__ import annotations
 
 import numpy as np
 
+from ._facets import paired_facets
+
 __all__ = ["shown_faces", "per_triangle_surface", "mesh_surface"]
-
-# the face opposite corner k of a tetrahedron, ordered so that it points outward for a
-# positively oriented tetrahedron (the mesher's convention)
-_TET_FACES = np.array([[1, 2, 3], [0, 3, 2], [0, 1, 3], [0, 2, 1]])
-
 
 def shown_faces(cells: np.ndarray, material: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Triangles to draw for a triangle or tetrahedron mesh, and the elements they bound.
@@ -52,21 +49,11 @@ def shown_faces(cells: np.ndarray, material: np.ndarray) -> tuple[np.ndarray, np
     m = len(cells)
     if cells.shape[1] == 3:
         return cells, np.stack([np.arange(m), np.full(m, -1)], axis=1)
-    faces = cells[:, _TET_FACES].reshape(-1, 3)              # (4M, 3), outward per tet
-    owner = np.repeat(np.arange(m), 4)                        # (4M,)
-    key = np.sort(faces, axis=1)                              # (4M, 3) orientation-free
-    order = np.lexsort(key.T[::-1])
-    key, faces, owner = key[order], faces[order], owner[order]
-    new_group = np.ones(len(key), bool)
-    new_group[1:] = (key[1:] != key[:-1]).any(axis=1)
-    first = np.flatnonzero(new_group)                         # (G,) start of each face group
-    count = np.diff(np.append(first, len(key)))               # 1 (boundary) or 2 (shared)
-    second = np.where(count == 2, owner[np.minimum(first + 1, len(key) - 1)], -1)
-    owners = np.stack([owner[first], second], axis=1)         # (G, 2)
-    shared = count == 2
+    faces, owners, _ = paired_facets(cells)
+    shared = owners[:, 1] >= 0
     interface = shared & (material[owners[:, 0]] != material[np.maximum(owners[:, 1], 0)])
     keep = ~shared | interface
-    return faces[first[keep]], owners[keep]
+    return faces[keep], owners[keep]
 
 
 def per_triangle_surface(points: np.ndarray, faces: np.ndarray, face_values: np.ndarray
