@@ -16,10 +16,19 @@ from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["CELL_TYPE", "material_names"]
+__all__ = ["CELL_TYPE", "material_names", "export_points"]
 
 #: meshio's name of the linear simplex of each dimension.
 CELL_TYPE = {2: "triangle", 3: "tetra"}
+
+
+def export_points(mesh) -> np.ndarray:
+    """(N, d) float64 coordinates of `mesh`'s points as every file gets them: x, y(, z).
+
+    The one place the exported frame is decided (every writer calls it): today the
+    mesh's axes reversed (column, row(, plane)).
+    """
+    return np.ascontiguousarray(np.asarray(mesh.points, dtype=np.float64)[:, ::-1])
 
 
 def material_names(names: dict[int, str], materials: np.ndarray) -> dict[int, str]:

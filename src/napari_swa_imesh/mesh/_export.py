@@ -31,7 +31,7 @@ import numpy as np
 
 from ..io import atomic_write, check_writable
 from ._abaqus import ABAQUS_ELEMENTS, abaqus_materials, write_abaqus
-from ._common import CELL_TYPE
+from ._common import CELL_TYPE, export_points
 from ._facets import facet_groups
 from ._gmsh import gmsh_materials, write_gmsh
 from ._quality import signed_volumes
@@ -112,7 +112,7 @@ def to_meshio(mesh: Mesh):
     import meshio
 
     _check_mesh_arg(mesh)
-    points = np.ascontiguousarray(np.asarray(mesh.points, dtype=np.float64)[:, ::-1])
+    points = export_points(mesh)
     cells = _orient_positive(points, mesh.cells)
     cell_data = {"material": [np.asarray(mesh.material, dtype=np.int64)]}
     for key, values in mesh.cell_data.items():
@@ -258,7 +258,7 @@ def write_mesh_vtu(mesh: Mesh, path, *, point_data: dict | None = None,
     callers that add fields and write through :func:`~napari_swa_imesh.io.atomic_write`
     themselves. Vectors in `cell_data`/`point_data` must already be in x, y(, z) order.
     """
-    points = mesh.points[:, ::-1]
+    points = export_points(mesh)
     data = {"material": mesh.material, **mesh.cell_data, **(cell_data or {})}
     write_vtu(path, points, _orient_positive(points, mesh.cells), cell_data=data,
               point_data=point_data)
