@@ -3,7 +3,9 @@
 Supported: ``.tif/.tiff`` (tifffile; ImageJ spacing and resolution tags), ``.png``,
 ``.jpg/.jpeg`` (imageio), ``.npy`` (no pickles), ``.nii/.nii.gz`` (nibabel; spacing from
 the header zooms). Arrays keep the order in which the file stores them; spacing is given
-per array axis in that same order.
+per array axis in that same order. A NIfTI file also places its voxels in a world frame
+(:func:`read_affine`: nibabel's ``img.affine``, voxel centres at integer indices); the
+other formats place voxel corner 0 at the origin, axes scaled by the spacing.
 """
 
 from __future__ import annotations
@@ -20,7 +22,7 @@ import numpy as np
 
 from ._validation import normalize_spacing
 
-__all__ = ["read_image", "write_labels", "write_labels_to", "label_array", "check_label_format",
+__all__ = ["read_image", "read_affine", "is_nifti", "write_labels", "write_labels_to", "label_array", "check_label_format",
            "image_suffix", "IMAGE_SUFFIXES", "LABEL_SUFFIXES", "check_writable", "atomic_write",
            "check_figure_path", "write_figure"]
 
@@ -134,6 +136,53 @@ def image_suffix(path) -> str:
     if name.endswith(".nii.gz"):
         return ".nii.gz"
     return Path(name).suffix
+
+
+def is_nifti(path) -> bool:
+    """Whether `path` names a NIfTI file (``.nii`` or ``.nii.gz``)."""
+    return image_suffix(path) in (".nii", ".nii.gz")
+
+
+def read_affine(path) -> np.ndarray | None:
+    """The index-to-world affine of a NIfTI file (header only), or None for other formats.
+
+    Parameters
+    ----------
+    path : str or Path
+        Any file :func:`read_image` reads.
+
+    Returns
+    -------
+    (4, 4) ndarray of float64 or None
+        nibabel's ``img.affine`` (the sform, else the qform, else the zooms): maps voxel
+        indices, in the array order :func:`read_image` gives, to world x, y, z, with voxel
+        centres at integer indices. None for TIFF, PNG, JPEG and ``.npy``, whose voxel
+        corner 0 lies at the origin.
+
+    Raises
+    ------
+    FileNotFoundError, ValueError
+        Missing file, or a NIfTI header nibabel cannot parse.
+
+    Examples
+    --------
+    >>> import tempfile, pathlib
+    >>> path = pathlib.Path(tempfile.mkdtemp()) / "l.nii.gz"
+    >>> _ = write_labels(path, np.ones((2, 3, 4), np.uint8), spacing=(2, 1, 1))
+    >>> np.diag(read_affine(path)).tolist()
+    [2.0, 1.0, 1.0, 1.0]
+    """
+    p = Path(path)
+    if not is_nifti(p):
+        return None
+    if not p.is_file():
+        raise FileNotFoundError(f"no image file at {p}; check the path.")
+    import nibabel as nib
+
+    try:
+        return np.asarray(nib.load(str(p)).affine, dtype=np.float64)
+    except Exception as exc:  # a corrupt header surfaces as many nibabel errors
+        raise ValueError(f"cannot read the header of {p} as NIfTI: {exc}") from exc
 
 
 def read_image(path, *, gray: bool = False) -> tuple[np.ndarray, tuple[float, ...]]:
