@@ -51,12 +51,14 @@ def _linear_part(affine, ndim: int, name: str) -> tuple[np.ndarray, np.ndarray]:
             raise ValueError(f"{name} tilts the {ndim}-D image out of the world's x-y plane "
                              f"(z changes along its axes: {arr[ndim:m, :ndim].tolist()}); a "
                              f"{ndim}-D mesh cannot lie there. Mesh it as a 3-D image of one "
-                             "slice (labels[..., None]), or in index space.")
+                             "slice (labels[..., None]), or in index space (without the "
+                             "affine; --index-space on the command line).")
     sv = np.linalg.svd(linear, compute_uv=False)
     if not sv[-1] > 1e-12 * sv[0]:
         raise ValueError(f"{name} is singular (its voxel axes {linear.T.tolist()} span less "
                          f"than {ndim}-D), so it places no voxel anywhere; fix the file's "
-                         "qform/sform, or mesh in index space.")
+                         "qform/sform, or mesh in index space (without the affine; "
+                         "--index-space on the command line).")
     return linear, shift
 
 
