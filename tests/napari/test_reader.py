@@ -146,3 +146,79 @@ def test_mesh_of_a_nifti_labels_layer_lies_on_the_voxels_and_is_written_in_world
     corner = mesh.points / np.asarray(mesh.spacing)
     np.testing.assert_allclose(meshio.read(written[0]).points,
                                apply_affine(affine, corner - 0.5), atol=1e-9)
+
+
+@pytest.mark.parametrize("tiles", [False, True])
+def test_classified_labels_of_a_nifti_image_lie_on_it(make_napari_viewer, qtbot, tmp_path,
+                                                     tiles):
+    from napari_swa_imesh._napari._classify_widget import METHOD_REFERENCE, OUTPUT_TILES
+    from napari_swa_imesh._napari._sample_data import make_texture_mosaic
+    from napari_swa_imesh._napari._workflow import WorkflowWidget
+
+    (image, _, _), (truth, truth_kwargs, _) = make_texture_mosaic()
+    # in-plane rotation by 30 degrees with a flip, 0.5 x 0.8 pixels, an origin
+    c, s = np.cos(np.pi / 6), np.sin(np.pi / 6)
+    affine = np.eye(4)
+    affine[:2, :2] = np.array([[c, s], [s, -c]]) @ np.diag([0.5, 0.8])
+    affine[:3, 3] = [12.0, -7.0, 3.0]
+    affine = save(tmp_path / "mosaic.nii.gz", image.astype(np.float32), affine)
+    viewer = make_napari_viewer()
+    (layer,) = viewer.open(tmp_path / "mosaic.nii.gz", plugin=PLUGIN)
+    truth_layer = viewer.add_labels(truth, **{**truth_kwargs, "scale": layer.scale,
+                                               "affine": layer.affine.affine_matrix})
+    flow = WorkflowWidget(viewer)
+    flow.classify.method_combo.value = METHOD_REFERENCE
+    flow.samples.truth_combo.value = truth_layer
+    flow.samples.per_material_spin.value = 16
+    flow.samples.scale_spin.value = 4
+    flow.samples.samples_from_truth()
+    wait_idle(qtbot, flow.samples)
+    flow.classify.scale_combo.value = 4
+    if tiles:
+        flow.classify.output_combo.value = OUTPUT_TILES
+    flow.classify.classify()
+    wait_idle(qtbot, flow.classify)
+    labels = viewer.layers["mosaic SWA labels"]
+    step = 16 if tiles else 1
+    for index in ([0, 0], [3, 7], [10, 2]):
+        # label t covers pixels t*step .. t*step + step - 1: its centre is their middle
+        centre = np.multiply(index, step) + (step - 1) / 2
+        np.testing.assert_allclose(labels.data_to_world(index), layer.data_to_world(centre),
+                                   atol=1e-9)
+    flow.mesh.select_labels(labels)
+    flow.mesh.set_excluded([])
+    flow.mesh.run_mesh()
+    wait_idle(qtbot, flow.mesh, timeout=120_000)
+    mesh = flow.mesh.mesh
+    corner = mesh.points / np.asarray(mesh.spacing) * step   # pixel-corner index
+    written = tmp_path / "m.vtu"
+    from napari_swa_imesh.mesh import write_mesh
+
+    write_mesh(mesh, written)
+    np.testing.assert_allclose(meshio.read(written).points[:, :2],
+                               apply_affine(affine, np.column_stack(
+                                   [corner - 0.5, np.zeros(len(corner))]))[:, :2], atol=1e-9)
+
+
+def test_field_of_a_nifti_mesh_lies_on_the_mesh(make_napari_viewer, qtbot, tmp_path):
+    from napari_swa_imesh._napari._simulate_widget import SimulateWidget
+
+    labels = np.ones((5, 6, 4), np.uint8)
+    labels[:, 3:] = 2
+    save(tmp_path / "l_seg.nii.gz", labels)
+    viewer = make_napari_viewer()
+    (layer,) = viewer.open(tmp_path / "l_seg.nii.gz", plugin=PLUGIN)
+    mesher = MeshWidget(viewer)
+    mesher.select_labels(layer)
+    mesher.set_excluded([])
+    mesher.run_mesh()
+    wait_idle(qtbot, mesher, timeout=120_000)
+    widget = SimulateWidget(viewer)
+    widget.select_mesh(mesher.surface_layer)
+    widget.run()
+    wait_idle(qtbot, widget, timeout=120_000)
+    field = widget.field_layer
+    point = mesher.mesh.points[7]
+    np.testing.assert_allclose(field.data_to_world(point),
+                               mesher.surface_layer.data_to_world(point), atol=1e-9)
+    np.testing.assert_allclose(field.affine.affine_matrix, layer.affine.affine_matrix)

@@ -12,7 +12,7 @@ if TYPE_CHECKING:
 __all__ = ["PALETTE", "material_palette", "labels_colormap", "layer_picker", "pick",
            "layer_spacing", "index_to_layer_data", "mesh_translate", "SAMPLES_KEY",
            "MATERIALS_KEY", "EXTENT_KEY", "MESH_KEY", "SCALE_KEY", "AFFINE_KEY",
-           "placed_by_affine"]
+           "placed_by_affine", "block_affine"]
 
 # tab10 without grey: distinct on dark and light napari themes
 PALETTE = ("#1f77b4", "#ff7f0e", "#2ca02c", "#d62728", "#9467bd", "#8c564b", "#e377c2",
@@ -65,6 +65,18 @@ def placed_by_affine(layer) -> np.ndarray | None:
     if not np.allclose(voxel_sizes(affine, layer.ndim), layer.scale, rtol=1e-9):
         return None
     return affine
+
+
+def block_affine(layer, step: int = 1) -> list | None:
+    """``AFFINE_KEY`` of a grid of `step`-voxel blocks of `layer` (tile labels; 1: the same
+    grid), from the layer's own; None when it has none."""
+    affine = layer.metadata.get(AFFINE_KEY)
+    if affine is None:
+        return None
+    block = np.eye(len(affine))
+    for axis in range(layer.ndim):     # block t covers voxels t*step .. t*step + step - 1
+        block[axis, axis], block[axis, -1] = step, (step - 1) / 2
+    return (np.asarray(affine, dtype=np.float64) @ block).tolist()
 
 
 def index_to_layer_data(coords: np.ndarray, source, target) -> np.ndarray:
