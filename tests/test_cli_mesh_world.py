@@ -185,3 +185,44 @@ def test_sheared_affine_is_placed_with_a_warning(tmp_path, capsys):
                                                    indexing="ij")).reshape(3, -1).T)
     np.testing.assert_allclose(m.points.min(axis=0), lo.min(axis=0), atol=1e-6)
     np.testing.assert_allclose(m.points.max(axis=0), lo.max(axis=0), atol=1e-6)
+
+
+@pytest.mark.parametrize("tiles", [False, True])
+def test_labels_segmented_from_a_nifti_image_keep_its_world(tmp_path, capsys, tiles):
+    from napari_swa_imesh.segmentation import Samples, save_samples
+
+    rng = np.random.default_rng(0)
+    truth = np.ones((48, 64), np.int64)
+    truth[:, 32:] = 2
+    image = np.array([0, 10.0, 14.0])[truth] + rng.standard_normal(truth.shape)
+    affine = np.eye(4)
+    affine[:2, :2] = oblique_flipped_affine(2)[:2, :2]
+    affine[:3, 3] = [3.0, -2.0, 9.0]
+    affine = save_nifti(tmp_path / "img.nii.gz", image.astype(np.float32), affine)
+    save_samples(Samples.from_dict({"boxes": [
+        {"label": 1, "start": [0, 0], "stop": [48, 28]},
+        {"label": 2, "start": [0, 36], "stop": [48, 64]}]}), tmp_path / "s.json")
+    code, _, err = run(capsys, "segment", tmp_path / "img.nii.gz", "--samples",
+                       tmp_path / "s.json", "--method", "reference", "--scale", 2,
+                       *(["--tiles"] if tiles else []), "-o", tmp_path / "lab.nii.gz")
+    assert code == 0, err
+    step = 4 if tiles else 1
+    got = nib.load(str(tmp_path / "lab.nii.gz")).affine
+    # label t's centre is the centre of the pixels it covers, where the image put them
+    for index in ([0, 0], [3, 5], [11, 15]):
+        centre = np.multiply(index, step) + (step - 1) / 2
+        np.testing.assert_allclose(apply_affine(got, index + [0]),
+                                   apply_affine(affine, list(centre) + [0]), atol=1e-5)
+    # and the mesh of the labels covers the image's world box
+    m, report = mesh_file(capsys, tmp_path / "lab.nii.gz", tmp_path / "m.vtu")
+    assert report["frame"] == "world"
+    corners = apply_affine(affine, np.array([[-0.5, -0.5, 0], [47.5, -0.5, 0], [-0.5, 63.5, 0],
+                                             [47.5, 63.5, 0]]))[:, :2]
+    np.testing.assert_allclose(m.points[:, :2].min(axis=0), corners.min(axis=0), atol=1e-5)
+    np.testing.assert_allclose(m.points[:, :2].max(axis=0), corners.max(axis=0), atol=1e-5)
+
+
+def test_write_labels_refuses_an_affine_it_cannot_hold(tmp_path):
+    with pytest.raises(ValueError, match="an affine can only be written to NIfTI"):
+        write_labels(tmp_path / "l.tif", np.ones((2, 3), np.uint8), affine=np.eye(4))
+    assert list(tmp_path.iterdir()) == []

@@ -22,7 +22,7 @@ import numpy as np
 
 from ._validation import normalize_spacing
 
-__all__ = ["read_image", "read_affine", "is_nifti", "write_labels", "write_labels_to", "label_array", "check_label_format",
+__all__ = ["read_image", "read_affine", "is_nifti", "grid_affine", "write_labels", "write_labels_to", "label_array", "check_label_format",
            "image_suffix", "IMAGE_SUFFIXES", "LABEL_SUFFIXES", "check_writable", "atomic_write",
            "check_figure_path", "write_figure"]
 
@@ -185,6 +185,23 @@ def read_affine(path) -> np.ndarray | None:
         raise ValueError(f"cannot read the header of {p} as NIfTI: {exc}") from exc
 
 
+def grid_affine(affine, step: int, ndim: int) -> np.ndarray:
+    """Index-to-world affine of a grid of `step`-voxel blocks (tiles) of an image.
+
+    Block t covers voxels ``t*step .. t*step + step - 1`` along each of the first `ndim`
+    axes, so its centre is voxel ``t*step + (step - 1) / 2``.
+
+    Examples
+    --------
+    >>> grid_affine(np.diag([2.0, 1.0, 1.0, 1.0]), 4, 2)[:2].tolist()
+    [[8.0, 0.0, 0.0, 3.0], [0.0, 4.0, 0.0, 1.5]]
+    """
+    block = np.eye(len(affine))
+    for axis in range(ndim):
+        block[axis, axis], block[axis, -1] = step, (step - 1) / 2
+    return np.asarray(affine, dtype=np.float64) @ block
+
+
 def read_image(path, *, gray: bool = False) -> tuple[np.ndarray, tuple[float, ...]]:
     """Read an image file and its voxel spacing.
 
@@ -336,7 +353,8 @@ def check_label_format(path, labels: np.ndarray) -> None:
         raise ValueError(f"NIfTI holds up to 7 axes; got {labels.ndim}. Use .npy.")
 
 
-def write_labels(path, labels, *, spacing=None, origin=None, force: bool = False) -> Path:
+def write_labels(path, labels, *, spacing=None, origin=None, affine=None,
+                 force: bool = False) -> Path:
     """Write a label image in the format its suffix names; values are kept exactly.
 
     Parameters
@@ -352,6 +370,10 @@ def write_labels(path, labels, *, spacing=None, origin=None, force: bool = False
     origin : sequence of float, optional
         Physical position of the centre of element 0 per axis (NIfTI affine translation,
         ImageJ ``xorigin``/``yorigin``/``zorigin``); default 0.
+    affine : (4, 4) array_like, optional
+        NIfTI only: the index-to-world affine of `labels` (e.g. the :func:`read_affine` of
+        the image they label, or its :func:`grid_affine` for tile labels), written as the
+        sform and qform instead of `spacing` and `origin`; the zooms are its voxel sizes.
     force : bool
         Replace an existing file. Without it an existing file is an error.
 
@@ -362,14 +384,19 @@ def write_labels(path, labels, *, spacing=None, origin=None, force: bool = False
     """
     data = label_array(labels)
     check_label_format(path, data)
+    if affine is not None and not is_nifti(path):
+        raise ValueError(f"an affine can only be written to NIfTI (.nii, .nii.gz), not "
+                         f"{Path(path).name!r}; give spacing and origin instead.")
     with atomic_write([path], force=force) as (tmp,):
-        write_labels_to(tmp, data, spacing=spacing, origin=origin)
+        write_labels_to(tmp, data, spacing=spacing, origin=origin, affine=affine)
     return Path(path)
 
 
-def write_labels_to(tmp, data: np.ndarray, *, spacing=None, origin=None) -> None:
+def write_labels_to(tmp, data: np.ndarray, *, spacing=None, origin=None, affine=None
+                    ) -> None:
     """Write checked labels (:func:`label_array`, :func:`check_label_format`) to `tmp`,
-    a temporary path from :func:`atomic_write` with the target's name."""
+    a temporary path from :func:`atomic_write` with the target's name (`affine`: NIfTI
+    only, see :func:`write_labels`)."""
     suffix = image_suffix(tmp)
     sp = normalize_spacing(spacing, data.ndim)
     org = (0.0,) * data.ndim if origin is None else tuple(float(v) for v in origin)
@@ -398,10 +425,15 @@ def write_labels_to(tmp, data: np.ndarray, *, spacing=None, origin=None) -> None
     elif suffix in (".nii", ".nii.gz"):
         import nibabel as nib
 
-        affine = np.eye(4)
-        for axis in range(min(3, data.ndim)):
-            affine[axis, axis] = sp[axis]
-            affine[axis, 3] = org[axis]
+        if affine is None:
+            affine = np.eye(4)
+            for axis in range(min(3, data.ndim)):
+                affine[axis, axis] = sp[axis]
+                affine[axis, 3] = org[axis]
+        else:
+            affine = np.asarray(affine, dtype=np.float64)
+            sizes = np.linalg.norm(affine[:3, :3], axis=0)
+            sp = tuple(float(sizes[a]) if a < 3 else sp[a] for a in range(data.ndim))
         img = nib.Nifti1Image(data, affine, dtype=data.dtype)
         img.header.set_zooms(sp)
         nib.save(img, str(tmp))

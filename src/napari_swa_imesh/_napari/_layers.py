@@ -69,14 +69,12 @@ def placed_by_affine(layer) -> np.ndarray | None:
 
 def block_affine(layer, step: int = 1) -> list | None:
     """``AFFINE_KEY`` of a grid of `step`-voxel blocks of `layer` (tile labels; 1: the same
-    grid), from the layer's own; None when it has none."""
+    grid, :func:`~napari_swa_imesh.io.grid_affine`), from the layer's own; None when it has
+    none."""
+    from ..io import grid_affine
+
     affine = layer.metadata.get(AFFINE_KEY)
-    if affine is None:
-        return None
-    block = np.eye(len(affine))
-    for axis in range(layer.ndim):     # block t covers voxels t*step .. t*step + step - 1
-        block[axis, axis], block[axis, -1] = step, (step - 1) / 2
-    return (np.asarray(affine, dtype=np.float64) @ block).tolist()
+    return None if affine is None else grid_affine(affine, step, layer.ndim).tolist()
 
 
 def index_to_layer_data(coords: np.ndarray, source, target) -> np.ndarray:
