@@ -22,8 +22,9 @@ import numpy as np
 
 from ._validation import normalize_spacing
 
-__all__ = ["read_image", "read_affine", "is_nifti", "grid_affine", "write_labels", "write_labels_to", "label_array", "check_label_format",
-           "image_suffix", "IMAGE_SUFFIXES", "LABEL_SUFFIXES", "check_writable", "atomic_write",
+__all__ = ["read_image", "read_affine", "is_nifti", "grid_affine", "write_labels",
+           "write_labels_to", "label_array", "check_label_format", "image_suffix",
+           "IMAGE_SUFFIXES", "LABEL_SUFFIXES", "check_writable", "atomic_write",
            "check_figure_path", "write_figure"]
 
 LABEL_SUFFIXES = (".npy", ".tif", ".tiff", ".nii", ".nii.gz", ".png")

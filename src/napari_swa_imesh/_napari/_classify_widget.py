@@ -21,8 +21,15 @@ from ..segmentation import (
 )
 from . import _samples_layer as sl
 from ._dock import button, group, scroll_body, side_by_side, wrapped_label
-from ._layers import (AFFINE_KEY, block_affine, labels_colormap, layer_picker,
-                      layer_spacing, material_palette, pick)
+from ._layers import (
+    AFFINE_KEY,
+    block_affine,
+    labels_colormap,
+    layer_picker,
+    layer_spacing,
+    material_palette,
+    pick,
+)
 from ._tasks import TaskPanel, notify_error, notify_info, notify_warning
 
 if TYPE_CHECKING:

@@ -13,8 +13,15 @@ from qtpy.QtWidgets import QFileDialog, QLabel, QListWidget, QListWidgetItem, QW
 from ..mesh import QUALITY_METRICS, check_mesh, mesh_labels, mesh_surface, quality_table, write_mesh
 from ..mesh._export import MESH_SUFFIXES
 from ._dock import scroll_body, wrapped_label
-from ._layers import (MESH_KEY, default_color, layer_picker, layer_spacing, mesh_translate,
-                      pick, placed_by_affine)
+from ._layers import (
+    MESH_KEY,
+    default_color,
+    layer_picker,
+    layer_spacing,
+    mesh_translate,
+    pick,
+    placed_by_affine,
+)
 from ._plots import ThemedFigure, dark_theme, theme_text_color
 from ._tasks import TaskPanel, notify_error, notify_info
 
