@@ -114,6 +114,8 @@ def mosaic_steps(viewer) -> None:
 
 
 def phantom_steps(viewer) -> None:
+    from qtpy.QtWidgets import QScrollArea
+
     viewer.open_sample("napari-swa-imesh", "tissue_phantom")
     image, truth = viewer.layers
     truth.visible = False
@@ -159,7 +161,8 @@ def phantom_steps(viewer) -> None:
     clip.axis_combo.value = 0                 # z: the slider starts in the middle
     clip.keep_combo.value = "above"
     clip.enable_box.value = True
-    camera.zoom *= 1.3
+    flow.mesh.findChild(QScrollArea).ensureWidgetVisible(flow.mesh.clip_box)
+    camera.zoom *= 1.1
     save(viewer, "09_mesh_3d_clipped.png")
 
 
