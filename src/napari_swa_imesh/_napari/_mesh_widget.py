@@ -284,9 +284,11 @@ class MeshWidget(QWidget):
         if layer is None or self.full_surface is None or layer not in self.viewer.layers:
             return
         surface = self._shown_surface()
-        layer.vertex_colors = None       # sized for the old vertices
-        layer.data = (surface["vertices"], surface["triangles"], surface["quality"])
         layer.metadata[SURFACE_VALUES_KEY] = _values(surface)
+        # each setter of a Surface redraws it (normals and all): set as few as possible
+        if layer.vertex_colors is not None:
+            layer.vertex_colors = None   # sized for the old vertices
+        layer.data = (surface["vertices"], surface["triangles"], surface["quality"])
         self.apply_colors()
         self.clip.show_counts(surface)
 
@@ -309,8 +311,10 @@ class MeshWidget(QWidget):
             # limits of the whole mesh, so colours keep their meaning as the clip moves
             lo, hi = bound_range(mesh.ndim, mesh.spacing)
             worst = float(np.max(mesh.quality)) if mesh.n_cells else hi
-            layer.vertex_colors = None
-            layer.vertex_values = values["quality"]
+            if layer.vertex_colors is not None:
+                layer.vertex_colors = None
+            if layer.vertex_values is not values["quality"]:
+                layer.vertex_values = values["quality"]
             layer.colormap = "turbo"
             layer.contrast_limits = [lo, max(hi, worst) + 1e-9]
 
