@@ -108,8 +108,9 @@ def in_napari(labels, spacing) -> None:
                 clip.position_slider.value = p
             redraw.append(_time(widget.refresh_surface)[0])
             frame.append(_time(viewer.screenshot, canvas_only=True, flash=False)[0])
-        print(f"napari axis {axis}, {colour.split()[0]}: layer redraw median {_ms(np.median(redraw))} (worst "
-              f"{_ms(max(redraw))}), next frame median {_ms(np.median(frame))}")
+        print(f"napari axis {axis}, {colour.split()[0]}: layer redraw median "
+              f"{_ms(np.median(redraw))} (worst {_ms(max(redraw))}), next frame median "
+              f"{_ms(np.median(frame))}")
     viewer.close()
 
 

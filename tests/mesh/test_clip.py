@@ -105,7 +105,7 @@ def test_the_cut_exposes_the_elements_the_plane_cuts(keep):
 
 
 def test_vtk_crinkle_clip_keeps_the_same_cells_and_surface():
-    pv = pytest.importorskip("pyvista")
+    pytest.importorskip("pyvista")
     mesh = MESHES["noise-excluded"]()
     clipper = MeshClipper(mesh)
     grid = mesh.to_pyvista()
