@@ -79,3 +79,20 @@ def test_the_mesh_is_not_changed():
     mesh.to_pyvista()
     np.testing.assert_array_equal(mesh.points, before[0])
     np.testing.assert_array_equal(mesh.cells, before[1])
+
+
+@pytest.mark.parametrize("flip", [1.0, -1.0])
+def test_a_world_placed_mesh_is_in_its_world_frame_with_positive_cells(flip):
+    # a NIfTI-like placement: axes not reversed (so possibly mirrored), scaled, turned
+    mesh = _mesh(3, (2.0, 1.0, 0.5))
+    angle = 0.3
+    turn = np.array([[np.cos(angle), -np.sin(angle), 0], [np.sin(angle), np.cos(angle), 0],
+                     [0, 0, flip]])
+    world = np.eye(4)
+    world[:3, :3], world[:3, 3] = 1.5 * turn, (10.0, -4.0, 2.0)
+    mesh.world = world
+    grid = mesh.to_pyvista()
+    np.testing.assert_allclose(grid.points, export_points(mesh))
+    sizes = grid.compute_cell_sizes(length=False, area=False).cell_data["Volume"]
+    np.testing.assert_allclose(sizes, signed_volumes(mesh.points, mesh.cells) * 1.5 ** 3,
+                               rtol=1e-9)
