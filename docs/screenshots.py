@@ -18,6 +18,7 @@ from pathlib import Path
 import numpy as np
 
 from napari_swa_imesh._napari._layers import pick
+from napari_swa_imesh._napari._mesh_widget import COLOR_BY_QUALITY
 
 OUT = Path(__file__).resolve().parent / "images"
 WINDOW = (1500, 940)
@@ -113,6 +114,8 @@ def mosaic_steps(viewer) -> None:
 
 
 def phantom_steps(viewer) -> None:
+    from qtpy.QtWidgets import QScrollArea
+
     viewer.open_sample("napari-swa-imesh", "tissue_phantom")
     image, truth = viewer.layers
     truth.visible = False
@@ -151,6 +154,16 @@ def phantom_steps(viewer) -> None:
     save(viewer, "06_mesh_3d.png")
     flow.mesh.color_combo.value = "material"
     save(viewer, "07_mesh_3d_materials.png")
+
+    # see inside: the whole tetrahedra above the middle plane, coloured by quality
+    flow.mesh.color_combo.value = COLOR_BY_QUALITY
+    clip = flow.mesh.clip
+    clip.axis_combo.value = 0                 # z: the slider starts in the middle
+    clip.keep_combo.value = "above"
+    clip.enable_box.value = True
+    flow.mesh.findChild(QScrollArea).ensureWidgetVisible(flow.mesh.clip_box)
+    camera.zoom *= 1.1
+    save(viewer, "09_mesh_3d_clipped.png")
 
 
 def main() -> int:

@@ -1,4 +1,9 @@
-"""Mesh widget: IMESH a Labels layer into a Surface coloured per element, with its quality."""
+"""Mesh widget: IMESH a Labels layer into a Surface coloured per element, with its quality.
+
+The Surface shows the mesh's boundary and material interfaces, or, with the clip of
+:mod:`._clip_panel` on, the surface of the whole elements on one side of a plane
+(:class:`~napari_swa_imesh.mesh.MeshClipper`); either way the same layer is updated in place.
+"""
 
 from __future__ import annotations
 
@@ -10,8 +15,10 @@ from magicgui.widgets import CheckBox, ComboBox, Container, PushButton
 from qtpy.QtCore import Qt, Signal
 from qtpy.QtWidgets import QFileDialog, QLabel, QListWidget, QListWidgetItem, QWidget
 
-from ..mesh import QUALITY_METRICS, check_mesh, mesh_labels, mesh_surface, quality_table, write_mesh
+from ..mesh import (MeshClipper, check_mesh, mesh_labels, mesh_surface, quality_bounds,
+                    write_mesh)
 from ..mesh._export import MESH_SUFFIXES
+from ._clip_panel import ClipPanel
 from ._dock import scroll_body, wrapped_label
 from ._layers import (
     MESH_KEY,
@@ -32,7 +39,7 @@ if TYPE_CHECKING:
     from ..mesh import Mesh
 
 __all__ = ["MeshWidget", "COLOR_BY_QUALITY", "COLOR_BY_MATERIAL", "CHECKS_KEY",
-           "SURFACE_VALUES_KEY", "bound_range"]
+           "SURFACE_VALUES_KEY", "bound_range", "bound_label"]
 
 COLOR_BY_QUALITY = "quality (radius-to-edge)"
 COLOR_BY_MATERIAL = "material"
@@ -42,22 +49,32 @@ METHODS = ("template", "delaunay")
 _ELEMENT = {2: "triangles", 3: "tetrahedra"}
 
 
-def quality_metric(ndim: int):
-    """The radius-to-edge descriptor of the library for `ndim`-D elements."""
-    return next(m for m in QUALITY_METRICS if m.name == "quality" and m.dim == ndim)
-
-
 @lru_cache(maxsize=None)
-def bound_range(ndim: int) -> tuple[float, float]:
-    """Radius-to-edge range of every IMESH template element in `ndim`-D (the shaded range).
+def bound_range(ndim: int, spacing: tuple[float, ...] = ()) -> tuple[float, float]:
+    """Radius-to-edge range of every IMESH template element for these voxels (shaded).
 
     From the regular simplex (the best any element can be) to the worst template simplex
-    of :func:`napari_swa_imesh.mesh.quality_table`, which meshes every leaf configuration
-    with the mesher's own templates: the proven bound, not a number copied here. About
-    1.5 s in 3-D, so call it in a worker first; it is cached.
+    stretched by `spacing` (:func:`napari_swa_imesh.mesh.quality_bounds`): for square or
+    cubic voxels the proven bound of :func:`~napari_swa_imesh.mesh.quality_table`, which
+    meshes every leaf configuration with the mesher's own templates, not a number copied
+    here. About 1.5 s in 3-D the first time, so call it in a worker first; it is cached.
     """
-    regular = quality_metric(ndim).valid_range[0]
-    return regular, max(row["radius_edge_ratio"] for row in quality_table(ndim))
+    return quality_bounds(ndim, spacing or None)["quality"]
+
+
+def _aspect(spacing: tuple[float, ...]) -> str:
+    """Voxel proportions as text: (2.0, 1.0, 1.0) -> "2:1:1"."""
+    smallest = min(spacing)
+    return ":".join(f"{s / smallest:.3g}" for s in spacing)
+
+
+def bound_label(mesh: "Mesh") -> str:
+    """What the shaded range is for `mesh`: the IMESH bound for its voxels, or none."""
+    cubic = len(set(mesh.spacing)) <= 1
+    voxels = "square/cubic voxels" if cubic else f"{_aspect(mesh.spacing)} voxels"
+    if mesh.info.get("method", "template") != "template":
+        return f"template bound, {voxels} ({mesh.info['method']} proves none)"
+    return f"IMESH bound, {voxels}"
 
 
 def _labels_present(data: np.ndarray) -> list[int]:
@@ -65,6 +82,24 @@ def _labels_present(data: np.ndarray) -> list[int]:
     if data.dtype.kind in "iu" and data.size and data.min() >= 0 and data.max() < 1 << 24:
         return np.flatnonzero(np.bincount(data.ravel())).tolist()
     return np.unique(data).tolist()
+
+
+def _values(surface: dict) -> dict[str, np.ndarray]:
+    """Per-vertex values of a surface in both colourings (the layer's metadata)."""
+    return {"quality": surface["quality"], "material": surface["material"]}
+
+
+def _bound_line(mesh: "Mesh") -> str:
+    """The summary's sentence on the quality bound that holds for `mesh`'s voxels."""
+    hi = bound_range(mesh.ndim, mesh.spacing)[1]
+    if mesh.info.get("method", "template") != "template":
+        return (f"no quality bound is proven for the {mesh.info['method']} method "
+                f"(shaded: the template mesher's, {hi:.3f})")
+    if len(set(mesh.spacing)) <= 1:
+        return f"IMESH bound (square/cubic voxels): ratio <= {hi:.3f}"
+    cubic = bound_range(mesh.ndim)[1]
+    return (f"IMESH bound for {_aspect(mesh.spacing)} voxels: ratio <= {hi:.3f} (the "
+            f"cubic {cubic:.3f} does not hold: the spacing stretches every element)")
 
 
 class MeshWidget(QWidget):
@@ -106,6 +141,8 @@ class MeshWidget(QWidget):
         self.summary.native.setTextInteractionFlags(Qt.TextSelectableByMouse)
         self.plot = ThemedFigure(self.viewer, self._draw_histogram, min_height=180)
         self.tasks = TaskPanel()
+        self.full_surface: dict | None = None
+        self.clip = ClipPanel(self.refresh_surface)
 
         layout = scroll_body(self)
         layout.addWidget(Container(widgets=[self.labels_combo, self.method_combo]).native)
@@ -116,6 +153,8 @@ class MeshWidget(QWidget):
         layout.addWidget(self.tasks)
         layout.addWidget(self.summary.native)
         layout.addWidget(self.plot, 1)
+        self.clip_box = self.clip.widget()
+        layout.addWidget(self.clip_box)
         layout.addWidget(self.export_button.native)
         self.labels_combo.changed.connect(self._refresh_materials)
         self.color_combo.changed.connect(self.apply_colors)
@@ -190,19 +229,23 @@ class MeshWidget(QWidget):
                 checks = check_mesh(mesh, data, exclude=exclude)
             yield 2, 3, "faces to draw"
             surface = mesh_surface(mesh)
+            clipper = MeshClipper(mesh, shown=(surface["faces"], surface["owners"]))
+            clipper.kept(0, 0.0)         # the element extents on the first axis, here
             bound_range(mesh.ndim)       # cached here, not computed in the main thread
+            bound_range(mesh.ndim, mesh.spacing)
             yield 3, 3, "done"
-            return mesh, checks, surface
+            return mesh, checks, surface, clipper
 
         return self.tasks.run(steps, title="IMESH meshing",
                               on_result=lambda out: self._show_mesh(layer, *out))
 
     # -- results (main thread) ---------------------------------------------------------------
-    def _show_mesh(self, labels, mesh: "Mesh", checks, surface: dict) -> None:
-        self.mesh, self.checks = mesh, checks
+    def _show_mesh(self, labels, mesh: "Mesh", checks, full: dict, clipper) -> None:
+        self.mesh, self.checks, self.full_surface = mesh, checks, full
+        self.clip.set_clipper(clipper)
+        surface = self._shown_surface()
         data = (surface["vertices"], surface["triangles"], surface["quality"])
-        values = {"quality": surface["quality"], "material": surface["material"]}
-        metadata = {MESH_KEY: mesh, CHECKS_KEY: checks, SURFACE_VALUES_KEY: values}
+        metadata = {MESH_KEY: mesh, CHECKS_KEY: checks, SURFACE_VALUES_KEY: _values(surface)}
         name = f"{labels.name} mesh"
         translate = mesh_translate(labels)
         existing = self.viewer.layers[name] if name in self.viewer.layers else None
@@ -222,10 +265,32 @@ class MeshWidget(QWidget):
                                             shading="flat" if mesh.ndim == 3 else "none")
         self.surface_layer = layer
         self.apply_colors()
-        self._show_summary(mesh, checks, surface["n_faces"])
+        self._show_summary(mesh, checks, full["n_faces"])
+        self.clip.show_counts(surface)
         self.plot.redraw()
         self.export_button.enabled = True
         self.mesh_ready.emit(layer)
+
+    def _shown_surface(self) -> dict:
+        """The whole mesh's surface, or the clipped one when the clip is on."""
+        if self.clip.active:
+            axis, position, keep = self.clip.settings()
+            return self.clip.clipper.surface(axis, position, keep=keep)
+        return self.full_surface
+
+    def refresh_surface(self) -> None:
+        """Draw the clip's current surface (or the whole mesh's) in the same layer."""
+        layer = self.surface_layer
+        if layer is None or self.full_surface is None or layer not in self.viewer.layers:
+            return
+        surface = self._shown_surface()
+        layer.metadata[SURFACE_VALUES_KEY] = _values(surface)
+        # each setter of a Surface redraws it (normals and all): set as few as possible
+        if layer.vertex_colors is not None:
+            layer.vertex_colors = None   # sized for the old vertices
+        layer.data = (surface["vertices"], surface["triangles"], surface["quality"])
+        self.apply_colors()
+        self.clip.show_counts(surface)
 
     def apply_colors(self, *_) -> None:
         """Colour the mesh Surface by element quality or by material."""
@@ -236,17 +301,20 @@ class MeshWidget(QWidget):
         mesh = layer.metadata[MESH_KEY]
         layer.wireframe.visible = self.edges_box.value
         layer.wireframe.color = "black"
-        if self.color_combo.value == COLOR_BY_MATERIAL:
+        if self.color_combo.value == COLOR_BY_MATERIAL and len(values["material"]):
             from napari.utils.colormaps.standardize_color import transform_color
 
-            materials = np.unique(values["material"])
+            materials = np.unique(mesh.material)
             table = np.stack([transform_color(default_color(m))[0] for m in materials])
             layer.vertex_colors = table[np.searchsorted(materials, values["material"])]
         else:
-            lo, hi = bound_range(mesh.ndim)
-            worst = float(np.max(values["quality"])) if len(values["quality"]) else 1.0
-            layer.vertex_colors = None
-            layer.vertex_values = values["quality"]
+            # limits of the whole mesh, so colours keep their meaning as the clip moves
+            lo, hi = bound_range(mesh.ndim, mesh.spacing)
+            worst = float(np.max(mesh.quality)) if mesh.n_cells else hi
+            if layer.vertex_colors is not None:
+                layer.vertex_colors = None
+            if layer.vertex_values is not values["quality"]:
+                layer.vertex_values = values["quality"]
             layer.colormap = "turbo"
             layer.contrast_limits = [lo, max(hi, worst) + 1e-9]
 
@@ -260,7 +328,8 @@ class MeshWidget(QWidget):
         angle = "angles" if mesh.ndim == 2 else "dihedral angles"
         lines = [f"{len(mesh.points)} vertices, {mesh.n_cells} {element} ({per_material})",
                  f"worst radius-to-edge ratio {float(mesh.quality.max()):.3f}; "
-                 f"{angle} {lo:.1f} to {hi:.1f} deg"]
+                 f"{angle} {lo:.1f} to {hi:.1f} deg",
+                 _bound_line(mesh)]
         if checks is None:
             lines.append("checks not run")
         elif checks.get("all_passed"):
@@ -282,8 +351,9 @@ class MeshWidget(QWidget):
             return
         ax = figure.add_subplot(1, 1, 1)
         q = mesh.quality[np.isfinite(mesh.quality)]
-        lo, hi = bound_range(mesh.ndim)
-        ax.axvspan(lo, hi, color="#2ca02c", alpha=0.18, lw=0, label="IMESH bound range")
+        lo, hi = bound_range(mesh.ndim, mesh.spacing)
+        band = ax.axvspan(lo, hi, color="#2ca02c", alpha=0.18, lw=0, label=bound_label(mesh))
+        band.set_gid("bound")
         # the range always spans the bound, so a mesh of one element shape still bins
         span = (min(lo, float(q.min(initial=lo))), max(hi, float(q.max(initial=hi))))
         ax.hist(q, bins=40, range=span, color="#6fb1ff" if dark_theme(self.viewer) else "#1f77b4")

@@ -15,12 +15,15 @@
   interfaces, exteriors);
 * memory: :func:`estimate_mesh_memory`, :func:`count_boundary_voxels`;
 * display: :func:`shown_faces` (boundary and material-interface faces),
-  :func:`mesh_surface` (per-triangle vertices and values for a surface view).
+  :func:`mesh_surface` (per-triangle vertices and values for a surface view),
+  :func:`clip_cells` and :class:`MeshClipper` (the whole elements on one side of a plane,
+  and the surface of that set); :meth:`Mesh.to_pyvista` for VTK's own filters.
 """
 
 from ._balance import balance_tree
 from ._bounds import format_quality_table, quality_bounds, quality_table
 from ._checks import MeshChecks, check_mesh, rasterize_materials
+from ._clip import MeshClipper, clip_cells
 from ._export import read_mesh, to_meshio, write_mesh, write_mesh_vtu
 from ._facets import FacetGroup, facet_groups
 from ._imesh import mesh_labels, mesh_tree
@@ -43,4 +46,5 @@ __all__ = [
     "radius_edge_ratio", "signed_volumes", "quality_bounds", "quality_table",
     "format_quality_table", "read_mesh", "to_meshio", "write_mesh", "estimate_mesh_memory",
     "count_boundary_voxels", "mesh_surface", "shown_faces", "world_from_affine",
+    "MeshClipper", "clip_cells",
 ]

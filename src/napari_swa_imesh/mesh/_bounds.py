@@ -10,7 +10,9 @@ of sites obeying that rule (a superset of what trees produce, so the bound is sa
 (``_templates.cut_leaves``) and returns the distinct simplices up to the symmetries of
 the cube, with their quality. Every element of every template mesh
 is a translated, uniformly scaled copy of one of them (isotropic spacing), so the table's
-worst values are the mesh's bounds.
+worst values are the mesh's bounds. With anisotropic spacing every element is such a copy
+stretched by the spacing, so the worst stretched template is the bound for that spacing
+(:func:`quality_bounds` with ``spacing``).
 """
 
 from __future__ import annotations
@@ -21,9 +23,10 @@ import math
 
 import numpy as np
 
+from .._validation import normalize_spacing
 from . import _templates_luts as luts
 from ._quality import dihedral_angles, radius_edge_ratio, signed_volumes, triangle_angles
-from ._templates import cut_leaves
+from ._templates import cut_leaves, template_quality
 
 __all__ = ["format_quality_table", "leaf_configurations", "quality_bounds", "quality_table"]
 
@@ -197,28 +200,43 @@ _IDEAL = {2: {"quality": 1 / math.sqrt(3), "min_angle": 60.0, "max_angle": 60.0}
               "max_dihedral": math.degrees(math.acos(1 / 3))}}
 
 
+def _ranges(d: int, worst_of) -> dict[str, tuple[float, float]]:
+    """Per metric, (worst, ideal) or (ideal, worst) from ``worst_of(name, smaller_is_worse)``."""
+    out = {}
+    for name, ideal in _IDEAL[d].items():
+        low = name.startswith("min")
+        worst = worst_of(name, low)
+        out[name] = (worst, ideal) if low else (ideal, worst)
+    return out
+
+
 @functools.lru_cache(maxsize=None)
 def _bounds(d: int) -> tuple:
     rows = quality_table(d)
-    out = {}
-    for name, ideal in _IDEAL[d].items():
-        column = "radius_edge_ratio" if name == "quality" else name
-        values = [r[column] for r in rows]
-        worst = min(values) if name.startswith("min") else max(values)
-        out[name] = (worst, ideal) if name.startswith("min") else (ideal, worst)
-    return tuple(out.items())
+
+    def worst_of(name, low):
+        values = [r["radius_edge_ratio" if name == "quality" else name] for r in rows]
+        return min(values) if low else max(values)
+
+    return tuple(_ranges(d, worst_of).items())
 
 
-def quality_bounds(dim: int) -> dict[str, tuple[float, float]]:
+def quality_bounds(dim: int, spacing=None) -> dict[str, tuple[float, float]]:
     """The range every element of a template mesh lies in, per metric (the IMESH bound).
 
     Derived from :func:`quality_table`: each range runs from the regular simplex's value
-    to the worst value over all template simplices, which is the proven bound (isotropic
-    spacing). ``QUALITY_METRICS[...].optimal_range`` holds the same numbers in closed form.
+    to the worst value over all template simplices, which is the proven bound for square
+    or cubic voxels. ``QUALITY_METRICS[...].optimal_range`` holds the same numbers in
+    closed form. With anisotropic `spacing` the mesher's elements are its templates
+    stretched by the spacing, so the worst stretched template (of every template, used by
+    some leaf configuration or not: a safe bound) is the bound for that spacing.
 
     Parameters
     ----------
     dim : {2, 3}
+    spacing : float or sequence of float, optional
+        Voxel spacing the mesh was made with (one value or one per axis). Default, or all
+        values equal: the cubic bound.
 
     Returns
     -------
@@ -227,13 +245,25 @@ def quality_bounds(dim: int) -> dict[str, tuple[float, float]]:
         ``"max_angle"`` (2-D) or ``"min_dihedral"``, ``"max_dihedral"`` (3-D, degrees):
         the keys of the mesh's ``cell_data``. A GUI shades these on its histograms.
 
+    Raises
+    ------
+    ValueError
+        For a `dim` other than 2 or 3, or a spacing that is not positive and finite.
+
     Examples
     --------
     >>> b = quality_bounds(2)
     >>> [round(x, 4) for x in b["quality"] + b["min_angle"]]
     [0.5774, 0.7071, 45.0, 60.0]
+    >>> round(quality_bounds(2, spacing=(2.0, 1.0))["quality"][1], 4)   # 2:1 pixels
+    1.118
     """
-    return dict(_bounds(_check_dim(dim)))
+    d = _check_dim(dim)
+    spacing = normalize_spacing(spacing, d)
+    if all(s == spacing[0] for s in spacing):
+        return dict(_bounds(d))
+    table = template_quality(d, spacing)
+    return _ranges(d, lambda name, low: float(table[name].min() if low else table[name].max()))
 
 
 def format_quality_table(rows: list[dict]) -> str:

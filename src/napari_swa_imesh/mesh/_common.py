@@ -1,10 +1,11 @@
 """What every file format shares: meshio's cell-type names and the material names.
 
-Conventions written once for the writers (``_export`` and one module per awkward format):
-exported coordinates are :func:`export_points` (x, y(, z) = column, row(, plane), the
-reverse of the numpy axis order a ``Mesh`` keeps, unless the mesh carries a ``world``
-placement such as a NIfTI affine), and a material without a name is called
-``material_<id>``.
+Conventions written once for the writers (``_export`` and one module per awkward format)
+and the pyvista bridge (``_pyvista``): exported coordinates are :func:`export_points` (x,
+y(, z) = column, row(, plane), the reverse of the numpy axis order a ``Mesh`` keeps,
+unless the mesh carries a ``world`` placement such as a NIfTI affine); cells are
+positively oriented in those coordinates (:func:`orient_positive`); a material without a
+name is called ``material_<id>``.
 
 Format writers
 --------------
@@ -18,7 +19,9 @@ from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["CELL_TYPE", "material_names", "export_points", "export_vectors"]
+from ._quality import signed_volumes
+
+__all__ = ["CELL_TYPE", "material_names", "export_points", "export_vectors", "orient_positive"]
 
 #: meshio's name of the linear simplex of each dimension.
 CELL_TYPE = {2: "triangle", 3: "tetra"}
@@ -61,6 +64,20 @@ def export_vectors(mesh, vectors) -> np.ndarray:
         return np.ascontiguousarray(vectors[:, ::-1])
     d = vectors.shape[1]
     return np.einsum("nk,jk->nj", vectors, world[:d, :d])
+
+
+def orient_positive(points: np.ndarray, cells: np.ndarray) -> np.ndarray:
+    """Copy of `cells` with the first two corners swapped where the volume is negative.
+
+    Reversing the axes for export mirrors 3-D elements (a world placement may or may not),
+    so orientation is decided in the exported frame, by the sign of each volume. The
+    volumes are computed in chunks (:func:`signed_volumes`): the corners of ten million
+    tetrahedra at once would take a gigabyte.
+    """
+    cells = np.array(cells, dtype=np.intp, copy=True)
+    flip = signed_volumes(points, cells) < 0
+    cells[flip, 0], cells[flip, 1] = cells[flip, 1], cells[flip, 0].copy()
+    return cells
 
 
 def material_names(names: dict[int, str], materials: np.ndarray) -> dict[int, str]:

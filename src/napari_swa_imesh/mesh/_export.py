@@ -32,9 +32,9 @@ import numpy as np
 from ..io import atomic_write, check_writable
 from ._abaqus import ABAQUS_ELEMENTS, abaqus_materials, write_abaqus
 from ._common import CELL_TYPE, export_points
+from ._common import orient_positive as _orient_positive  # shared with the pyvista bridge
 from ._facets import facet_groups
 from ._gmsh import gmsh_materials, write_gmsh
-from ._quality import signed_volumes
 from ._triangle_tetgen import read_node_ele, write_node_ele
 from ._types import Mesh
 from ._vtu import write_vtu
@@ -56,18 +56,6 @@ MESH_SUFFIXES = {
 
 
 # ----------------------------------------------------------------------------- helpers
-
-
-def _orient_positive(points: np.ndarray, cells: np.ndarray) -> np.ndarray:
-    """Copy of `cells` with the first two corners swapped where the volume is negative.
-
-    The volumes are computed in chunks (:func:`signed_volumes`): the corners of ten
-    million tetrahedra at once would take a gigabyte.
-    """
-    cells = np.array(cells, dtype=np.intp, copy=True)
-    flip = signed_volumes(points, cells) < 0
-    cells[flip, 0], cells[flip, 1] = cells[flip, 1], cells[flip, 0].copy()
-    return cells
 
 
 def _check_mesh_arg(mesh) -> None:

@@ -75,7 +75,8 @@ def per_triangle_surface(points: np.ndarray, faces: np.ndarray, face_values: np.
     ((3, 2), [[0, 1, 2]], [7.0, 7.0, 7.0])
     """
     f = len(faces)
-    vertices = np.asarray(points, dtype=np.float64)[faces].reshape(3 * f, -1)
+    points = np.asarray(points, dtype=np.float64)
+    vertices = points[faces].reshape(3 * f, points.shape[1])   # shape known when F = 0
     triangles = np.arange(3 * f, dtype=np.intp).reshape(f, 3)
     return vertices, triangles, np.repeat(np.asarray(face_values, dtype=np.float64), 3)
 
@@ -93,7 +94,8 @@ def mesh_surface(mesh) -> dict[str, np.ndarray]:
     dict
         ``vertices (3F, d)``, ``triangles (F, 3)``, ``quality (3F,)`` (the worse
         radius-to-edge ratio of the face's elements), ``material (3F,)`` (of the face's
-        first element) and ``n_faces``.
+        first element), ``n_faces``, and ``faces (F, 3)`` and ``owners (F, 2)`` from
+        :func:`shown_faces` (a clipped view starts from them).
     """
     faces, owners = shown_faces(mesh.cells, mesh.material)
     q = mesh.quality
@@ -102,4 +104,4 @@ def mesh_surface(mesh) -> dict[str, np.ndarray]:
     vertices, triangles, quality = per_triangle_surface(mesh.points, faces, worst)
     material = np.repeat(mesh.material[owners[:, 0]], 3)
     return {"vertices": vertices, "triangles": triangles, "quality": quality,
-            "material": material, "n_faces": len(faces)}
+            "material": material, "n_faces": len(faces), "faces": faces, "owners": owners}

@@ -137,6 +137,37 @@ class Mesh:
                     np.asarray(self.shape, dtype=np.float64) * np.asarray(self.spacing, float))
         return self.points.min(axis=0), self.points.max(axis=0)
 
+    def to_pyvista(self):
+        """The mesh as a ``pyvista.UnstructuredGrid``, for VTK's filters and plotting.
+
+        Points in the exported frame (x, y(, z), as the mesh files have them; 2-D meshes
+        on the plane z = 0), cells ``VTK_TRIANGLE`` or ``VTK_TETRA`` positively oriented
+        there, cell data ``material`` and every array of ``cell_data``. Cell ``i`` of the
+        grid is element ``i``, point ``j`` is vertex ``j``; the filters that pass
+        ``vtkOriginalPointIds`` (``extract_cells``, ``extract_surface``) lead back to
+        ``points``, the (plane, row, column) coordinates napari draws. Needs pyvista
+        (imported here, not with the package).
+
+        Returns
+        -------
+        pyvista.UnstructuredGrid
+
+        Raises
+        ------
+        ImportError
+            Without pyvista.
+
+        Examples
+        --------
+        >>> m = Mesh([[0, 0], [0, 1], [1, 0]], [[0, 2, 1]], [7])
+        >>> grid = m.to_pyvista()
+        >>> grid.n_cells, grid.cell_data["material"].tolist()
+        (1, [7])
+        """
+        from ._pyvista import to_pyvista
+
+        return to_pyvista(self)
+
 
 def _as_points(points) -> np.ndarray:
     arr = np.asarray(points)
