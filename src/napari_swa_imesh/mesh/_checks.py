@@ -362,7 +362,9 @@ def check_mesh(mesh: Mesh, labels, *, exclude=(), tree: RegionTree | None = None
     if tree is not None:
         if not isinstance(tree, RegionTree):
             raise TypeError(f"tree must be a RegionTree (from build_tree); got {type(tree).__name__}.")
-        if tuple(tree.shape) != lab.shape:
+        multiple = len(tree.shape) == lab.ndim and all(
+            t % n == 0 for t, n in zip(tree.shape, lab.shape))
+        if not multiple:
             raise ValueError(f"tree was built from an image of shape {tuple(tree.shape)}, but the "
                              f"labels have shape {lab.shape}; pass build_tree(labels) or no tree.")
     return _check_mesh(mesh, lab, exclude_arr, tree)
@@ -378,16 +380,30 @@ def _check_mesh(mesh: Mesh, lab: np.ndarray, exclude: np.ndarray,
     n_excluded = count_excluded(lab, exclude)
     voxel = float(np.prod(mesh.spacing)) if mesh.spacing else 1.0
     if tree is None:
-        tree = _build_tree(lab)
+        tree = _build_tree(_on_lattice(lab, mesh))
+    # a tree on a finer lattice (anisotropy subdivision, refinement) is in lattice cells
+    cells_per_voxel = np.array(tree.shape) // np.array(lab.shape)
+    leaf_points = points if (cells_per_voxel == 1).all() else points * cells_per_voxel
     parts = {
         "n_unused_points": _unused_points(cells, len(points)),
         **_volumes(points, cells, lab.size - n_excluded, voxel),
         **_facets(points, cells, lab, exclude),
-        **_leaves(points, cells, tree),
+        **_leaves(leaf_points, cells, tree),
         **_pixels(points, cells, mesh.material, lab, exclude, n_excluded),
         **_finite(mesh),
     }
     return MeshChecks(**{name: parts[name] for name in MeshChecks.__dataclass_fields__})
+
+
+def _on_lattice(lab: np.ndarray, mesh: Mesh) -> np.ndarray:
+    """The labels repeated by the anisotropy subdivision the mesh records (if any): the
+    blocks its elements must lie in are homogeneous blocks of lattice cells."""
+    factors = mesh.info.get("lattice", {}).get("factors") if isinstance(mesh.info, dict) else None
+    if not factors or all(int(n) == 1 for n in factors) or len(factors) != lab.ndim:
+        return lab
+    for axis, n in enumerate(factors):
+        lab = np.repeat(lab, int(n), axis=axis)
+    return lab
 
 
 def _unused_points(cells: np.ndarray, n_points: int) -> int:
