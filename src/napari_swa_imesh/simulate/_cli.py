@@ -41,6 +41,9 @@ def add_commands(subparsers) -> None:
     p.add_argument("--order", type=int, default=1, metavar="1|2",
                    help="element degree: 1 (linear, default) or 2 (quadratic, more "
                         "accurate per unknown)")
+    p.add_argument("--refine", type=int, default=0, metavar="K",
+                   help="labels only: elements at material interfaces are 2^-K voxels "
+                        "(0..4, default 0), where the field is least smooth")
     p.add_argument("--axes", nargs="+", choices=("x", "y", "z"), default=None,
                    help="axes to solve along (default: all)")
     p.add_argument("--tol", type=float, default=1e-10,
@@ -92,9 +95,15 @@ def _run_simulate(args: argparse.Namespace) -> int:
     elif args.output:
         check_series_path(args.output, force=args.force)
     is_image = image_suffix(args.input) in IMAGE_SUFFIXES
-    if not is_image and (args.spacing or args.exclude):
-        raise ValueError("--spacing and --exclude apply to a label image; a mesh file "
-                         "already has its coordinates and materials.")
+    if not is_image and (args.spacing or args.exclude or args.refine):
+        raise ValueError("--spacing, --exclude and --refine apply to a label image; a mesh "
+                         "file already has its coordinates, materials and elements.")
+    from ..mesh._lattice import check_refine
+
+    check_refine(args.refine)
+    if transient is not None and args.refine:
+        raise ValueError("--refine is for the steady k_eff run; for --transient, mesh with "
+                         "swa-imesh mesh --refine K and simulate the mesh file.")
     if args.spacing:
         normalize_spacing(args.spacing, len(args.spacing))
 
@@ -118,7 +127,7 @@ def _run_simulate(args: argparse.Namespace) -> int:
     else:
         result = simulate(source, conductivity, spacing=spacing, order=args.order,
                           axes=args.axes, tol=args.tol, exclude=tuple(args.exclude),
-                          material_names=names)
+                          material_names=names, refine=args.refine)
     written = []
     if args.output:
         with timer("write"):

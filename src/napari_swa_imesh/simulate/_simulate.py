@@ -105,19 +105,19 @@ def _check_axes(axes, ndim: int) -> tuple[str, ...]:
 
 
 def prepare_mesh(mesh_or_labels, *, spacing=None, exclude=(),
-                 material_names: Mapping[int, str] | None = None) -> Mesh:
+                 material_names: Mapping[int, str] | None = None, refine: int = 0) -> Mesh:
     """The mesh to simulate on: a given mesh (with extra names, not modified) or the
-    IMESH mesh of a label image."""
+    IMESH mesh of a label image (refined at interfaces by `refine` levels)."""
     if isinstance(mesh_or_labels, Mesh):
-        if spacing is not None or tuple(exclude):
-            raise ValueError("spacing and exclude apply to a label image; a mesh already "
-                             "has them.")
+        if spacing is not None or tuple(exclude) or refine:
+            raise ValueError("spacing, exclude and refine apply to a label image; a mesh "
+                             "already has them.")
         if not material_names:
             return mesh_or_labels
         names = {**mesh_or_labels.material_names, **dict(material_names)}
         return dataclasses.replace(mesh_or_labels, material_names=names)
     return mesh_labels(mesh_or_labels, spacing=spacing, exclude=exclude,
-                       material_names=dict(material_names or {}))
+                       material_names=dict(material_names or {}), refine=refine)
 
 
 def check_tolerance(tol) -> None:
@@ -137,13 +137,13 @@ def _cell_flux(tensors: np.ndarray, cell_material: np.ndarray, grad: np.ndarray
 
 def simulate_steps(mesh_or_labels, conductivity: Mapping, *, spacing=None, order: int = 1,
                    axes=None, tol: float = DEFAULT_TOLERANCE, exclude=(),
-                   material_names: Mapping[int, str] | None = None,
+                   material_names: Mapping[int, str] | None = None, refine: int = 0,
                    ) -> Generator[tuple[int, int, str], None, SimulationResult]:
     """Run :func:`simulate` step by step, for a progress bar.
 
     Parameters
     ----------
-    mesh_or_labels, conductivity, spacing, order, axes, tol, exclude, material_names
+    mesh_or_labels, conductivity, spacing, order, axes, tol, exclude, material_names, refine
         As for :func:`simulate`.
 
     Yields
@@ -162,7 +162,7 @@ def simulate_steps(mesh_or_labels, conductivity: Mapping, *, spacing=None, order
     seconds: dict[str, float] = {}
     t0 = time.perf_counter()
     mesh = prepare_mesh(mesh_or_labels, spacing=spacing, exclude=exclude,
-                        material_names=material_names)
+                        material_names=material_names, refine=refine)
     names = _check_axes(axes, mesh.ndim)
     materials, cell_material = np.unique(mesh.material, return_inverse=True)
     tensors = conductivity_tensors(conductivity, materials, mesh.ndim, mesh.material_names)
@@ -216,7 +216,8 @@ def simulate_steps(mesh_or_labels, conductivity: Mapping, *, spacing=None, order
 
 def simulate(mesh_or_labels, conductivity: Mapping, *, spacing=None, order: int = 1,
              axes=None, tol: float = DEFAULT_TOLERANCE, exclude=(),
-             material_names: Mapping[int, str] | None = None) -> SimulationResult:
+             material_names: Mapping[int, str] | None = None,
+             refine: int = 0) -> SimulationResult:
     """Steady diffusion on an IMESH mesh: effective conductivity of the image box.
 
     For each axis asked, the mixed-boundary protocol: potential 0 and 1 on the two faces
@@ -243,6 +244,9 @@ def simulate(mesh_or_labels, conductivity: Mapping, *, spacing=None, order: int 
         Materials not to mesh (labels only); they act as insulating voids.
     material_names : mapping of int to str, optional
         Names for materials, usable as keys of `conductivity`.
+    refine : int
+        Labels only: mesh with elements of ``2**-refine`` voxels at material interfaces
+        (``mesh_labels(refine=...)``), where the field is least smooth.
 
     Returns
     -------
@@ -259,7 +263,8 @@ def simulate(mesh_or_labels, conductivity: Mapping, *, spacing=None, order: int 
     1.5
     """
     steps = simulate_steps(mesh_or_labels, conductivity, spacing=spacing, order=order,
-                           axes=axes, tol=tol, exclude=exclude, material_names=material_names)
+                           axes=axes, tol=tol, exclude=exclude, material_names=material_names,
+                           refine=refine)
     while True:
         try:
             next(steps)
