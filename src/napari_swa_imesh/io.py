@@ -3,7 +3,9 @@
 Supported: ``.tif/.tiff`` (tifffile; ImageJ spacing and resolution tags), ``.png``,
 ``.jpg/.jpeg`` (imageio), ``.npy`` (no pickles), ``.nii/.nii.gz`` (nibabel; spacing from
 the header zooms). Arrays keep the order in which the file stores them; spacing is given
-per array axis in that same order.
+per array axis in that same order. A NIfTI file also places its voxels in a world frame
+(:func:`read_affine`: nibabel's ``img.affine``, voxel centres at integer indices); the
+other formats place voxel corner 0 at the origin, axes scaled by the spacing.
 """
 
 from __future__ import annotations
@@ -20,8 +22,9 @@ import numpy as np
 
 from ._validation import normalize_spacing
 
-__all__ = ["read_image", "write_labels", "write_labels_to", "label_array", "check_label_format",
-           "image_suffix", "IMAGE_SUFFIXES", "LABEL_SUFFIXES", "check_writable", "atomic_write",
+__all__ = ["read_image", "read_affine", "is_nifti", "grid_affine", "write_labels",
+           "write_labels_to", "label_array", "check_label_format", "image_suffix",
+           "IMAGE_SUFFIXES", "LABEL_SUFFIXES", "check_writable", "atomic_write",
            "check_figure_path", "write_figure"]
 
 LABEL_SUFFIXES = (".npy", ".tif", ".tiff", ".nii", ".nii.gz", ".png")
@@ -134,6 +137,70 @@ def image_suffix(path) -> str:
     if name.endswith(".nii.gz"):
         return ".nii.gz"
     return Path(name).suffix
+
+
+def is_nifti(path) -> bool:
+    """Whether `path` names a NIfTI file (``.nii`` or ``.nii.gz``)."""
+    return image_suffix(path) in (".nii", ".nii.gz")
+
+
+def read_affine(path) -> np.ndarray | None:
+    """The index-to-world affine of a NIfTI file (header only), or None for other formats.
+
+    Parameters
+    ----------
+    path : str or Path
+        Any file :func:`read_image` reads.
+
+    Returns
+    -------
+    (4, 4) ndarray of float64 or None
+        nibabel's ``img.affine`` (the sform, else the qform, else the zooms): maps voxel
+        indices, in the array order :func:`read_image` gives, to world x, y, z, with voxel
+        centres at integer indices. None for TIFF, PNG, JPEG and ``.npy``, whose voxel
+        corner 0 lies at the origin.
+
+    Raises
+    ------
+    FileNotFoundError, ValueError
+        Missing file, or a NIfTI header nibabel cannot parse.
+
+    Examples
+    --------
+    >>> import tempfile, pathlib
+    >>> path = pathlib.Path(tempfile.mkdtemp()) / "l.nii.gz"
+    >>> _ = write_labels(path, np.ones((2, 3, 4), np.uint8), spacing=(2, 1, 1))
+    >>> np.diag(read_affine(path)).tolist()
+    [2.0, 1.0, 1.0, 1.0]
+    """
+    p = Path(path)
+    if not is_nifti(p):
+        return None
+    if not p.is_file():
+        raise FileNotFoundError(f"no image file at {p}; check the path.")
+    import nibabel as nib
+
+    try:
+        return np.asarray(nib.load(str(p)).affine, dtype=np.float64)
+    except Exception as exc:  # a corrupt header surfaces as many nibabel errors
+        raise ValueError(f"cannot read the header of {p} as NIfTI: {exc}") from exc
+
+
+def grid_affine(affine, step: int, ndim: int) -> np.ndarray:
+    """Index-to-world affine of a grid of `step`-voxel blocks (tiles) of an image.
+
+    Block t covers voxels ``t*step .. t*step + step - 1`` along each of the first `ndim`
+    axes, so its centre is voxel ``t*step + (step - 1) / 2``.
+
+    Examples
+    --------
+    >>> grid_affine(np.diag([2.0, 1.0, 1.0, 1.0]), 4, 2)[:2].tolist()
+    [[8.0, 0.0, 0.0, 3.0], [0.0, 4.0, 0.0, 1.5]]
+    """
+    block = np.eye(len(affine))
+    for axis in range(ndim):
+        block[axis, axis], block[axis, -1] = step, (step - 1) / 2
+    return np.asarray(affine, dtype=np.float64) @ block
 
 
 def read_image(path, *, gray: bool = False) -> tuple[np.ndarray, tuple[float, ...]]:
@@ -287,7 +354,8 @@ def check_label_format(path, labels: np.ndarray) -> None:
         raise ValueError(f"NIfTI holds up to 7 axes; got {labels.ndim}. Use .npy.")
 
 
-def write_labels(path, labels, *, spacing=None, origin=None, force: bool = False) -> Path:
+def write_labels(path, labels, *, spacing=None, origin=None, affine=None,
+                 force: bool = False) -> Path:
     """Write a label image in the format its suffix names; values are kept exactly.
 
     Parameters
@@ -303,6 +371,10 @@ def write_labels(path, labels, *, spacing=None, origin=None, force: bool = False
     origin : sequence of float, optional
         Physical position of the centre of element 0 per axis (NIfTI affine translation,
         ImageJ ``xorigin``/``yorigin``/``zorigin``); default 0.
+    affine : (4, 4) array_like, optional
+        NIfTI only: the index-to-world affine of `labels` (e.g. the :func:`read_affine` of
+        the image they label, or its :func:`grid_affine` for tile labels), written as the
+        sform and qform instead of `spacing` and `origin`; the zooms are its voxel sizes.
     force : bool
         Replace an existing file. Without it an existing file is an error.
 
@@ -313,14 +385,19 @@ def write_labels(path, labels, *, spacing=None, origin=None, force: bool = False
     """
     data = label_array(labels)
     check_label_format(path, data)
+    if affine is not None and not is_nifti(path):
+        raise ValueError(f"an affine can only be written to NIfTI (.nii, .nii.gz), not "
+                         f"{Path(path).name!r}; give spacing and origin instead.")
     with atomic_write([path], force=force) as (tmp,):
-        write_labels_to(tmp, data, spacing=spacing, origin=origin)
+        write_labels_to(tmp, data, spacing=spacing, origin=origin, affine=affine)
     return Path(path)
 
 
-def write_labels_to(tmp, data: np.ndarray, *, spacing=None, origin=None) -> None:
+def write_labels_to(tmp, data: np.ndarray, *, spacing=None, origin=None, affine=None
+                    ) -> None:
     """Write checked labels (:func:`label_array`, :func:`check_label_format`) to `tmp`,
-    a temporary path from :func:`atomic_write` with the target's name."""
+    a temporary path from :func:`atomic_write` with the target's name (`affine`: NIfTI
+    only, see :func:`write_labels`)."""
     suffix = image_suffix(tmp)
     sp = normalize_spacing(spacing, data.ndim)
     org = (0.0,) * data.ndim if origin is None else tuple(float(v) for v in origin)
@@ -349,10 +426,15 @@ def write_labels_to(tmp, data: np.ndarray, *, spacing=None, origin=None) -> None
     elif suffix in (".nii", ".nii.gz"):
         import nibabel as nib
 
-        affine = np.eye(4)
-        for axis in range(min(3, data.ndim)):
-            affine[axis, axis] = sp[axis]
-            affine[axis, 3] = org[axis]
+        if affine is None:
+            affine = np.eye(4)
+            for axis in range(min(3, data.ndim)):
+                affine[axis, axis] = sp[axis]
+                affine[axis, 3] = org[axis]
+        else:
+            affine = np.asarray(affine, dtype=np.float64)
+            sizes = np.linalg.norm(affine[:3, :3], axis=0)
+            sp = tuple(float(sizes[a]) if a < 3 else sp[a] for a in range(data.ndim))
         img = nib.Nifti1Image(data, affine, dtype=data.dtype)
         img.header.set_zooms(sp)
         nib.save(img, str(tmp))

@@ -21,7 +21,15 @@ from ..segmentation import (
 )
 from . import _samples_layer as sl
 from ._dock import button, group, scroll_body, side_by_side, wrapped_label
-from ._layers import labels_colormap, layer_picker, layer_spacing, material_palette, pick
+from ._layers import (
+    AFFINE_KEY,
+    block_affine,
+    labels_colormap,
+    layer_picker,
+    layer_spacing,
+    material_palette,
+    pick,
+)
 from ._tasks import TaskPanel, notify_error, notify_info, notify_warning
 
 if TYPE_CHECKING:
@@ -346,7 +354,8 @@ class ClassifyWidget(QWidget):
         names = {m.label: m.name for m in materials}
         colors = material_palette(names, {m.label: m.color for m in materials})
         spacing = layer_spacing(image)
-        if self.output_combo.value == OUTPUT_TILES:
+        tiles = self.output_combo.value == OUTPUT_TILES
+        if tiles:
             data = result.tile_labels
             layer_scale, offset = tile_placement(result.scale, spacing, image.ndim)
             translate = tuple(t + o for t, o in zip(image.translate, offset))
@@ -354,17 +363,19 @@ class ClassifyWidget(QWidget):
             data, layer_scale, translate = result.labels, spacing, tuple(image.translate)
         name = f"{image.name} SWA labels"
         metadata = {SEGMENTATION_KEY: result.summary(), "material_names": names,
-                    "swa_imesh_source": image.name}
+                    "swa_imesh_source": image.name,
+                    AFFINE_KEY: block_affine(image, 1 << result.scale if tiles else 1)}
+        affine = image.affine.affine_matrix               # a NIfTI image's world placement
         if name in self.viewer.layers and \
                 type(self.viewer.layers[name]).__name__ == "Labels":
             labels = self.viewer.layers[name]
             labels.data = data
-            labels.scale, labels.translate = layer_scale, translate
+            labels.scale, labels.translate, labels.affine = layer_scale, translate, affine
             labels.metadata.update(metadata)
             labels.colormap = labels_colormap(colors)
         else:
             labels = self.viewer.add_labels(data, name=name, scale=layer_scale,
-                                            translate=translate, opacity=0.5,
+                                            translate=translate, affine=affine, opacity=0.5,
                                             colormap=labels_colormap(colors), metadata=metadata)
         self.scores.value = run_summary(result, dice, names)
         self._show_signatures(result.signatures)

@@ -11,7 +11,8 @@ if TYPE_CHECKING:
 
 __all__ = ["PALETTE", "material_palette", "labels_colormap", "layer_picker", "pick",
            "layer_spacing", "index_to_layer_data", "mesh_translate", "SAMPLES_KEY",
-           "MATERIALS_KEY", "EXTENT_KEY", "MESH_KEY", "SCALE_KEY"]
+           "MATERIALS_KEY", "EXTENT_KEY", "MESH_KEY", "SCALE_KEY", "AFFINE_KEY",
+           "placed_by_affine", "block_affine"]
 
 # tab10 without grey: distinct on dark and light napari themes
 PALETTE = ("#1f77b4", "#ff7f0e", "#2ca02c", "#d62728", "#9467bd", "#8c564b", "#e377c2",
@@ -23,6 +24,7 @@ MATERIALS_KEY = "swa_imesh_materials"  # on a Shapes layer: list of {label, name
 SCALE_KEY = "swa_imesh_scale"          # on a Shapes layer: the scale chosen from the RES
 EXTENT_KEY = "swa_imesh_extent_of"     # on the 3-D extent overlay: its samples layer name
 MESH_KEY = "swa_imesh_mesh"            # on a Surface layer: the real Mesh (for the writer)
+AFFINE_KEY = "swa_imesh_affine"        # on a layer read from NIfTI: its index-to-world affine
 
 
 def default_color(label: int) -> str:
@@ -49,6 +51,30 @@ def labels_colormap(colors: dict[int, str]):
 def layer_spacing(layer) -> tuple[float, ...]:
     """Voxel spacing of a layer: its ``scale``."""
     return tuple(float(s) for s in layer.scale)
+
+
+def placed_by_affine(layer) -> np.ndarray | None:
+    """The NIfTI affine a layer was read with (``AFFINE_KEY``), while its scale is still
+    the affine's voxel sizes; else None (mesh with the scale, in the image's frame)."""
+    affine = layer.metadata.get(AFFINE_KEY)
+    if affine is None:
+        return None
+    from ..mesh._world import voxel_sizes
+
+    affine = np.asarray(affine, dtype=np.float64)
+    if not np.allclose(voxel_sizes(affine, layer.ndim), layer.scale, rtol=1e-9):
+        return None
+    return affine
+
+
+def block_affine(layer, step: int = 1) -> list | None:
+    """``AFFINE_KEY`` of a grid of `step`-voxel blocks of `layer` (tile labels; 1: the same
+    grid, :func:`~napari_swa_imesh.io.grid_affine`), from the layer's own; None when it has
+    none."""
+    from ..io import grid_affine
+
+    affine = layer.metadata.get(AFFINE_KEY)
+    return None if affine is None else grid_affine(affine, step, layer.ndim).tolist()
 
 
 def index_to_layer_data(coords: np.ndarray, source, target) -> np.ndarray:

@@ -13,7 +13,15 @@ from qtpy.QtWidgets import QFileDialog, QLabel, QListWidget, QListWidgetItem, QW
 from ..mesh import QUALITY_METRICS, check_mesh, mesh_labels, mesh_surface, quality_table, write_mesh
 from ..mesh._export import MESH_SUFFIXES
 from ._dock import scroll_body, wrapped_label
-from ._layers import MESH_KEY, default_color, layer_picker, layer_spacing, mesh_translate, pick
+from ._layers import (
+    MESH_KEY,
+    default_color,
+    layer_picker,
+    layer_spacing,
+    mesh_translate,
+    pick,
+    placed_by_affine,
+)
 from ._plots import ThemedFigure, dark_theme, theme_text_color
 from ._tasks import TaskPanel, notify_error, notify_info
 
@@ -168,11 +176,14 @@ class MeshWidget(QWidget):
         spacing, exclude = layer_spacing(layer), self.excluded()
         method, run_checks = self.method_combo.value, self.checks_box.value
         names = {int(k): str(v) for k, v in layer.metadata.get("material_names", {}).items()}
+        # read from NIfTI (and its scale untouched): files get the file's world frame
+        place = placed_by_affine(layer)
 
         def steps():
             yield 0, 3, f"{method} mesh of the balanced 2^d-tree"
-            mesh = mesh_labels(data, method=method, exclude=exclude, spacing=spacing,
-                               material_names=names)
+            mesh = mesh_labels(data, method=method, exclude=exclude, material_names=names,
+                               **({"affine": place} if place is not None else
+                                  {"spacing": spacing}))
             checks = None
             if run_checks:
                 yield 1, 3, "checking the mesh (conforming, volumes, labels recovered)"
@@ -200,11 +211,13 @@ class MeshWidget(QWidget):
             existing.vertex_colors = None
             existing.data = data
             existing.translate = translate
+            existing.affine = labels.affine.affine_matrix
             existing.metadata.update(metadata)
             layer = existing
         else:
             # flat shading gives 3-D faces depth; in 2-D it would only darken the colours
             layer = self.viewer.add_surface(data, name=name, translate=translate,
+                                            affine=labels.affine.affine_matrix,
                                             metadata=metadata,
                                             shading="flat" if mesh.ndim == 3 else "none")
         self.surface_layer = layer

@@ -1,11 +1,40 @@
-"""Reader for NIfTI volumes (.nii, .nii.gz) that keeps the voxel spacing as the layer scale."""
+"""Reader for NIfTI volumes (.nii, .nii.gz): every voxel where the file's affine puts it.
+
+The layer's ``scale`` is the voxel size per array axis (what the widgets take as spacing)
+and its ``affine`` the rest of the NIfTI affine (rotation, flip, origin); the NIfTI affine
+itself rides in the metadata (``AFFINE_KEY``) so a mesh of the layer is written in that
+world. napari world axis ``a`` is the NIfTI world axis nearest to array axis ``a``
+(nibabel's ``io_orientation``): napari draws a 2-D slice only through the displayed rows of
+the affine, and a layer whose affine sends a displayed array axis to the slider's world
+axis (a plain axis swap) would be singular there. So a near-axial volume stays close to
+diagonal in napari, and the mesh Surface, given the same affine, lies on it.
+
+A volume opens as a Labels layer when its values are whole numbers and either its name
+says so (a word such as ``seg``, ``labels``, ``mask``, ``aseg`` or ``atlas`` between
+``_``, ``-`` or ``.``) or at most ``MAX_LABELS`` distinct values occur in a sample of about a
+million voxels; else as an Image layer.
+"""
 
 from __future__ import annotations
 
+import re
+import warnings
 from collections.abc import Callable
 from pathlib import Path
 
-__all__ = ["get_nifti_reader", "read_nifti"]
+import numpy as np
+
+from ._layers import AFFINE_KEY
+
+__all__ = ["get_nifti_reader", "read_nifti", "napari_placement", "looks_like_labels",
+           "LABEL_WORDS", "MAX_LABELS"]
+
+#: Words of a file name that mark a label volume (BIDS ``dseg``, FreeSurfer ``aseg``...).
+LABEL_WORDS = frozenset({"seg", "dseg", "segmentation", "label", "labels", "mask", "masks",
+                         "aseg", "aparc", "parc", "parcellation", "atlas", "roi"})
+#: At most this many distinct whole values in the sample make an unnamed volume labels.
+MAX_LABELS = 64
+_SAMPLE = 1 << 20
 
 
 def get_nifti_reader(path) -> Callable | None:
@@ -15,12 +44,80 @@ def get_nifti_reader(path) -> Callable | None:
     return read_nifti
 
 
-def read_nifti(path) -> list[tuple]:
-    """Read a NIfTI file as an image layer whose ``scale`` is the voxel spacing."""
-    from ..io import read_image
+def napari_placement(affine, ndim: int) -> tuple[tuple[float, ...], np.ndarray]:
+    """napari ``scale`` and ``affine`` of a layer whose data have index-to-world `affine`.
 
-    image, spacing = read_image(path)
+    Parameters
+    ----------
+    affine : (4, 4) array_like
+        NIfTI affine (voxel centres at integer indices, world x, y, z).
+    ndim : int
+        Dimension of the data (2 or 3; a 2-D image must lie in a plane of constant z).
+
+    Returns
+    -------
+    scale : tuple of float
+        Voxel size per array axis (the norms of the affine's columns).
+    affine : (ndim+1, ndim+1) ndarray
+        Maps ``scale * index`` to napari world: the NIfTI world's rotation/flip and
+        origin, its axes ordered as the array axes nearest to them.
+
+    Raises
+    ------
+    ValueError
+        As :func:`napari_swa_imesh.mesh.world_from_affine` (singular, tilted 2-D, ...).
+    """
+    from nibabel.orientations import io_orientation
+
+    from ..mesh import world_from_affine
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", UserWarning)   # shear: napari shows it as it is
+        spacing, world = world_from_affine(affine, ndim)
+    rotation = world[:ndim, :ndim]
+    # world maps corners (index + 1/2) * spacing; napari maps voxel centres index * scale
+    shift = world[:ndim, ndim] + rotation @ np.divide(spacing, 2)
+    index_to_world = np.eye(ndim + 1)
+    index_to_world[:ndim, :ndim], index_to_world[:ndim, ndim] = rotation * spacing, shift
+    nearest = io_orientation(index_to_world)[:, 0].astype(int)   # world axis per array axis
+    out = np.eye(ndim + 1)
+    out[:ndim, :ndim], out[:ndim, ndim] = rotation[nearest], shift[nearest]
+    return spacing, out
+
+
+def looks_like_labels(data: np.ndarray, name: str) -> bool:
+    """Whether a volume is a label image: whole values, and a label word in `name` or at
+    most :data:`MAX_LABELS` distinct values in a sample (see the module docstring)."""
+    flat = data.reshape(-1)
+    sample = flat[:: max(1, flat.size // _SAMPLE)]
+    if data.dtype.kind == "b":
+        return True
+    if data.dtype.kind == "f":
+        if not (np.isfinite(sample).all() and np.array_equal(sample, np.round(sample))):
+            return False
+    elif data.dtype.kind not in "iu":
+        return False
+    if LABEL_WORDS & set(re.split(r"[^a-z0-9]+", name.lower())):
+        return True
+    return np.unique(sample).size <= MAX_LABELS
+
+
+def read_nifti(path) -> list[tuple]:
+    """Read a NIfTI file as an Image or Labels layer placed by the file's affine."""
+    from ..io import label_array, read_affine, read_image
+
+    image, zooms = read_image(path)
+    affine = read_affine(path)
     name = Path(str(path)).name
     for suffix in (".gz", ".nii"):
         name = name.removesuffix(suffix)
-    return [(image, {"name": name, "scale": spacing}, "image")]
+    kwargs: dict = {"name": name, "scale": zooms, "metadata": {}}
+    if image.ndim in (2, 3):
+        try:
+            kwargs["scale"], kwargs["affine"] = napari_placement(affine, image.ndim)
+            kwargs["metadata"][AFFINE_KEY] = affine.tolist()
+        except ValueError as exc:
+            warnings.warn(f"{name}: {exc} Showing it with its voxel sizes only.", stacklevel=2)
+    if looks_like_labels(image, name):
+        return [(label_array(image, name=name), kwargs, "labels")]
+    return [(image, kwargs, "image")]

@@ -235,9 +235,10 @@ class SimulateWidget(QWidget):
             self.field_layer.name = name
         else:
             translate = mesh_layer.translate if mesh_layer is not None else np.zeros(mesh.ndim)
+            affine = mesh_layer.affine.affine_matrix if mesh_layer is not None else None
             self.field_layer = self.viewer.add_surface(
                 data, name=name, colormap=COLORMAP, contrast_limits=(0.0, 1.0),
-                translate=translate, shading="smooth" if mesh.ndim == 3 else "none",
+                translate=translate, affine=affine, shading="smooth" if mesh.ndim == 3 else "none",
                 metadata={FIELD_KEY: axis})
         self.field_layer.metadata[FIELD_KEY] = axis
 

@@ -9,6 +9,8 @@
   :func:`quality_table` and the ranges they prove per metric, :func:`quality_bounds`;
 * export: :func:`write_mesh`, :func:`read_mesh`, :func:`to_meshio`, and
   :func:`write_mesh_vtu` (the ``.vtu`` writer, with extra fields);
+* placement: ``mesh_labels(..., affine=...)`` puts the files in an image's world frame
+  (NIfTI); :func:`world_from_affine` gives the spacing and ``Mesh.world`` it uses;
 * facet groups for boundary conditions: :func:`facet_groups` (box sides, material
   interfaces, exteriors);
 * memory: :func:`estimate_mesh_memory`, :func:`count_boundary_voxels`;
@@ -33,11 +35,12 @@ from ._quality import (
 )
 from ._surface import mesh_surface, shown_faces
 from ._types import Mesh
+from ._world import world_from_affine
 
 __all__ = [
     "FacetGroup", "facet_groups", "write_mesh_vtu", "Mesh", "balance_tree", "mesh_labels", "mesh_tree", "check_mesh", "MeshChecks",
     "rasterize_materials", "QUALITY_METRICS", "dihedral_angles", "max_angle", "min_angle",
     "radius_edge_ratio", "signed_volumes", "quality_bounds", "quality_table",
     "format_quality_table", "read_mesh", "to_meshio", "write_mesh", "estimate_mesh_memory",
-    "count_boundary_voxels", "mesh_surface", "shown_faces",
+    "count_boundary_voxels", "mesh_surface", "shown_faces", "world_from_affine",
 ]

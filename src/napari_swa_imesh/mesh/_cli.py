@@ -49,6 +49,10 @@ def add_commands(subparsers) -> None:
     p.add_argument("--spacing", type=float, nargs="+", default=None, metavar="S",
                    help="voxel size per axis in array order (one value = isotropic); "
                         "default: from the file, else 1")
+    p.add_argument("--index-space", action="store_true",
+                   help="NIfTI only: write the mesh in the image's own frame (x, y, z = "
+                        "column, row, plane times the header zooms, voxel corner 0 at 0) "
+                        "instead of the world frame of the file's affine (the default)")
     p.add_argument("--material-names", nargs="+", action="extend", default=[],
                    metavar="ID=NAME", help="names for materials, e.g. 1=bone 2=soft "
                                            "(Gmsh physical groups, Abaqus element sets)")
@@ -139,6 +143,7 @@ def _run_mesh(args: argparse.Namespace) -> int:
     _check_resolution_args(args)
     # from the file's header: refuse a volume whose labels and grids alone cannot fit
     peek = _peek_shape_dtype(args.labels)
+    placement = _placement(args, peek)
     if peek is not None and len(peek[0]) in (2, 3) and limit != 0:
         _check_memory(args, estimate_mesh_memory(peek[0], peek[1], n_boundary=0,
                                                  max_label=0, check=not args.no_check),
@@ -153,7 +158,7 @@ def _run_mesh(args: argparse.Namespace) -> int:
     # the door: labels keep their dtype (no copy), spacing and exclusions checked once
     labels, spacing, exclude = _mesh_arguments(
         image, method=args.method, exclude=tuple(args.exclude),
-        spacing=args.spacing if args.spacing else file_spacing,
+        spacing=placement[0] if placement else args.spacing if args.spacing else file_spacing,
         name=f"labels in {Path(args.labels).name}")
     del image
     from ._imesh import resolution_arguments
@@ -178,6 +183,7 @@ def _run_mesh(args: argparse.Namespace) -> int:
         mesh, tree = _mesh_labels(labels, method=args.method, exclude=exclude,
                                   spacing=spacing, material_names=names, lattice=lattice,
                                   max_size=max_size)
+    mesh.world = placement[1] if placement else None
     if coarsen:
         mesh.info["coarsen"] = coarse_report
         warn_lost_materials(coarse_report, names)
@@ -193,6 +199,8 @@ def _run_mesh(args: argparse.Namespace) -> int:
 
     report = _mesh_report(args, mesh, checks, written, timer.seconds)
     report["memory_estimate_bytes"] = estimate
+    report["frame"] = "world" if placement else "image"
+    report["world"] = placement[1].tolist() if placement else None
     if args.json:
         print_json(report)
     else:
@@ -218,6 +226,31 @@ def _check_resolution_args(args) -> None:
     check_coarsen(args.coarsen)
     if args.max_size is not None and not (np.isfinite(args.max_size) and args.max_size > 0):
         raise ValueError(f"--max-size must be a positive length; got {args.max_size}.")
+
+
+def _placement(args, peek) -> tuple | None:
+    """(spacing, world) from a NIfTI file's affine (its header only, before any work), or
+    None: the image's own frame (other formats, ``--index-space``)."""
+    from ..io import is_nifti, read_affine
+    from ._world import world_from_affine
+
+    name = Path(args.labels).name
+    if not is_nifti(args.labels):
+        if args.index_space:
+            raise ValueError(f"--index-space applies to NIfTI files (.nii, .nii.gz), whose "
+                             f"affine places the mesh; {name} has none and is always meshed "
+                             "in its own frame, so drop the option.")
+        return None
+    if args.index_space:
+        return None
+    if args.spacing:
+        raise ValueError(f"--spacing conflicts with the affine of {name}, which sets the voxel "
+                         "sizes and places the mesh in world coordinates; drop --spacing, or "
+                         "add --index-space to mesh in the image's own frame with it.")
+    affine = read_affine(args.labels)
+    if peek is None or len(peek[0]) not in (2, 3):
+        return None                   # the reader or the mesher's door says what is wrong
+    return world_from_affine(affine, len(peek[0]), name=f"the affine of {name}")
 
 
 def _check_memory(args, estimate: int, limit: int | None, shape, dtype, *,
@@ -356,6 +389,8 @@ def _mesh_text(r: dict) -> str:
     flags = [f"{k} {'ok' if v else 'FAILED'}" for k, v in r["checks"].items()
              if isinstance(v, bool) and k not in ("all_passed", "skipped")]
     lines.append("checks: " + (", ".join(flags) if flags else "skipped (--no-check)"))
+    if r.get("frame") == "world":
+        lines.append("points in the world frame of the NIfTI affine (--index-space: image frame)")
     total = sum(v for k, v in r["seconds"].items() if k != "mesh_steps")
     lines.append(f"wrote {', '.join(r['output'])} ({total:.2f} s)")
     return "\n".join(lines)

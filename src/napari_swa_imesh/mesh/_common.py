@@ -1,8 +1,10 @@
 """What every file format shares: meshio's cell-type names and the material names.
 
 Conventions written once for the writers (``_export`` and one module per awkward format):
-exported coordinates are x, y(, z) = column, row(, plane), the reverse of the numpy axis
-order a ``Mesh`` keeps, and a material without a name is called ``material_<id>``.
+exported coordinates are :func:`export_points` (x, y(, z) = column, row(, plane), the
+reverse of the numpy axis order a ``Mesh`` keeps, unless the mesh carries a ``world``
+placement such as a NIfTI affine), and a material without a name is called
+``material_<id>``.
 
 Format writers
 --------------
@@ -16,7 +18,7 @@ from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["CELL_TYPE", "material_names", "export_points"]
+__all__ = ["CELL_TYPE", "material_names", "export_points", "export_vectors"]
 
 #: meshio's name of the linear simplex of each dimension.
 CELL_TYPE = {2: "triangle", 3: "tetra"}
@@ -25,10 +27,40 @@ CELL_TYPE = {2: "triangle", 3: "tetra"}
 def export_points(mesh) -> np.ndarray:
     """(N, d) float64 coordinates of `mesh`'s points as every file gets them: x, y(, z).
 
-    The one place the exported frame is decided (every writer calls it): today the
-    mesh's axes reversed (column, row(, plane)).
+    The one place the exported frame is decided (every writer calls it): the mesh's
+    axes reversed (column, row(, plane)), or ``mesh.world`` applied to the points when
+    the mesh carries one (a NIfTI image's world frame, see ``_world``).
+
+    Examples
+    --------
+    >>> from napari_swa_imesh.mesh import Mesh
+    >>> m = Mesh([[0, 0], [0, 2], [1, 0]], [[0, 2, 1]], [1])
+    >>> export_points(m).tolist()
+    [[0.0, 0.0], [2.0, 0.0], [0.0, 1.0]]
+    >>> m.world = np.array([[1., 0, 5], [0, -1, 0], [0, 0, 1]])
+    >>> export_points(m).tolist()
+    [[5.0, 0.0], [5.0, -2.0], [6.0, 0.0]]
     """
-    return np.ascontiguousarray(np.asarray(mesh.points, dtype=np.float64)[:, ::-1])
+    points = np.asarray(mesh.points, dtype=np.float64)
+    world = mesh.world
+    if world is None:
+        return np.ascontiguousarray(points[:, ::-1])
+    d = points.shape[1]
+    # einsum: a (N, 3) x (3, 3) product without BLAS's threads (2-3x faster here)
+    out = np.einsum("nk,jk->nj", points, world[:d, :d])
+    out += world[:d, d]
+    return out
+
+
+def export_vectors(mesh, vectors) -> np.ndarray:
+    """(K, d) vectors given in `mesh`'s axis order (plane, row, col), in the frame of
+    :func:`export_points` (a flux written beside the points must turn with them)."""
+    vectors = np.asarray(vectors, dtype=np.float64)
+    world = mesh.world
+    if world is None:
+        return np.ascontiguousarray(vectors[:, ::-1])
+    d = vectors.shape[1]
+    return np.einsum("nk,jk->nj", vectors, world[:d, :d])
 
 
 def material_names(names: dict[int, str], materials: np.ndarray) -> dict[int, str]:

@@ -32,6 +32,7 @@ from ._coarsen import check_coarsen, coarsen_labels
 from ._lattice import Lattice, choose_lattice, lattice_tree
 from ._templates import template_mesh, template_quality
 from ._types import Mesh
+from ._world import world_from_affine
 
 __all__ = ["mesh_labels", "mesh_tree"]
 
@@ -39,7 +40,7 @@ METHODS = ("template", "delaunay")
 
 
 def mesh_labels(labels, *, method: str = "template", exclude=(), spacing=None,
-                material_names: dict[int, str] | None = None, refine: int = 0,
+                material_names: dict[int, str] | None = None, affine=None, refine: int = 0,
                 max_size: float | None = None, subdivide: bool = True,
                 coarsen: int = 0) -> Mesh:
     """Mesh a 2-D or 3-D label image into triangles or tetrahedra, one material each.
@@ -61,6 +62,12 @@ def mesh_labels(labels, *, method: str = "template", exclude=(), spacing=None,
         ``index * spacing``. Default 1.
     material_names : dict of int to str, optional
         Names carried to the mesh (used by the writers).
+    affine : (d+1, d+1) or (4, 4) array_like, optional
+        Index-to-world affine of `labels`, voxel centres at integer indices (NIfTI:
+        nibabel's ``img.affine``, :func:`napari_swa_imesh.io.read_affine`). The mesh is
+        made with the affine's voxel sizes as spacing and carries the rest as
+        ``Mesh.world``, so every file gets world coordinates (see :mod:`._world`;
+        rotations, flips and an origin included). Give it instead of `spacing`.
     refine : int
         Interface refinement ``0 .. 4``: elements sharing a facet with a material
         interface are ``2**-refine`` voxels; the interior coarsens as before.
@@ -109,9 +116,25 @@ def mesh_labels(labels, *, method: str = "template", exclude=(), spacing=None,
     (8, [1, 2])
     >>> float(m.quality.max().round(4))
     0.7071
+
+    Placed by an affine (x flipped, 2 x 3 voxels; voxel (0, 0) centred at the origin):
+
+    >>> from napari_swa_imesh.mesh import to_meshio
+    >>> placed = mesh_labels(np.ones((1, 2), int), affine=np.diag([-2.0, 3.0, 1.0]))
+    >>> placed.spacing
+    (2.0, 3.0)
+    >>> xy = to_meshio(placed).points
+    >>> xy.min(axis=0).tolist(), xy.max(axis=0).tolist()
+    ([-1.0, -1.5], [1.0, 4.5])
     """
     lab, spacing_t, exclude_arr = _mesh_arguments(labels, method=method, exclude=exclude,
                                                    spacing=spacing)
+    world = None
+    if affine is not None:
+        if spacing is not None:
+            raise ValueError("give spacing or affine, not both: the mesh takes its spacing "
+                             "from the affine's voxel sizes.")
+        spacing_t, world = world_from_affine(affine, lab.ndim)
     lattice, max_size, coarsen = resolution_arguments(
         spacing_t, method=method, refine=refine, max_size=max_size, subdivide=subdivide,
         coarsen=coarsen)
@@ -119,6 +142,7 @@ def mesh_labels(labels, *, method: str = "template", exclude=(), spacing=None,
     mesh, tree = _mesh_labels(lab, method=method, exclude=exclude_arr, spacing=spacing_t,
                               material_names=material_names, lattice=lattice,
                               max_size=max_size)
+    mesh.world = world
     if coarsen:
         mesh.info["coarsen"] = coarse_report
         warn_lost_materials(coarse_report, mesh.material_names)

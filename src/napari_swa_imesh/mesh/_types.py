@@ -6,8 +6,11 @@ Conventions
   i.e. pixel corner index times spacing. The image box is ``[0, shape[a]*spacing[a]]``.
 * ``cells`` index ``points``; every cell has positive signed volume in these coordinates:
   ``det([p1-p0, p2-p0(, p3-p0)]) > 0`` with columns in axis order.
-* Writers (``to_meshio``) reverse the axes to x, y(, z) = column, row(, plane), the order
-  FE tools expect, and reorder each cell so its volume stays positive there.
+* ``world`` says where the points go in a file: None, the axes reversed to x, y(, z) =
+  column, row(, plane), the order FE tools expect; or a homogeneous matrix from ``points``
+  to x, y(, z) (a NIfTI affine, :func:`world_from_affine`). The writers call
+  ``_common.export_points`` for it and reorder each cell so its volume stays positive
+  there. Everything else (checks, facet groups, quality, simulation) works on ``points``.
 """
 
 from __future__ import annotations
@@ -45,14 +48,19 @@ class Mesh:
         Optional names for material ids (used by Gmsh physical groups and Abaqus sets).
     info : dict
         Counts and timings of the run that made the mesh (for reports and ``--json``).
+    world : (d+1, d+1) ndarray of float64 or None
+        Homogeneous map from `points` to the coordinates files get (x, y(, z)); its
+        last row is ``[0, .., 0, 1]`` and its linear part invertible. None: the axes
+        reversed (column, row(, plane)).
 
     Raises
     ------
     TypeError
         For non-numeric points or non-integer cells or materials.
     ValueError
-        For arrays of the wrong shape, non-finite points, cell ids out of range, or
-        per-cell arrays whose length is not the number of cells.
+        For arrays of the wrong shape, non-finite points, cell ids out of range,
+        per-cell arrays whose length is not the number of cells, or a `world` matrix
+        that is not an invertible affine map of the points' dimension.
 
     Examples
     --------
@@ -69,6 +77,7 @@ class Mesh:
     shape: tuple[int, ...] = ()
     material_names: dict[int, str] = field(default_factory=dict)
     info: dict = field(default_factory=dict)
+    world: np.ndarray | None = None
 
     def __post_init__(self):
         self.points = _as_points(self.points)
@@ -86,15 +95,16 @@ class Mesh:
                                  f"got {value}.")
         self.material_names = {int(k): str(v) for k, v in dict(self.material_names or {}).items()}
         self.info = dict(self.info or {})
+        self.world = None if self.world is None else _as_world(self.world, d)
 
     @classmethod
     def _trusted(cls, points, cells, material, cell_data, *, spacing, shape,
-                 material_names, info) -> "Mesh":
+                 material_names, info, world=None) -> "Mesh":
         """A mesh from arrays the mesher made (already of the right dtypes and shapes)."""
         mesh = cls.__new__(cls)
         mesh.points, mesh.cells, mesh.material, mesh.cell_data = points, cells, material, cell_data
         mesh.spacing, mesh.shape = spacing, shape
-        mesh.material_names, mesh.info = material_names, info
+        mesh.material_names, mesh.info, mesh.world = material_names, info, world
         return mesh
 
     @property
@@ -139,6 +149,24 @@ def _as_points(points) -> np.ndarray:
         bad = int(np.count_nonzero(~np.isfinite(arr).all(axis=1)))
         raise ValueError(f"{bad} mesh point(s) have NaN or infinite coordinates; every "
                          "vertex needs a finite position.")
+    return arr
+
+
+def _as_world(world, d: int) -> np.ndarray:
+    arr = np.asarray(world)
+    if arr.dtype.kind not in "biuf" or arr.shape != (d + 1, d + 1):
+        raise ValueError(f"world must be a ({d + 1}, {d + 1}) matrix of numbers for a {d}-D "
+                         f"mesh; got {arr.dtype} of shape {arr.shape}.")
+    arr = np.array(arr, dtype=np.float64)
+    last = np.zeros(d + 1)
+    last[d] = 1.0
+    if not np.isfinite(arr).all() or not np.array_equal(arr[d], last):
+        raise ValueError(f"world must be finite with last row {last.tolist()} (an affine "
+                         f"map); got {arr.tolist()}.")
+    sv = np.linalg.svd(arr[:d, :d], compute_uv=False)
+    if not sv[-1] > 1e-12 * sv[0]:
+        raise ValueError(f"world's linear part {arr[:d, :d].tolist()} is singular; points "
+                         "would collapse. Give an invertible map.")
     return arr
 
 

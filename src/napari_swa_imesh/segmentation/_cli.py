@@ -167,8 +167,8 @@ def _check_segment_args(args: argparse.Namespace) -> None:
 
 
 def _run_segment(args: argparse.Namespace) -> int:
-    from ..io import atomic_write, check_label_format, label_array, read_image, \
-        write_labels_to
+    from ..io import atomic_write, check_label_format, grid_affine, is_nifti, label_array, \
+        read_affine, read_image, write_labels_to
     from ._metrics import evaluate
     from ._model_io import load_model, write_model_to
     from ._res import plot_res_scales, res_statistics
@@ -180,6 +180,8 @@ def _run_segment(args: argparse.Namespace) -> int:
     _check_segment_args(args)
     with timer("read"):
         image, spacing = read_image(args.image, gray=args.gray)
+        # a NIfTI image's placement goes to NIfTI labels (the mesh of them lies on it)
+        affine = read_affine(args.image) if is_nifti(args.output) else None
         samples = load_samples(args.samples) if args.samples else None
         model = load_model(args.model) if args.model else None
         truth = read_image(args.truth)[0] if args.truth else None
@@ -204,6 +206,8 @@ def _run_segment(args: argparse.Namespace) -> int:
             # the header describes the tile grid: 2^j voxels per tile, first tile's centre
             tile_spacing, origin = tile_placement(result.scale, spacing, image.ndim)
             labels, out_spacing = label_array(result.tile_labels), tile_spacing
+            if affine is not None:
+                affine = grid_affine(affine, 1 << result.scale, image.ndim)
         else:
             labels, out_spacing, origin = label_array(result.labels), spacing, None
         check_label_format(args.output, labels)
@@ -216,7 +220,8 @@ def _run_segment(args: argparse.Namespace) -> int:
                    if p]
         with atomic_write(outputs, force=args.force) as temps:
             temps = dict(zip(outputs, temps))
-            write_labels_to(temps[args.output], labels, spacing=out_spacing, origin=origin)
+            write_labels_to(temps[args.output], labels, spacing=out_spacing, origin=origin,
+                            affine=affine)
             if args.model_out:
                 write_model_to(temps[args.model_out], *result.model.file_content())
             if args.signatures:

@@ -8,6 +8,7 @@ import numpy as np
 
 from ..io import atomic_write, check_writable
 from ..mesh import to_meshio, write_mesh_vtu
+from ..mesh._common import export_vectors
 
 __all__ = ["FIELD_SUFFIXES", "check_field_path", "check_series_path", "write_field",
            "write_series"]
@@ -27,11 +28,12 @@ def check_field_path(path, *, force: bool = False) -> list[Path]:
 
 
 def _fields(result) -> tuple[dict[str, np.ndarray], dict[str, np.ndarray]]:
-    """Point data ``potential_<axis>`` and cell data ``flux_<axis>`` (vectors in x, y(, z)
-    order) of a result."""
+    """Point data ``potential_<axis>`` and cell data ``flux_<axis>`` (vectors in the
+    file's x, y(, z): turned with the points when the mesh is placed in a world frame)."""
+    mesh = result.mesh
     return ({f"potential_{axis}": np.asarray(v, dtype=np.float64)
              for axis, v in result.potential.items()},
-            {f"flux_{axis}": np.asarray(v, dtype=np.float64)
+            {f"flux_{axis}": export_vectors(mesh, np.asarray(v, dtype=np.float64)[:, ::-1])
              for axis, v in result.flux.items()})
 
 

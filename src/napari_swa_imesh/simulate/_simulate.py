@@ -120,6 +120,41 @@ def prepare_mesh(mesh_or_labels, *, spacing=None, exclude=(),
                        material_names=dict(material_names or {}), refine=refine)
 
 
+def _check_box_faces(mesh: Mesh, names, lo: np.ndarray, hi: np.ndarray) -> None:
+    """A mesh read from a file must have its box faces on axis planes for the protocol.
+
+    A mesh placed in a rotated world frame (NIfTI) touches the planes of its bounding box
+    at a few points only: the potential would be fixed on almost nothing and k_eff would
+    be wrong. Refuse when a face to fix carries under 1 % of its area in facets.
+    """
+    from ..mesh._facets import facet_groups
+
+    groups = facet_groups(mesh)
+    d = mesh.ndim
+    extent = hi - lo
+    for name in names:
+        axis = d - 1 - "xyz".index(name)
+        face_area = float(np.prod(np.delete(extent, axis)))
+        for face in (f"{name}min", f"{name}max"):
+            group = groups.get(face)
+            area = 0.0 if group is None else float(_facet_measure(mesh.points[group.facets]).sum())
+            if area < 0.01 * face_area:
+                raise ValueError(
+                    f"the mesh covers {100 * area / face_area:.2g} % of its {face} face: it "
+                    "is not an axis-aligned box (a mesh in a rotated world frame, such as a "
+                    "NIfTI mesh written without --index-space?), so the potential cannot be "
+                    "fixed on that face. Simulate the label image, or a mesh written with "
+                    "swa-imesh mesh --index-space.")
+
+
+def _facet_measure(corners: np.ndarray) -> np.ndarray:
+    """(F,) length (2-D) or area (3-D) of facets given by their (F, d, d) corners."""
+    if corners.shape[1] == 2:
+        return np.linalg.norm(corners[:, 1] - corners[:, 0], axis=1)
+    return 0.5 * np.linalg.norm(np.cross(corners[:, 1] - corners[:, 0],
+                                         corners[:, 2] - corners[:, 0]), axis=1)
+
+
 def check_tolerance(tol) -> None:
     if isinstance(tol, bool) or not isinstance(tol, Real) or not 0 < tol < 1:
         raise ValueError(f"tol must be a relative residual between 0 and 1, not {tol!r}.")
@@ -178,6 +213,8 @@ def simulate_steps(mesh_or_labels, conductivity: Mapping, *, spacing=None, order
     volumes = signed_volumes(mesh.points, mesh.cells)
     per_material = np.bincount(cell_material, weights=volumes, minlength=materials.size)
     fractions = per_material / float(np.prod(hi - lo))
+    if not mesh.records_box:
+        _check_box_faces(mesh, names, lo, hi)
     if not mesh.records_box and fractions.sum() < 1 - 1e-9:
         warnings.warn("the mesh has voids and does not record the image box, so the box is "
                       "the extent of its points; if an excluded material covered a whole "
