@@ -15,6 +15,7 @@ from dataclasses import asdict, dataclass
 import numpy as np
 
 from .._tree import RegionTree, _build_tree, leaf_finder
+from ._lattice import labels_on_lattice
 from .._validation import as_labels
 from ._quality import _det, signed_volumes
 from ._types import Mesh
@@ -380,7 +381,7 @@ def _check_mesh(mesh: Mesh, lab: np.ndarray, exclude: np.ndarray,
     n_excluded = count_excluded(lab, exclude)
     voxel = float(np.prod(mesh.spacing)) if mesh.spacing else 1.0
     if tree is None:
-        tree = _build_tree(_on_lattice(lab, mesh))
+        tree = _build_tree(labels_on_lattice(lab, _index_points(mesh)))
     # a tree on a finer lattice (anisotropy subdivision, refinement) is in lattice cells
     cells_per_voxel = np.array(tree.shape) // np.array(lab.shape)
     leaf_points = points if (cells_per_voxel == 1).all() else points * cells_per_voxel
@@ -393,17 +394,6 @@ def _check_mesh(mesh: Mesh, lab: np.ndarray, exclude: np.ndarray,
         **_finite(mesh),
     }
     return MeshChecks(**{name: parts[name] for name in MeshChecks.__dataclass_fields__})
-
-
-def _on_lattice(lab: np.ndarray, mesh: Mesh) -> np.ndarray:
-    """The labels repeated by the anisotropy subdivision the mesh records (if any): the
-    blocks its elements must lie in are homogeneous blocks of lattice cells."""
-    factors = mesh.info.get("lattice", {}).get("factors") if isinstance(mesh.info, dict) else None
-    if not factors or all(int(n) == 1 for n in factors) or len(factors) != lab.ndim:
-        return lab
-    for axis, n in enumerate(factors):
-        lab = np.repeat(lab, int(n), axis=axis)
-    return lab
 
 
 def _unused_points(cells: np.ndarray, n_points: int) -> int:

@@ -32,7 +32,7 @@ import numpy as np
 from .._tree import PAD_LABEL, RegionTree, _build_tree
 
 __all__ = ["ASPECT_LIMIT", "MAX_REFINE", "Lattice", "aspect_bounds", "aspect_table",
-           "choose_lattice", "lattice_tree", "subdivision_factors"]
+           "choose_lattice", "labels_on_lattice", "lattice_tree", "subdivision_factors"]
 
 #: Residual aspect up to which the 3-D bounds stay within radius-to-edge sqrt(29)/4 and
 #: dihedral angles [30, 135] degrees (1.3185 and 30.5-130.3 at 1.2; 1.3754 and 29.5 at
@@ -372,3 +372,32 @@ class _InterfaceFaces:
                 hit[rows] = total > 0
         return hit
 
+
+def labels_on_lattice(lab: np.ndarray, points: np.ndarray) -> np.ndarray:
+    """The labels on the lattice a mesh was cut from, found from its points (voxel units).
+
+    Anisotropic voxels are cut into ``n`` cells per axis (and refinement halves them
+    further): the blocks the elements must lie in are then homogeneous blocks of those
+    cells, which a tree of the voxels does not have. The points tell the lattice (read
+    from a file, the mesh has no record of it): per axis the fewest cells per voxel
+    ``c`` putting every coordinate on the grid. A power of two common to every axis
+    needs no repeat: the tree of labels repeated 2^k times along every axis is the
+    voxels' tree scaled.
+    """
+    if not len(points):
+        return lab
+    cells = []
+    for axis in range(lab.ndim):
+        coords = np.unique(points[:, axis])
+        for c in range(1, MAX_FACTOR * 2 ** MAX_REFINE + 1):
+            scaled = coords * c
+            if np.abs(scaled - np.rint(scaled)).max() <= 1e-6 * max(1.0, np.abs(scaled).max()):
+                break
+        else:
+            c = 1                         # off every lattice: the leaf check will say so
+        cells.append(c)
+    common = min((c & -c) for c in cells)          # largest power of two dividing all
+    for axis, c in enumerate(cells):
+        if c // common > 1:
+            lab = np.repeat(lab, c // common, axis=axis)
+    return lab
