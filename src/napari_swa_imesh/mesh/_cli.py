@@ -69,6 +69,9 @@ def add_commands(subparsers) -> None:
                    help="mesh the labels in blocks of 2^K voxels, each taking its majority "
                         "label (0..5; default 0, exact): fewer elements for large smooth "
                         "volumes; the per-material volume change is printed")
+    p.add_argument("--periodic", action="store_true",
+                   help="the same vertices and facets on opposite faces of the box "
+                        "(translated), for periodic boundary conditions")
     p.add_argument("--no-subdivide", action="store_true",
                    help="mesh anisotropic voxels as stretched templates (no physical "
                         "quality bound) instead of subdividing them into nearly cubic cells")
@@ -141,6 +144,9 @@ def _run_mesh(args: argparse.Namespace) -> int:
     if args.spacing:
         normalize_spacing(args.spacing, len(args.spacing))  # a bad value fails before reading
     _check_resolution_args(args)
+    if args.periodic and args.method != "template":
+        raise ValueError("--periodic needs the template method (the delaunay method cannot "
+                         "match opposite faces).")
     # from the file's header: refuse a volume whose labels and grids alone cannot fit
     peek = _peek_shape_dtype(args.labels)
     placement = _placement(args, peek)
@@ -182,7 +188,7 @@ def _run_mesh(args: argparse.Namespace) -> int:
         labels, coarse_report = coarsen_labels(labels, coarsen)
         mesh, tree = _mesh_labels(labels, method=args.method, exclude=exclude,
                                   spacing=spacing, material_names=names, lattice=lattice,
-                                  max_size=max_size)
+                                  max_size=max_size, periodic=args.periodic)
     mesh.world = placement[1] if placement else None
     if coarsen:
         mesh.info["coarsen"] = coarse_report

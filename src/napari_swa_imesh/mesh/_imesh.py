@@ -42,7 +42,7 @@ METHODS = ("template", "delaunay")
 def mesh_labels(labels, *, method: str = "template", exclude=(), spacing=None,
                 material_names: dict[int, str] | None = None, affine=None, refine: int = 0,
                 max_size: float | None = None, subdivide: bool = True,
-                coarsen: int = 0) -> Mesh:
+                coarsen: int = 0, periodic: bool = False) -> Mesh:
     """Mesh a 2-D or 3-D label image into triangles or tetrahedra, one material each.
 
     Parameters
@@ -83,6 +83,9 @@ def mesh_labels(labels, *, method: str = "template", exclude=(), spacing=None,
         its majority label), for large smooth volumes. Boundaries move to that grid; the
         per-material volume change is in ``info["coarsen"]`` and a material that no block
         keeps is named in a warning.
+    periodic : bool
+        Give opposite faces of the image box the same vertices and facets (translated),
+        for periodic boundary conditions: elements touching the box are one lattice cell.
 
     Returns
     -------
@@ -139,9 +142,12 @@ def mesh_labels(labels, *, method: str = "template", exclude=(), spacing=None,
         spacing_t, method=method, refine=refine, max_size=max_size, subdivide=subdivide,
         coarsen=coarsen)
     lab, coarse_report = coarsen_labels(lab, coarsen)
+    if periodic and method != "template":
+        raise ValueError("periodic meshes need the template method (the delaunay method "
+                         "cannot match opposite faces).")
     mesh, tree = _mesh_labels(lab, method=method, exclude=exclude_arr, spacing=spacing_t,
                               material_names=material_names, lattice=lattice,
-                              max_size=max_size)
+                              max_size=max_size, periodic=bool(periodic))
     mesh.world = world
     if coarsen:
         mesh.info["coarsen"] = coarse_report
@@ -212,7 +218,8 @@ def _mesh_arguments(labels, *, method, exclude, spacing, name: str = "labels"):
 
 def _mesh_labels(lab: np.ndarray, *, method: str, exclude: np.ndarray, spacing: tuple,
                  material_names: dict | None = None, lattice: Lattice | None = None,
-                 max_size: float | None = None) -> tuple[Mesh, RegionTree]:
+                 max_size: float | None = None, periodic: bool = False
+                 ) -> tuple[Mesh, RegionTree]:
     """The worker behind :func:`mesh_labels`; arguments come from :func:`_mesh_arguments`.
 
     Returns the mesh and the region tree it was cut from (in lattice cells), which the
@@ -221,10 +228,11 @@ def _mesh_labels(lab: np.ndarray, *, method: str, exclude: np.ndarray, spacing: 
     if lattice is None:
         lattice = Lattice(spacing, (1,) * len(spacing))
     t0 = time.perf_counter()
-    if lattice.is_voxel_lattice and max_size is None:
+    if lattice.is_voxel_lattice and max_size is None and not periodic:
         tree = _build_tree(lab)
     else:
-        tree = lattice_tree(lab, lattice, exclude=exclude, max_size=max_size)
+        tree = lattice_tree(lab, lattice, exclude=exclude, max_size=max_size,
+                            periodic=periodic)
     seconds = {"tree": time.perf_counter() - t0}
     mesh = _mesh_tree(tree, method=method, exclude=exclude, spacing=lattice.step,
                       material_names=_names(material_names), connectivity=None,
@@ -236,6 +244,7 @@ def _mesh_labels(lab: np.ndarray, *, method: str, exclude: np.ndarray, spacing: 
     mesh.info["lattice"] = lattice.describe()
     if max_size is not None:
         mesh.info["max_size"] = max_size
+    mesh.info["periodic"] = bool(periodic)
     return mesh, tree
 
 

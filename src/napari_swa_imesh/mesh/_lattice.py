@@ -244,7 +244,7 @@ def check_refine(refine) -> int:
 
 
 def lattice_tree(lab: np.ndarray, lattice: Lattice, *, exclude: np.ndarray,
-                 max_size: float | None = None) -> RegionTree:
+                 max_size: float | None = None, periodic: bool = False) -> RegionTree:
     """The region tree of `lab` on the lattice, refined at interfaces and capped in size.
 
     Parameters
@@ -258,6 +258,10 @@ def lattice_tree(lab: np.ndarray, lattice: Lattice, *, exclude: np.ndarray,
     max_size : float, optional
         Longest element edge allowed (physical units); leaves whose body diagonal is
         longer are split.
+    periodic : bool
+        Split every leaf that touches the image box down to one lattice cell. Cells of
+        one cell are always cut the same way (Kuhn), so opposite faces of the box then
+        carry the same vertices and facets, translated: what periodic conditions need.
 
     Returns
     -------
@@ -279,6 +283,10 @@ def lattice_tree(lab: np.ndarray, lattice: Lattice, *, exclude: np.ndarray,
         faces = _InterfaceFaces(lab, exclude)
         cells = np.asarray(lattice.cells_per_voxel, dtype=np.int64)
         tree = split_leaves(tree, lambda origin, size: faces.touches(origin, size, cells))
+    if periodic:
+        extent = np.asarray(tree.shape, dtype=np.int64)
+        tree = split_leaves(tree, lambda origin, size: (
+            (origin == 0) | (origin + size[:, None] >= extent)).any(axis=1))
     if max_size is not None:
         diagonal = float(np.linalg.norm(lattice.step))
         # a leaf of side 2^l cells has edges up to 2^l diagonals long (its Kuhn diagonal)

@@ -44,6 +44,10 @@ def add_commands(subparsers) -> None:
     p.add_argument("--refine", type=int, default=0, metavar="K",
                    help="labels only: elements at material interfaces are 2^-K voxels "
                         "(0..4, default 0), where the field is least smooth")
+    p.add_argument("--protocol", choices=("mixed", "periodic"), default="mixed",
+                   help="mixed (potential 0/1 on two faces, others insulated; default) or "
+                        "periodic (unit mean gradient, periodic fluctuation: the full "
+                        "tensor, printed and in --json as \"tensor\")")
     p.add_argument("--axes", nargs="+", choices=("x", "y", "z"), default=None,
                    help="axes to solve along (default: all)")
     p.add_argument("--tol", type=float, default=1e-10,
@@ -101,6 +105,8 @@ def _run_simulate(args: argparse.Namespace) -> int:
     from ..mesh._lattice import check_refine
 
     check_refine(args.refine)
+    if transient is not None and args.protocol != "mixed":
+        raise ValueError("--protocol is for the steady k_eff run, not --transient.")
     if transient is not None and args.refine:
         raise ValueError("--refine is for the steady k_eff run; for --transient, mesh with "
                          "swa-imesh mesh --refine K and simulate the mesh file.")
@@ -127,7 +133,7 @@ def _run_simulate(args: argparse.Namespace) -> int:
     else:
         result = simulate(source, conductivity, spacing=spacing, order=args.order,
                           axes=args.axes, tol=args.tol, exclude=tuple(args.exclude),
-                          material_names=names, refine=args.refine)
+                          material_names=names, refine=args.refine, protocol=args.protocol)
     written = []
     if args.output:
         with timer("write"):
