@@ -52,6 +52,20 @@ def add_commands(subparsers) -> None:
                    help="axes to solve along (default: all)")
     p.add_argument("--tol", type=float, default=1e-10,
                    help="relative residual of the linear solve (default 1e-10)")
+    b = p.add_argument_group(
+        "boundary conditions", "with any of these, solve -div(k grad u) = f with conditions "
+        "on the mesh's boundary facet groups (xmin..zmax, exterior_<A>) instead of k_eff; "
+        "groups without one are insulated")
+    b.add_argument("--dirichlet", nargs="+", action="extend", default=[],
+                   metavar="GROUP=VALUE", help="fixed value on a group: xmin=1")
+    b.add_argument("--neumann", nargs="+", action="extend", default=[],
+                   metavar="GROUP=FLUX", help="inward flux density on a group (positive "
+                                              "enters): xmax=0.5")
+    b.add_argument("--robin", nargs="+", action="extend", default=[],
+                   metavar="GROUP=H:UINF", help="exchange -k du/dn = H (u - UINF) on a "
+                                                "group: zmax=10:20")
+    b.add_argument("--source", nargs="+", action="extend", default=[],
+                   metavar="MATERIAL=F", help="volume source density per material: 2=1.5")
     t = p.add_argument_group(
         "transient", "with --transient, solve c du/dt = div(k grad u) by implicit Euler "
         "instead of k_eff; faces not fixed are insulated")
@@ -94,6 +108,12 @@ def _run_simulate(args: argparse.Namespace) -> int:
     if not 0 < args.tol < 1:
         raise ValueError(f"--tol must lie between 0 and 1, not {args.tol:g}.")
     transient = _transient_options(args)
+    boundary = _boundary_options(args)
+    if boundary is not None and (transient is not None or args.axes
+                                 or args.protocol != "mixed"):
+        raise ValueError("--dirichlet/--neumann/--robin/--source solve one boundary-value "
+                         "problem; they do not combine with --transient, --axes or "
+                         "--protocol.")
     if args.output and transient is None:
         check_field_path(args.output, force=args.force)
     elif args.output:
@@ -123,7 +143,16 @@ def _run_simulate(args: argparse.Namespace) -> int:
             if not source.info.get("has_material", True):
                 raise ValueError(f"{Path(args.input).name} has no material per element; "
                                  "simulate needs one (mesh the labels with swa-imesh mesh).")
-    if transient is not None:
+    if boundary is not None:
+        from ._boundary import solve_boundary_value
+        from ._simulate import prepare_mesh
+
+        mesh = prepare_mesh(source, spacing=spacing if is_image else None,
+                            exclude=tuple(args.exclude), material_names=names,
+                            refine=args.refine)
+        result = solve_boundary_value(mesh, conductivity, order=args.order, tol=args.tol,
+                                      **boundary)
+    elif transient is not None:
         from ._transient import simulate_transient
 
         result = simulate_transient(source, conductivity, spacing=spacing,
@@ -186,6 +215,35 @@ def _transient_options(args) -> dict | None:
             "initial": _numbers(args.initial, "--initial", 0.0),
             "capacity": _numbers(args.capacity, "--capacity", 1.0),
             "save_every": 1 if args.save_every is None else args.save_every}
+
+
+def _boundary_options(args) -> dict | None:
+    """The keyword arguments of solve_boundary_value, or None for a k_eff run."""
+    if not (args.dirichlet or args.neumann or args.robin or args.source):
+        return None
+
+    def pairs(items, flag, arity):
+        out = {}
+        for item in items:
+            name, sep, text = item.partition("=")
+            parts = text.split(":") if sep else []
+            try:
+                values = [float(v) for v in parts]
+            except ValueError:
+                values = []
+            if not sep or not name or len(values) != arity or not np.isfinite(values).all():
+                form = "GROUP=H:UINF such as zmax=10:20" if arity == 2 else \
+                    "GROUP=VALUE such as xmin=1"
+                raise ValueError(f"{flag} takes {form}, not {item!r}.")
+            if name in out:
+                raise ValueError(f"{flag} gives group {name} twice.")
+            out[name] = values[0] if arity == 1 else tuple(values)
+        return out
+
+    return {"dirichlet": pairs(args.dirichlet, "--dirichlet", 1),
+            "neumann": pairs(args.neumann, "--neumann", 1),
+            "robin": pairs(args.robin, "--robin", 2),
+            "source": _numbers(args.source, "--source", 0.0) or None}
 
 
 def _numbers(items: list[str], flag: str, default: float) -> dict | float:
