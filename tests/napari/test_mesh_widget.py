@@ -53,16 +53,43 @@ def test_histogram_shades_the_range_of_quality_table(make_napari_viewer, qtbot, 
 def test_anisotropic_voxels_shade_their_own_bound_not_the_cubic_one(make_napari_viewer, qtbot):
     rng = np.random.default_rng(5)
     viewer = make_napari_viewer()
-    widget = _meshed(viewer, qtbot, rng.integers(1, 4, (8, 10, 10)).astype(np.uint8),
-                     scale=(2.0, 1.0, 1.0))
+    data = rng.integers(1, 4, (8, 10, 10)).astype(np.uint8)
+    # default: 2:1:1 voxels are cut into 2 x 1 x 1 cubic cells, and the cubic bound holds
+    widget = _meshed(viewer, qtbot, data, scale=(2.0, 1.0, 1.0))
+    lo, hi, label = _band(widget)
+    cubic = quality_bounds(3)["quality"][1]
+    assert label == "IMESH bound, 2:1:1 voxels in 2 x 1 x 1 cells"
+    assert hi == pytest.approx(cubic)
+    assert widget.mesh.quality.max() <= hi + 1e-9
+    assert "2:1:1 voxels cut into 2 x 1 x 1 cells: ratio <= 1.118" in widget.summary.value
+    # stretched voxels: their own (worse) bound, and the cubic one is said not to hold
+    widget.subdivide_box.value = False
+    widget.run_mesh()
+    wait_idle(qtbot, widget, timeout=120_000)
     lo, hi, label = _band(widget)
     assert label == "IMESH bound, 2:1:1 voxels"
-    assert hi == pytest.approx(quality_bounds(3, spacing=(2.0, 1.0, 1.0))["quality"][1])
-    cubic = quality_bounds(3)["quality"][1]
-    # the stretched elements break the cubic bound and stay inside their own
+    assert hi == pytest.approx(
+        quality_bounds(3, spacing=(2.0, 1.0, 1.0), subdivide=False)["quality"][1])
     assert cubic + 0.1 < widget.mesh.quality.max() <= hi + 1e-9
     assert "2:1:1 voxels: ratio <= 2.550" in widget.summary.value
     assert f"cubic {cubic:.3f} does not hold" in widget.summary.value
+
+
+def test_refine_and_max_edge_reach_the_mesher(make_napari_viewer, qtbot):
+    viewer = make_napari_viewer()
+    data = np.ones((12, 12, 12), np.uint8)
+    data[4:8, 4:8, 4:8] = 2
+    widget = _meshed(viewer, qtbot, data)
+    plain = widget.mesh.n_cells
+    widget.refine_spin.value = 1
+    widget.max_size_spin.value = 4.0
+    widget.run_mesh()
+    wait_idle(qtbot, widget, timeout=120_000)
+    mesh = widget.mesh
+    assert mesh.info["lattice"]["refine"] == 1 and mesh.info["max_size"] == 4.0
+    assert mesh.n_cells > plain
+    corners = mesh.points[mesh.cells]
+    assert np.linalg.norm(corners[:, :, None] - corners[:, None], axis=-1).max() <= 4.0
 
 
 def _faces(layer):

@@ -11,7 +11,7 @@ from functools import lru_cache
 from typing import TYPE_CHECKING
 
 import numpy as np
-from magicgui.widgets import CheckBox, ComboBox, Container, PushButton
+from magicgui.widgets import CheckBox, ComboBox, Container, FloatSpinBox, PushButton, SpinBox
 from qtpy.QtCore import Qt, Signal
 from qtpy.QtWidgets import QFileDialog, QLabel, QListWidget, QListWidgetItem, QWidget
 
@@ -50,16 +50,25 @@ _ELEMENT = {2: "triangles", 3: "tetrahedra"}
 
 
 @lru_cache(maxsize=None)
-def bound_range(ndim: int, spacing: tuple[float, ...] = ()) -> tuple[float, float]:
+def bound_range(ndim: int, spacing: tuple[float, ...] = (), subdivide: bool = True
+                ) -> tuple[float, float]:
     """Radius-to-edge range of every IMESH template element for these voxels (shaded).
 
     From the regular simplex (the best any element can be) to the worst template simplex
-    stretched by `spacing` (:func:`napari_swa_imesh.mesh.quality_bounds`): for square or
-    cubic voxels the proven bound of :func:`~napari_swa_imesh.mesh.quality_table`, which
-    meshes every leaf configuration with the mesher's own templates, not a number copied
-    here. About 1.5 s in 3-D the first time, so call it in a worker first; it is cached.
+    stretched by the lattice cells the mesher cuts voxels of `spacing` into
+    (:func:`napari_swa_imesh.mesh.quality_bounds`; the voxels themselves with
+    ``subdivide=False``): for cubic cells the proven bound of
+    :func:`~napari_swa_imesh.mesh.quality_table`, which meshes every leaf configuration
+    with the mesher's own templates, not a number copied here. About 1.5 s in 3-D the
+    first time, so call it in a worker first; it is cached.
     """
-    return quality_bounds(ndim, spacing or None)["quality"]
+    return quality_bounds(ndim, spacing or None, subdivide=subdivide)["quality"]
+
+
+def _subdivided(mesh: "Mesh") -> bool:
+    """Whether the mesh was cut on a lattice finer than its voxels for anisotropy."""
+    factors = mesh.info.get("lattice", {}).get("factors")
+    return bool(factors) and any(int(f) > 1 for f in factors)
 
 
 def _aspect(spacing: tuple[float, ...]) -> str:
@@ -72,6 +81,8 @@ def bound_label(mesh: "Mesh") -> str:
     """What the shaded range is for `mesh`: the IMESH bound for its voxels, or none."""
     cubic = len(set(mesh.spacing)) <= 1
     voxels = "square/cubic voxels" if cubic else f"{_aspect(mesh.spacing)} voxels"
+    if _subdivided(mesh):
+        voxels += " in " + " x ".join(str(f) for f in mesh.info["lattice"]["factors"]) + " cells"
     if mesh.info.get("method", "template") != "template":
         return f"template bound, {voxels} ({mesh.info['method']} proves none)"
     return f"IMESH bound, {voxels}"
@@ -91,12 +102,17 @@ def _values(surface: dict) -> dict[str, np.ndarray]:
 
 def _bound_line(mesh: "Mesh") -> str:
     """The summary's sentence on the quality bound that holds for `mesh`'s voxels."""
-    hi = bound_range(mesh.ndim, mesh.spacing)[1]
+    subdivided = _subdivided(mesh)
+    hi = bound_range(mesh.ndim, mesh.spacing, subdivided)[1]
     if mesh.info.get("method", "template") != "template":
         return (f"no quality bound is proven for the {mesh.info['method']} method "
                 f"(shaded: the template mesher's, {hi:.3f})")
     if len(set(mesh.spacing)) <= 1:
         return f"IMESH bound (square/cubic voxels): ratio <= {hi:.3f}"
+    if subdivided:
+        cells = " x ".join(str(f) for f in mesh.info["lattice"]["factors"])
+        return (f"IMESH bound for {_aspect(mesh.spacing)} voxels cut into {cells} cells: "
+                f"ratio <= {hi:.3f}")
     cubic = bound_range(mesh.ndim)[1]
     return (f"IMESH bound for {_aspect(mesh.spacing)} voxels: ratio <= {hi:.3f} (the "
             f"cubic {cubic:.3f} does not hold: the spacing stretches every element)")
@@ -129,6 +145,15 @@ class MeshWidget(QWidget):
         self.exclude_list.setMaximumHeight(110)
         self.exclude_list.setToolTip("Checked materials are not meshed; their faces become "
                                      "the mesh boundary.")
+        self.refine_spin = SpinBox(
+            label="refine", value=0, min=0, max=4,
+            tooltip="Elements sharing a facet with a material interface are 2^-K voxels "
+                    "(template method); the interior coarsens as before.")
+        self.max_size_spin = FloatSpinBox(
+            label="max edge", value=0.0, min=0.0, max=1e9, step=1.0,
+            tooltip="Longest element edge allowed, in the layer's units (0: no cap).")
+        self.subdivide_box = CheckBox(
+            text="cut anisotropic voxels into near-cubic cells (quality bound)", value=True)
         self.checks_box = CheckBox(
             text="check the mesh (conforming, volumes, labels recovered)", value=True)
         self.color_combo = ComboBox(label="colour by",
@@ -145,7 +170,9 @@ class MeshWidget(QWidget):
         self.clip = ClipPanel(self.refresh_surface)
 
         layout = scroll_body(self)
-        layout.addWidget(Container(widgets=[self.labels_combo, self.method_combo]).native)
+        layout.addWidget(Container(widgets=[self.labels_combo, self.method_combo,
+                                            self.refine_spin, self.max_size_spin,
+                                            self.subdivide_box]).native)
         layout.addWidget(QLabel("exclude"))
         layout.addWidget(self.exclude_list)
         layout.addWidget(Container(widgets=[self.checks_box, self.color_combo, self.edges_box,
@@ -217,10 +244,22 @@ class MeshWidget(QWidget):
         names = {int(k): str(v) for k, v in layer.metadata.get("material_names", {}).items()}
         # read from NIfTI (and its scale untouched): files get the file's world frame
         place = placed_by_affine(layer)
+        resolution = {}
+        if method == "template":
+            resolution = {"refine": int(self.refine_spin.value),
+                          "subdivide": bool(self.subdivide_box.value),
+                          "max_size": float(self.max_size_spin.value) or None}
+        elif self.refine_spin.value or self.max_size_spin.value:
+            notify_error("refine and max edge apply to the template method; set them to 0 "
+                         "or pick the template method.")
+            return None
+        else:
+            resolution = {"subdivide": False}
 
         def steps():
             yield 0, 3, f"{method} mesh of the balanced 2^d-tree"
             mesh = mesh_labels(data, method=method, exclude=exclude, material_names=names,
+                               **resolution,
                                **({"affine": place} if place is not None else
                                   {"spacing": spacing}))
             checks = None
@@ -232,7 +271,7 @@ class MeshWidget(QWidget):
             clipper = MeshClipper(mesh, shown=(surface["faces"], surface["owners"]))
             clipper.kept(0, 0.0)         # the element extents on the first axis, here
             bound_range(mesh.ndim)       # cached here, not computed in the main thread
-            bound_range(mesh.ndim, mesh.spacing)
+            bound_range(mesh.ndim, mesh.spacing, _subdivided(mesh))
             yield 3, 3, "done"
             return mesh, checks, surface, clipper
 
@@ -309,7 +348,7 @@ class MeshWidget(QWidget):
             layer.vertex_colors = table[np.searchsorted(materials, values["material"])]
         else:
             # limits of the whole mesh, so colours keep their meaning as the clip moves
-            lo, hi = bound_range(mesh.ndim, mesh.spacing)
+            lo, hi = bound_range(mesh.ndim, mesh.spacing, _subdivided(mesh))
             worst = float(np.max(mesh.quality)) if mesh.n_cells else hi
             if layer.vertex_colors is not None:
                 layer.vertex_colors = None
@@ -351,7 +390,7 @@ class MeshWidget(QWidget):
             return
         ax = figure.add_subplot(1, 1, 1)
         q = mesh.quality[np.isfinite(mesh.quality)]
-        lo, hi = bound_range(mesh.ndim, mesh.spacing)
+        lo, hi = bound_range(mesh.ndim, mesh.spacing, _subdivided(mesh))
         band = ax.axvspan(lo, hi, color="#2ca02c", alpha=0.18, lw=0, label=bound_label(mesh))
         band.set_gid("bound")
         # the range always spans the bound, so a mesh of one element shape still bins

@@ -221,15 +221,18 @@ def _bounds(d: int) -> tuple:
     return tuple(_ranges(d, worst_of).items())
 
 
-def quality_bounds(dim: int, spacing=None) -> dict[str, tuple[float, float]]:
+def quality_bounds(dim: int, spacing=None, *, subdivide: bool = True
+                   ) -> dict[str, tuple[float, float]]:
     """The range every element of a template mesh lies in, per metric (the IMESH bound).
 
     Derived from :func:`quality_table`: each range runs from the regular simplex's value
     to the worst value over all template simplices, which is the proven bound for square
     or cubic voxels. ``QUALITY_METRICS[...].optimal_range`` holds the same numbers in
-    closed form. With anisotropic `spacing` the mesher's elements are its templates
-    stretched by the spacing, so the worst stretched template (of every template, used by
-    some leaf configuration or not: a safe bound) is the bound for that spacing.
+    closed form. With anisotropic `spacing` the mesher cuts voxels into nearly cubic
+    lattice cells (:func:`~._lattice.choose_lattice`); its elements are the templates
+    stretched by the cell size, so the worst stretched template (of every template, used
+    by some leaf configuration or not: a safe bound) is the bound for that spacing. With
+    ``subdivide=False`` the cells are the voxels themselves.
 
     Parameters
     ----------
@@ -237,6 +240,9 @@ def quality_bounds(dim: int, spacing=None) -> dict[str, tuple[float, float]]:
     spacing : float or sequence of float, optional
         Voxel spacing the mesh was made with (one value or one per axis). Default, or all
         values equal: the cubic bound.
+    subdivide : bool
+        Whether the mesh was made with the anisotropy subdivision (``mesh_labels``'s
+        default) or of stretched voxels.
 
     Returns
     -------
@@ -255,12 +261,18 @@ def quality_bounds(dim: int, spacing=None) -> dict[str, tuple[float, float]]:
     >>> b = quality_bounds(2)
     >>> [round(x, 4) for x in b["quality"] + b["min_angle"]]
     [0.5774, 0.7071, 45.0, 60.0]
-    >>> round(quality_bounds(2, spacing=(2.0, 1.0))["quality"][1], 4)   # 2:1 pixels
+    >>> round(quality_bounds(2, spacing=(2.0, 1.0), subdivide=False)["quality"][1], 4)
     1.118
+    >>> round(quality_bounds(3, spacing=(2.5, 1.0, 1.0))["quality"][1], 4)  # 3x1x1 cells
+    1.3
     """
     d = _check_dim(dim)
     spacing = normalize_spacing(spacing, d)
-    if all(s == spacing[0] for s in spacing):
+    if subdivide:
+        from ._lattice import choose_lattice
+
+        spacing = choose_lattice(spacing).step
+    if all(abs(s / spacing[0] - 1) <= 1e-12 for s in spacing):
         return dict(_bounds(d))
     table = template_quality(d, spacing)
     return _ranges(d, lambda name, low: float(table[name].min() if low else table[name].max()))

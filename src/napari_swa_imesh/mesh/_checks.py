@@ -15,6 +15,7 @@ from dataclasses import asdict, dataclass
 import numpy as np
 
 from .._tree import RegionTree, _build_tree, leaf_finder
+from ._lattice import labels_on_lattice
 from .._validation import as_labels
 from ._quality import _det, signed_volumes
 from ._types import Mesh
@@ -362,7 +363,9 @@ def check_mesh(mesh: Mesh, labels, *, exclude=(), tree: RegionTree | None = None
     if tree is not None:
         if not isinstance(tree, RegionTree):
             raise TypeError(f"tree must be a RegionTree (from build_tree); got {type(tree).__name__}.")
-        if tuple(tree.shape) != lab.shape:
+        multiple = len(tree.shape) == lab.ndim and all(
+            t % n == 0 for t, n in zip(tree.shape, lab.shape))
+        if not multiple:
             raise ValueError(f"tree was built from an image of shape {tuple(tree.shape)}, but the "
                              f"labels have shape {lab.shape}; pass build_tree(labels) or no tree.")
     return _check_mesh(mesh, lab, exclude_arr, tree)
@@ -378,12 +381,15 @@ def _check_mesh(mesh: Mesh, lab: np.ndarray, exclude: np.ndarray,
     n_excluded = count_excluded(lab, exclude)
     voxel = float(np.prod(mesh.spacing)) if mesh.spacing else 1.0
     if tree is None:
-        tree = _build_tree(lab)
+        tree = _build_tree(labels_on_lattice(lab, _index_points(mesh)))
+    # a tree on a finer lattice (anisotropy subdivision, refinement) is in lattice cells
+    cells_per_voxel = np.array(tree.shape) // np.array(lab.shape)
+    leaf_points = points if (cells_per_voxel == 1).all() else points * cells_per_voxel
     parts = {
         "n_unused_points": _unused_points(cells, len(points)),
         **_volumes(points, cells, lab.size - n_excluded, voxel),
         **_facets(points, cells, lab, exclude),
-        **_leaves(points, cells, tree),
+        **_leaves(leaf_points, cells, tree),
         **_pixels(points, cells, mesh.material, lab, exclude, n_excluded),
         **_finite(mesh),
     }

@@ -59,6 +59,22 @@ def add_commands(subparsers) -> None:
     p.add_argument("--abaqus-elements", choices=("mechanical", "heat"), default="mechanical",
                    help="element types of an .inp: mechanical (CPS3/C3D4, default) or heat "
                         "(DC2D3/DC3D4, for *HEAT TRANSFER)")
+    p.add_argument("--refine", type=int, default=0, metavar="K",
+                   help="elements sharing a facet with a material interface are 2^-K voxels "
+                        "(0..4; default 0); the interior coarsens as before, bounds unchanged")
+    p.add_argument("--max-size", type=float, default=None, metavar="H",
+                   help="longest element edge allowed, in physical units (larger leaves "
+                        "are split); at least the diagonal of one lattice cell")
+    p.add_argument("--coarsen", type=int, default=0, metavar="K",
+                   help="mesh the labels in blocks of 2^K voxels, each taking its majority "
+                        "label (0..5; default 0, exact): fewer elements for large smooth "
+                        "volumes; the per-material volume change is printed")
+    p.add_argument("--periodic", action="store_true",
+                   help="the same vertices and facets on opposite faces of the box "
+                        "(translated), for periodic boundary conditions")
+    p.add_argument("--no-subdivide", action="store_true",
+                   help="mesh anisotropic voxels as stretched templates (no physical "
+                        "quality bound) instead of subdividing them into nearly cubic cells")
     p.add_argument("--force", action="store_true", help="replace an existing output file")
     p.add_argument("--no-check", action="store_true",
                    help="skip the conformity/volume/label checks (they take about 10 us per "
@@ -77,6 +93,9 @@ def add_commands(subparsers) -> None:
         description="Print the distinct template simplices of a dimension with their "
                     "radius-to-edge ratio and angles: the quality the mesher guarantees.")
     p.add_argument("--dim", type=int, required=True, metavar="D", help="dimension (2 or 3)")
+    p.add_argument("--spacing", type=float, nargs="+", default=None, metavar="S",
+                   help="voxel spacing: also print the lattice the mesher uses for it and "
+                        "the bound that holds there")
     p.add_argument("--json", action="store_true", help="print one JSON object on stdout")
     p.set_defaults(func=_run_bounds)
 
@@ -124,6 +143,10 @@ def _run_mesh(args: argparse.Namespace) -> int:
     limit = parse_memory_size(args.memory_limit)
     if args.spacing:
         normalize_spacing(args.spacing, len(args.spacing))  # a bad value fails before reading
+    _check_resolution_args(args)
+    if args.periodic and args.method != "template":
+        raise ValueError("--periodic needs the template method (the delaunay method cannot "
+                         "match opposite faces).")
     # from the file's header: refuse a volume whose labels and grids alone cannot fit
     peek = _peek_shape_dtype(args.labels)
     placement = _placement(args, peek)
@@ -144,20 +167,32 @@ def _run_mesh(args: argparse.Namespace) -> int:
         spacing=placement[0] if placement else args.spacing if args.spacing else file_spacing,
         name=f"labels in {Path(args.labels).name}")
     del image
+    from ._imesh import resolution_arguments
+
+    lattice, max_size, coarsen = resolution_arguments(
+        spacing, method=args.method, refine=args.refine, max_size=args.max_size,
+        subdivide=not args.no_subdivide, coarsen=args.coarsen)
     with timer("estimate"):
         estimate = estimate_mesh_memory(labels.shape, labels.dtype,
                                         n_boundary=count_boundary_voxels(labels),
-                                        max_label=int(labels.max()), check=not args.no_check)
+                                        max_label=int(labels.max()), check=not args.no_check,
+                                        cells_per_voxel=lattice.cells_per_voxel)
     if limit != 0:
         _check_memory(args, estimate, limit, labels.shape, labels.dtype)
 
     from ._checks import _check_mesh
-    from ._imesh import _mesh_labels
+    from ._coarsen import coarsen_labels
+    from ._imesh import _mesh_labels, warn_lost_materials
 
     with timer("mesh"):
+        labels, coarse_report = coarsen_labels(labels, coarsen)
         mesh, tree = _mesh_labels(labels, method=args.method, exclude=exclude,
-                                  spacing=spacing, material_names=names)
+                                  spacing=spacing, material_names=names, lattice=lattice,
+                                  max_size=max_size, periodic=args.periodic)
     mesh.world = placement[1] if placement else None
+    if coarsen:
+        mesh.info["coarsen"] = coarse_report
+        warn_lost_materials(coarse_report, names)
     if args.no_check:
         checks = {"skipped": True}
     else:
@@ -185,6 +220,18 @@ def _run_mesh(args: argparse.Namespace) -> int:
               f"({failed}); {advice}.", file=sys.stderr)
         return 1
     return 0
+
+
+def _check_resolution_args(args) -> None:
+    """Refine and coarsen levels in range before any reading (the size cap needs the
+    spacing, so it is checked with it)."""
+    from ._coarsen import check_coarsen
+    from ._lattice import check_refine
+
+    check_refine(args.refine)
+    check_coarsen(args.coarsen)
+    if args.max_size is not None and not (np.isfinite(args.max_size) and args.max_size > 0):
+        raise ValueError(f"--max-size must be a positive length; got {args.max_size}.")
 
 
 def _placement(args, peek) -> tuple | None:
@@ -298,6 +345,11 @@ def _mesh_report(args, mesh, checks, written, seconds) -> dict:
     if mesh.ndim == 3 and "min_dihedral" in cd:
         report["min_dihedral"] = float(np.nanmin(cd["min_dihedral"]))
         report["max_dihedral"] = float(np.nanmax(cd["max_dihedral"]))
+    report["lattice"] = info.get("lattice")
+    if "coarsen" in info:
+        report["coarsen"] = info["coarsen"]
+    if "max_size" in info:
+        report["max_size"] = info["max_size"]
     report["checks"] = checks
     report["seconds"] = {
         "read": seconds.get("read", 0.0),
@@ -327,6 +379,19 @@ def _mesh_text(r: dict) -> str:
     if "min_dihedral" in r:
         quality += f", dihedral angles {r['min_dihedral']:.2f} to {r['max_dihedral']:.2f} deg"
     lines.append(quality)
+    lattice = r.get("lattice")
+    if lattice and lattice["cells_per_voxel"] != [1] * r["dim"]:
+        cells = " x ".join(str(c) for c in lattice["cells_per_voxel"])
+        b = lattice["bounds"]
+        lines.append(f"lattice: {cells} cells per voxel (refine {lattice['refine']}, residual "
+                     f"aspect {lattice['residual_aspect']:.3f}; bound there: ratio <= "
+                     f"{b['worst_ratio']:.4f}, angles {b['min_angle']:.2f} to "
+                     f"{b['max_angle']:.2f} deg)")
+    if "coarsen" in r:
+        c = r["coarsen"]
+        changes = ", ".join(f"{m}: {100 * v:+.2f} %" for m, v in c["relative_change"].items())
+        lines.append(f"coarsened to 2^{c['level']} voxel blocks: {c['changed_voxels']} voxels "
+                     f"changed material; volume change per material {changes}")
     flags = [f"{k} {'ok' if v else 'FAILED'}" for k, v in r["checks"].items()
              if isinstance(v, bool) and k not in ("all_passed", "skipped")]
     lines.append("checks: " + (", ".join(flags) if flags else "skipped (--no-check)"))
@@ -339,10 +404,34 @@ def _mesh_text(r: dict) -> str:
 
 def _run_bounds(args: argparse.Namespace) -> int:
     from ._bounds import format_quality_table, quality_table
+    from ._lattice import aspect_table, choose_lattice
 
+    if args.dim not in (2, 3):
+        raise ValueError(f"--dim must be 2 or 3; got {args.dim}.")
+    lattice = None
+    if args.spacing:
+        lattice = choose_lattice(normalize_spacing(args.spacing, args.dim))
     rows = quality_table(args.dim)
+    aspects = aspect_table(args.dim)
     if args.json:
-        print_json({"command": "bounds", "dim": args.dim, "simplices": rows})
-    else:
-        print(format_quality_table(rows))
+        out = {"command": "bounds", "dim": args.dim, "simplices": rows,
+               "by_residual_aspect": aspects}
+        if lattice is not None:
+            out["lattice"] = lattice.describe()
+        print_json(out)
+        return 0
+    print(format_quality_table(rows))
+    angle = "dihedral angles" if args.dim == 3 else "angles"
+    print(f"\nbounds on lattice cells of residual aspect A (max/min cell size): anisotropic "
+          f"voxels are cut into cells with A <= 1.2 unless --no-subdivide")
+    print(f"{'A':>6s} {'ratio <=':>9s} {angle + ' (deg)':>22s}")
+    for row in aspects:
+        print(f"{row['aspect']:6.2f} {row['worst_ratio']:9.4f} "
+              f"{row['min_angle']:10.2f} .. {row['max_angle']:7.2f}")
+    if lattice is not None:
+        d = lattice.describe()
+        print(f"\nspacing {' x '.join(f'{s:g}' for s in lattice.spacing)}: "
+              f"{' x '.join(map(str, lattice.factors))} cells per voxel, residual aspect "
+              f"{d['residual_aspect']:.3f}: ratio <= {d['bounds']['worst_ratio']:.4f}, "
+              f"{angle} {d['bounds']['min_angle']:.2f} to {d['bounds']['max_angle']:.2f}")
     return 0

@@ -19,6 +19,7 @@ in physical units, per-element data, counts and seconds in ``info``.
 from __future__ import annotations
 
 import time
+import warnings
 
 import numpy as np
 
@@ -27,6 +28,8 @@ from .._validation import as_labels, normalize_spacing
 from ._balance import balance_tree, count_balanced_leaves
 from ._checks import _check_mesh, count_excluded
 from ._delaunay import delaunay_mesh
+from ._coarsen import check_coarsen, coarsen_labels
+from ._lattice import Lattice, choose_lattice, lattice_tree
 from ._templates import template_mesh, template_quality
 from ._types import Mesh
 from ._world import world_from_affine
@@ -37,7 +40,9 @@ METHODS = ("template", "delaunay")
 
 
 def mesh_labels(labels, *, method: str = "template", exclude=(), spacing=None,
-                material_names: dict[int, str] | None = None, affine=None) -> Mesh:
+                material_names: dict[int, str] | None = None, affine=None, refine: int = 0,
+                max_size: float | None = None, subdivide: bool = True,
+                coarsen: int = 0, periodic: bool = False) -> Mesh:
     """Mesh a 2-D or 3-D label image into triangles or tetrahedra, one material each.
 
     Parameters
@@ -63,6 +68,24 @@ def mesh_labels(labels, *, method: str = "template", exclude=(), spacing=None,
         made with the affine's voxel sizes as spacing and carries the rest as
         ``Mesh.world``, so every file gets world coordinates (see :mod:`._world`;
         rotations, flips and an origin included). Give it instead of `spacing`.
+    refine : int
+        Interface refinement ``0 .. 4``: elements sharing a facet with a material
+        interface are ``2**-refine`` voxels; the interior coarsens as before.
+    max_size : float, optional
+        Longest element edge allowed (physical units); larger leaves are split.
+    subdivide : bool
+        Cut anisotropic voxels into nearly cubic lattice cells (integer factors per axis,
+        residual aspect at most ``ASPECT_LIMIT`` = 1.2) so the quality bounds hold in
+        physical space (3-D: radius-to-edge <= 1.3185, dihedral angles 30.5-130.3 deg).
+        Off: the stretched voxels are meshed as they are, without a bound.
+    coarsen : int
+        ``0 .. 5``: mesh the labels in blocks of ``2**coarsen`` voxels (each block takes
+        its majority label), for large smooth volumes. Boundaries move to that grid; the
+        per-material volume change is in ``info["coarsen"]`` and a material that no block
+        keeps is named in a warning.
+    periodic : bool
+        Give opposite faces of the image box the same vertices and facets (translated),
+        for periodic boundary conditions: elements touching the box are one lattice cell.
 
     Returns
     -------
@@ -75,9 +98,9 @@ def mesh_labels(labels, *, method: str = "template", exclude=(), spacing=None,
 
     Notes
     -----
-    The quality bounds hold in index space (isotropic voxels); anisotropic `spacing`
-    stretches every template by the same factors, and the per-element metrics are those of
-    the stretched elements. Template elements per leaf: d! (Kuhn) when no edge midpoint or
+    The mesher works on the lattice of :func:`choose_lattice` (``info["lattice"]``): the
+    voxels themselves for cubic spacing without refinement. The per-element metrics are
+    those of the physical elements; ``level`` counts lattice cells. Template elements per leaf: d! (Kuhn) when no edge midpoint or
     face centre of the leaf is a vertex, else one cone simplex per boundary segment or face
     triangle (2-D: 5-8; 3-D: 12-48).
 
@@ -115,9 +138,20 @@ def mesh_labels(labels, *, method: str = "template", exclude=(), spacing=None,
             raise ValueError("give spacing or affine, not both: the mesh takes its spacing "
                              "from the affine's voxel sizes.")
         spacing_t, world = world_from_affine(affine, lab.ndim)
+    lattice, max_size, coarsen = resolution_arguments(
+        spacing_t, method=method, refine=refine, max_size=max_size, subdivide=subdivide,
+        coarsen=coarsen)
+    lab, coarse_report = coarsen_labels(lab, coarsen)
+    if periodic and method != "template":
+        raise ValueError("periodic meshes need the template method (the delaunay method "
+                         "cannot match opposite faces).")
     mesh, tree = _mesh_labels(lab, method=method, exclude=exclude_arr, spacing=spacing_t,
-                              material_names=material_names)
+                              material_names=material_names, lattice=lattice,
+                              max_size=max_size, periodic=bool(periodic))
     mesh.world = world
+    if coarsen:
+        mesh.info["coarsen"] = coarse_report
+        warn_lost_materials(coarse_report, mesh.material_names)
     if method == "delaunay":  # report the reference's step as it is
         t = time.perf_counter()
         checks = _check_mesh(mesh, lab, exclude_arr, tree)
@@ -125,6 +159,34 @@ def mesh_labels(labels, *, method: str = "template", exclude=(), spacing=None,
         mesh.info["conforming"] = checks.conforming
         mesh.info["seconds"]["checks"] = round(time.perf_counter() - t, 6)
     return mesh
+
+
+def resolution_arguments(spacing: tuple, *, method: str, refine, max_size, subdivide,
+                         coarsen) -> tuple[Lattice, float | None, int]:
+    """Check the resolution options at the door: (lattice, max_size, coarsen level).
+
+    Raises ValueError with what to pass for a refine level outside 0..4, a size cap below
+    one lattice cell, a coarsening level outside 0..5, or a non-template method with any
+    of them.
+    """
+    lattice = choose_lattice(spacing, refine=refine, subdivide=bool(subdivide))
+    max_size = check_max_size(max_size, lattice)
+    coarsen = check_coarsen(coarsen)
+    if method != "template" and (not lattice.is_voxel_lattice or max_size is not None):
+        raise ValueError("the delaunay method meshes voxels as they are; use the template "
+                         "method for refine, max_size or anisotropic subdivision (or "
+                         "subdivide=False).")
+    return lattice, max_size, coarsen
+
+
+def warn_lost_materials(report: dict, names: dict | None = None) -> None:
+    """Warn (naming them) about materials the coarsening removed entirely."""
+    if report.get("lost"):
+        lost = ", ".join(f"{m}" + (f" ({names[m]})" if names and m in names else "")
+                         for m in report["lost"])
+        warnings.warn(f"coarsening by 2^{report['level']} voxels removed material(s) {lost} "
+                      "entirely: they are thinner than a block. Use a smaller --coarsen to "
+                      "keep them.", UserWarning, stacklevel=3)
 
 
 def _exclude_array(exclude) -> np.ndarray:
@@ -155,18 +217,55 @@ def _mesh_arguments(labels, *, method, exclude, spacing, name: str = "labels"):
 
 
 def _mesh_labels(lab: np.ndarray, *, method: str, exclude: np.ndarray, spacing: tuple,
-                 material_names: dict | None = None) -> tuple[Mesh, RegionTree]:
+                 material_names: dict | None = None, lattice: Lattice | None = None,
+                 max_size: float | None = None, periodic: bool = False
+                 ) -> tuple[Mesh, RegionTree]:
     """The worker behind :func:`mesh_labels`; arguments come from :func:`_mesh_arguments`.
 
-    Returns the mesh and the region tree of `lab`, which the checks can reuse.
+    Returns the mesh and the region tree it was cut from (in lattice cells), which the
+    checks can reuse.
     """
+    if lattice is None:
+        lattice = Lattice(spacing, (1,) * len(spacing))
     t0 = time.perf_counter()
-    tree = _build_tree(lab)
+    if lattice.is_voxel_lattice and max_size is None and not periodic:
+        tree = _build_tree(lab)
+    else:
+        tree = lattice_tree(lab, lattice, exclude=exclude, max_size=max_size,
+                            periodic=periodic)
     seconds = {"tree": time.perf_counter() - t0}
-    mesh = _mesh_tree(tree, method=method, exclude=exclude, spacing=spacing,
+    mesh = _mesh_tree(tree, method=method, exclude=exclude, spacing=lattice.step,
                       material_names=_names(material_names), connectivity=None,
                       report_face_balance=False, seconds=seconds)
+    # the mesh describes the image it came from; the lattice is in info
+    mesh.shape, mesh.spacing = tuple(lab.shape), tuple(spacing)
+    mesh.info["spacing"] = list(spacing)
+    mesh.info["shape"] = list(lab.shape)
+    mesh.info["lattice"] = lattice.describe()
+    if max_size is not None:
+        mesh.info["max_size"] = max_size
+    mesh.info["periodic"] = bool(periodic)
     return mesh, tree
+
+
+def check_max_size(max_size, lattice: Lattice) -> float | None:
+    """`max_size` as a float no smaller than one lattice cell's diagonal, or ValueError."""
+    if max_size is None:
+        return None
+    try:
+        value = float(max_size)
+    except (TypeError, ValueError):
+        value = float("nan")
+    smallest = float(np.linalg.norm(lattice.step))
+    if not np.isfinite(value) or value <= 0:
+        raise ValueError(f"max_size must be a positive length; got {max_size!r}.")
+    if value < smallest:
+        raise ValueError(
+            f"max_size {value:g} is below the longest edge of the smallest element "
+            f"({smallest:.4g}: the diagonal of one lattice cell of size "
+            f"{tuple(round(h, 6) for h in lattice.step)}); ask for at least {smallest:.4g}."
+        )
+    return value
 
 
 def _names(material_names) -> dict[int, str]:

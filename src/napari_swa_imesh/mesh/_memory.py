@@ -120,7 +120,8 @@ def count_boundary_voxels(labels) -> int:
 
 
 def estimate_mesh_memory(shape, dtype=np.uint8, *, n_boundary: int | None = None,
-                         max_label: int | None = None, check: bool = True) -> int:
+                         max_label: int | None = None, check: bool = True,
+                         cells_per_voxel: tuple[int, ...] | None = None) -> int:
     """Estimate the peak memory (bytes) of meshing a label image with the templates.
 
     Parameters
@@ -138,6 +139,10 @@ def estimate_mesh_memory(shape, dtype=np.uint8, *, n_boundary: int | None = None
         (only when their top bit is used). Default: assume they do.
     check : bool
         Whether the mesh checks run too (``check_mesh``; the command line's default).
+    cells_per_voxel : tuple of int, optional
+        Lattice cells per voxel along each axis (anisotropy subdivision and refinement,
+        :class:`~._lattice.Lattice`): the lattice grids grow by their product, the
+        boundary layer by its (d-1)/d power, twice (both sides refined).
 
     Returns
     -------
@@ -159,6 +164,15 @@ def estimate_mesh_memory(shape, dtype=np.uint8, *, n_boundary: int | None = None
         raise ValueError(f"estimate_mesh_memory needs a 2-D or 3-D shape with at least one "
                          f"voxel per axis; got {shape}.")
     dtype = np.dtype(dtype)
+    if cells_per_voxel is not None and any(int(c) != 1 for c in cells_per_voxel):
+        # the mesher runs on the lattice: as an image of that shape whose boundary layer
+        # is finer (conservative: the labels are counted at lattice size too)
+        factor = math.prod(int(c) for c in cells_per_voxel)
+        lattice_boundary = (None if n_boundary is None
+                            else 2 * int(n_boundary) * factor ** ((d - 1) / d))
+        return estimate_mesh_memory(tuple(n * int(c) for n, c in zip(shape, cells_per_voxel)),
+                                    dtype, n_boundary=lattice_boundary, max_label=max_label,
+                                    check=check)
     padded = _padded_shape(shape)
     n_vox, n_pad = math.prod(shape), math.prod(padded)
     n_lattice = math.prod(n + 1 for n in padded)

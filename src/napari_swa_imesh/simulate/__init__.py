@@ -3,18 +3,23 @@
 * :func:`simulate` (and :func:`simulate_steps` for progress): steady diffusion with one
   conductivity per material (number, diagonal or tensor), P1 or P2 elements assembled by
   scikit-fem, solved by conjugate gradients with pyamg's algebraic multigrid; the
-  mixed-boundary effective conductivity per axis, checked against its Voigt-Reuss bounds;
+  mixed-boundary effective conductivity per axis, or the full tensor by the periodic
+  protocol, checked against its Voigt-Reuss bounds;
+* :func:`solve_boundary_value`: one steady problem with Dirichlet, Neumann and Robin
+  conditions on the mesh's named facet groups and volume sources;
 * :func:`simulate_transient` (and :func:`transient_steps`): implicit Euler on the same
   assembly, a heat front from a face or a substance released from a material;
 * :func:`conductivity_tensors`, :func:`parse_conductivity_args`: the conductivity table.
 """
 
+from ._boundary import BoundaryResult, solve_boundary_value
 from ._conductivity import conductivity_tensors, parse_conductivity_args
 from ._output import write_field, write_series
 from ._simulate import SimulationResult, simulate, simulate_steps
 from ._solve import SolverInfo
 from ._transient import TransientResult, simulate_transient, transient_steps
 
-__all__ = ["SimulationResult", "SolverInfo", "TransientResult", "conductivity_tensors",
+__all__ = ["BoundaryResult", "SimulationResult", "SolverInfo", "TransientResult", "conductivity_tensors",
            "parse_conductivity_args", "simulate", "simulate_steps", "simulate_transient",
+           "solve_boundary_value",
            "transient_steps", "write_field", "write_series"]

@@ -41,10 +41,31 @@ def add_commands(subparsers) -> None:
     p.add_argument("--order", type=int, default=1, metavar="1|2",
                    help="element degree: 1 (linear, default) or 2 (quadratic, more "
                         "accurate per unknown)")
+    p.add_argument("--refine", type=int, default=0, metavar="K",
+                   help="labels only: elements at material interfaces are 2^-K voxels "
+                        "(0..4, default 0), where the field is least smooth")
+    p.add_argument("--protocol", choices=("mixed", "periodic"), default="mixed",
+                   help="mixed (potential 0/1 on two faces, others insulated; default) or "
+                        "periodic (unit mean gradient, periodic fluctuation: the full "
+                        "tensor, printed and in --json as \"tensor\")")
     p.add_argument("--axes", nargs="+", choices=("x", "y", "z"), default=None,
                    help="axes to solve along (default: all)")
     p.add_argument("--tol", type=float, default=1e-10,
                    help="relative residual of the linear solve (default 1e-10)")
+    b = p.add_argument_group(
+        "boundary conditions", "with any of these, solve -div(k grad u) = f with conditions "
+        "on the mesh's boundary facet groups (xmin..zmax, exterior_<A>) instead of k_eff; "
+        "groups without one are insulated")
+    b.add_argument("--dirichlet", nargs="+", action="extend", default=[],
+                   metavar="GROUP=VALUE", help="fixed value on a group: xmin=1")
+    b.add_argument("--neumann", nargs="+", action="extend", default=[],
+                   metavar="GROUP=FLUX", help="inward flux density on a group (positive "
+                                              "enters): xmax=0.5")
+    b.add_argument("--robin", nargs="+", action="extend", default=[],
+                   metavar="GROUP=H:UINF", help="exchange -k du/dn = H (u - UINF) on a "
+                                                "group: zmax=10:20")
+    b.add_argument("--source", nargs="+", action="extend", default=[],
+                   metavar="MATERIAL=F", help="volume source density per material: 2=1.5")
     t = p.add_argument_group(
         "transient", "with --transient, solve c du/dt = div(k grad u) by implicit Euler "
         "instead of k_eff; faces not fixed are insulated")
@@ -87,14 +108,28 @@ def _run_simulate(args: argparse.Namespace) -> int:
     if not 0 < args.tol < 1:
         raise ValueError(f"--tol must lie between 0 and 1, not {args.tol:g}.")
     transient = _transient_options(args)
+    boundary = _boundary_options(args)
+    if boundary is not None and (transient is not None or args.axes
+                                 or args.protocol != "mixed"):
+        raise ValueError("--dirichlet/--neumann/--robin/--source solve one boundary-value "
+                         "problem; they do not combine with --transient, --axes or "
+                         "--protocol.")
     if args.output and transient is None:
         check_field_path(args.output, force=args.force)
     elif args.output:
         check_series_path(args.output, force=args.force)
     is_image = image_suffix(args.input) in IMAGE_SUFFIXES
-    if not is_image and (args.spacing or args.exclude):
-        raise ValueError("--spacing and --exclude apply to a label image; a mesh file "
-                         "already has its coordinates and materials.")
+    if not is_image and (args.spacing or args.exclude or args.refine):
+        raise ValueError("--spacing, --exclude and --refine apply to a label image; a mesh "
+                         "file already has its coordinates, materials and elements.")
+    from ..mesh._lattice import check_refine
+
+    check_refine(args.refine)
+    if transient is not None and args.protocol != "mixed":
+        raise ValueError("--protocol is for the steady k_eff run, not --transient.")
+    if transient is not None and args.refine:
+        raise ValueError("--refine is for the steady k_eff run; for --transient, mesh with "
+                         "swa-imesh mesh --refine K and simulate the mesh file.")
     if args.spacing:
         normalize_spacing(args.spacing, len(args.spacing))
 
@@ -108,7 +143,16 @@ def _run_simulate(args: argparse.Namespace) -> int:
             if not source.info.get("has_material", True):
                 raise ValueError(f"{Path(args.input).name} has no material per element; "
                                  "simulate needs one (mesh the labels with swa-imesh mesh).")
-    if transient is not None:
+    if boundary is not None:
+        from ._boundary import solve_boundary_value
+        from ._simulate import prepare_mesh
+
+        mesh = prepare_mesh(source, spacing=spacing if is_image else None,
+                            exclude=tuple(args.exclude), material_names=names,
+                            refine=args.refine)
+        result = solve_boundary_value(mesh, conductivity, order=args.order, tol=args.tol,
+                                      **boundary)
+    elif transient is not None:
         from ._transient import simulate_transient
 
         result = simulate_transient(source, conductivity, spacing=spacing,
@@ -118,7 +162,7 @@ def _run_simulate(args: argparse.Namespace) -> int:
     else:
         result = simulate(source, conductivity, spacing=spacing, order=args.order,
                           axes=args.axes, tol=args.tol, exclude=tuple(args.exclude),
-                          material_names=names)
+                          material_names=names, refine=args.refine, protocol=args.protocol)
     written = []
     if args.output:
         with timer("write"):
@@ -171,6 +215,35 @@ def _transient_options(args) -> dict | None:
             "initial": _numbers(args.initial, "--initial", 0.0),
             "capacity": _numbers(args.capacity, "--capacity", 1.0),
             "save_every": 1 if args.save_every is None else args.save_every}
+
+
+def _boundary_options(args) -> dict | None:
+    """The keyword arguments of solve_boundary_value, or None for a k_eff run."""
+    if not (args.dirichlet or args.neumann or args.robin or args.source):
+        return None
+
+    def pairs(items, flag, arity):
+        out = {}
+        for item in items:
+            name, sep, text = item.partition("=")
+            parts = text.split(":") if sep else []
+            try:
+                values = [float(v) for v in parts]
+            except ValueError:
+                values = []
+            if not sep or not name or len(values) != arity or not np.isfinite(values).all():
+                form = "GROUP=H:UINF such as zmax=10:20" if arity == 2 else \
+                    "GROUP=VALUE such as xmin=1"
+                raise ValueError(f"{flag} takes {form}, not {item!r}.")
+            if name in out:
+                raise ValueError(f"{flag} gives group {name} twice.")
+            out[name] = values[0] if arity == 1 else tuple(values)
+        return out
+
+    return {"dirichlet": pairs(args.dirichlet, "--dirichlet", 1),
+            "neumann": pairs(args.neumann, "--neumann", 1),
+            "robin": pairs(args.robin, "--robin", 2),
+            "source": _numbers(args.source, "--source", 0.0) or None}
 
 
 def _numbers(items: list[str], flag: str, default: float) -> dict | float:

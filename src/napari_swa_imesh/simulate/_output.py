@@ -31,6 +31,9 @@ def _fields(result) -> tuple[dict[str, np.ndarray], dict[str, np.ndarray]]:
     """Point data ``potential_<axis>`` and cell data ``flux_<axis>`` (vectors in the
     file's x, y(, z): turned with the points when the mesh is placed in a world frame)."""
     mesh = result.mesh
+    if isinstance(result.potential, np.ndarray):       # one field: a boundary-value run
+        return ({"potential": np.asarray(result.potential, dtype=np.float64)},
+                {"flux": export_vectors(mesh, np.asarray(result.flux, np.float64)[:, ::-1])})
     return ({f"potential_{axis}": np.asarray(v, dtype=np.float64)
              for axis, v in result.potential.items()},
             {f"flux_{axis}": export_vectors(mesh, np.asarray(v, dtype=np.float64)[:, ::-1])

@@ -1,0 +1,411 @@
+"""The lattice the mesher works on: voxels subdivided for anisotropic spacing and for
+refinement at material interfaces, and leaves split to a size cap.
+
+Why a lattice
+-------------
+The templates' quality bounds hold for cubic lattice cells. A voxel of spacing
+(2.5, 1, 1) stretches every template by 2.5 along one axis (worst radius-to-edge 3.66).
+Subdividing each voxel into ``n_a`` cells along axis ``a`` (integers, chosen so the cells
+are nearly cubic) brings the *residual aspect* ``max(h) / min(h)`` of the cell size
+``h = spacing / n`` under :data:`ASPECT_LIMIT`, where the bounds of
+:func:`aspect_bounds` hold; the tree merges the cells again wherever the labels are
+uniform, so the interior stays coarse. Material boundaries stay on voxel faces, which are
+lattice planes, so every material keeps its exact volume.
+
+Refinement ``K`` divides every cell by ``2**K`` more and splits every leaf that shares a
+facet with a material interface down to one lattice cell: elements at interfaces are
+``2**-K`` voxels, the interior coarsens as before, and balance and templates are the
+same (so are the bounds).
+
+A size cap ``H`` splits every leaf whose longest possible element edge (its body
+diagonal) is longer than ``H``.
+"""
+
+from __future__ import annotations
+
+import itertools
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from .._tree import PAD_LABEL, RegionTree, _build_tree
+
+__all__ = ["ASPECT_LIMIT", "MAX_REFINE", "Lattice", "aspect_bounds", "aspect_table",
+           "choose_lattice", "labels_on_lattice", "lattice_tree", "subdivision_factors"]
+
+#: Residual aspect up to which the 3-D bounds stay within radius-to-edge sqrt(29)/4 and
+#: dihedral angles [30, 135] degrees (1.3185 and 30.5-130.3 at 1.2; 1.3754 and 29.5 at
+#: 1.25, see :func:`aspect_bounds`).
+ASPECT_LIMIT = 1.2
+#: Largest subdivision of a voxel along one axis (spacing aspect up to about 19).
+MAX_FACTOR = 16
+#: Largest interface refinement level: 2**-4 voxels (4096 cells per voxel in 3-D).
+MAX_REFINE = 4
+
+
+@dataclass(frozen=True)
+class Lattice:
+    """How voxels are cut into lattice cells.
+
+    Attributes
+    ----------
+    spacing : tuple of float
+        Voxel size per axis (physical units).
+    factors : tuple of int
+        Cells per voxel along each axis from the anisotropy subdivision (all 1 for cubic
+        voxels or when subdivision is off).
+    refine : int
+        Interface refinement level K: cells are a further ``2**K`` times smaller.
+    """
+
+    spacing: tuple[float, ...]
+    factors: tuple[int, ...]
+    refine: int = 0
+
+    @property
+    def ndim(self) -> int:
+        return len(self.spacing)
+
+    @property
+    def cells_per_voxel(self) -> tuple[int, ...]:
+        """Lattice cells per voxel along each axis: ``factors * 2**refine``."""
+        return tuple(int(n) << self.refine for n in self.factors)
+
+    @property
+    def step(self) -> tuple[float, ...]:
+        """Physical size of one lattice cell per axis."""
+        return tuple(s / f for s, f in zip(self.spacing, self.cells_per_voxel))
+
+    @property
+    def residual_aspect(self) -> float:
+        """``max(step) / min(step)``: how far the lattice cells are from cubes."""
+        return max(self.step) / min(self.step)
+
+    @property
+    def is_voxel_lattice(self) -> bool:
+        """Whether lattice cells are the voxels themselves (no subdivision, no refinement)."""
+        return self.refine == 0 and all(n == 1 for n in self.factors)
+
+    def describe(self) -> dict:
+        """Plain-data summary for reports and ``--json``."""
+        return {"factors": list(self.factors), "refine": self.refine,
+                "cells_per_voxel": list(self.cells_per_voxel),
+                "step": [float(s) for s in self.step],
+                "residual_aspect": float(self.residual_aspect),
+                "bounds": aspect_bounds(self.ndim, self.residual_aspect)}
+
+
+def aspect_bounds(dim: int, aspect: float) -> dict:
+    """Quality bounds of the template mesh on lattice cells of residual aspect `aspect`.
+
+    The worst radius-to-edge ratio and the angle range (dihedral in 3-D) over every
+    template simplex, for every cell shape whose axes lie within a factor `aspect` of each
+    other. The extremes lie where every axis is 1 or `aspect` (a grid of shapes in
+    between gives nothing worse; tests check it), so those shapes are all evaluated.
+
+    Parameters
+    ----------
+    dim : {2, 3}
+    aspect : float
+        ``max(cell size) / min(cell size)``, at least 1.
+
+    Returns
+    -------
+    dict
+        ``worst_ratio``, ``min_angle`` and ``max_angle`` (degrees; dihedral in 3-D).
+
+    Examples
+    --------
+    >>> b = aspect_bounds(3, 1.0)
+    >>> round(b["worst_ratio"], 4), round(b["min_angle"], 2), round(b["max_angle"], 2)
+    (1.118, 35.26, 125.26)
+    """
+    from ._templates import template_quality
+
+    if dim not in (2, 3):
+        raise ValueError(f"bounds exist for 2-D and 3-D lattices; got dim={dim!r}.")
+    aspect = float(aspect)
+    if not (np.isfinite(aspect) and aspect >= 1.0):
+        raise ValueError(f"aspect must be a finite number >= 1; got {aspect!r}.")
+    lo_key, hi_key = ("min_dihedral", "max_dihedral") if dim == 3 else ("min_angle", "max_angle")
+    worst, lo, hi = 0.0, 180.0, 0.0
+    for shape in itertools.product((1.0, aspect), repeat=dim):
+        q = template_quality(dim, shape)
+        worst = max(worst, float(q["quality"].max()))
+        lo = min(lo, float(np.nanmin(q[lo_key])))
+        hi = max(hi, float(np.nanmax(q[hi_key])))
+    return {"worst_ratio": worst, "min_angle": lo, "max_angle": hi}
+
+
+def aspect_table(dim: int, aspects=(1.0, 1.05, 1.1, 1.15, 1.2, 1.25, 1.5, 2.0, 3.0)) -> list[dict]:
+    """:func:`aspect_bounds` for a list of residual aspects: rows of plain data.
+
+    Examples
+    --------
+    >>> [round(r["worst_ratio"], 4) for r in aspect_table(3, (1.0, 1.2))]
+    [1.118, 1.3185]
+    """
+    return [{"aspect": float(a), **aspect_bounds(dim, a)} for a in aspects]
+
+
+def _aspect(values) -> float:
+    return float(max(values) / min(values))
+
+
+def subdivision_factors(spacing, *, max_aspect: float = ASPECT_LIMIT) -> tuple[int, ...]:
+    """Fewest cells per voxel (product of integer factors) with residual aspect <= `max_aspect`.
+
+    Parameters
+    ----------
+    spacing : sequence of float
+        Voxel size per axis.
+    max_aspect : float
+        Largest ``max(h) / min(h)`` allowed for the cell size ``h = spacing / factors``.
+
+    Returns
+    -------
+    tuple of int
+        One factor per axis, each in ``1 .. MAX_FACTOR``; all 1 when the voxels already
+        meet `max_aspect`.
+
+    Raises
+    ------
+    ValueError
+        When no factors up to :data:`MAX_FACTOR` reach `max_aspect` (spacing aspect above
+        about 19).
+
+    Examples
+    --------
+    >>> subdivision_factors((2.5, 1.0, 1.0))
+    (3, 1, 1)
+    >>> subdivision_factors((1.0, 1.0))
+    (1, 1)
+    """
+    s = np.asarray(spacing, dtype=float)
+    if _aspect(s) <= max_aspect:
+        return (1,) * len(s)
+    best: tuple[int, tuple[int, ...]] | None = None
+    # the cell size h is one axis's spacing over some factor; every other axis then takes
+    # the factor on either side of s_b / h
+    for a, n in itertools.product(range(len(s)), range(1, MAX_FACTOR + 1)):
+        h = s[a] / n
+        options = [sorted({max(1, math.floor(v / h)), max(1, math.ceil(v / h))}) for v in s]
+        for combo in itertools.product(*options):
+            if max(combo) > MAX_FACTOR or _aspect(s / np.asarray(combo)) > max_aspect:
+                continue
+            key = (math.prod(combo), tuple(combo))
+            if best is None or key < best:
+                best = key
+    if best is None:
+        raise ValueError(
+            f"voxel spacing {tuple(float(v) for v in s)} has aspect {_aspect(s):.3g}: no "
+            f"subdivision of up to {MAX_FACTOR} cells per axis makes cells within aspect "
+            f"{max_aspect}; resample the image closer to cubic voxels, or pass "
+            "subdivide=False (--no-subdivide) to mesh the stretched voxels without a bound."
+        )
+    return best[1]
+
+
+def choose_lattice(spacing, *, refine: int = 0, subdivide: bool = True) -> Lattice:
+    """The lattice for voxels of `spacing`: anisotropy subdivision and interface refinement.
+
+    Parameters
+    ----------
+    spacing : tuple of float
+        Voxel size per axis (already checked).
+    refine : int
+        Interface refinement level, ``0 .. MAX_REFINE``.
+    subdivide : bool
+        Subdivide anisotropic voxels so the bounds of :func:`aspect_bounds` at
+        :data:`ASPECT_LIMIT` hold in physical space. Off: voxels are stretched templates
+        and no bound is claimed beyond the stretched one.
+
+    Examples
+    --------
+    >>> choose_lattice((3.0, 1.0, 1.0), refine=1).cells_per_voxel
+    (6, 2, 2)
+    """
+    refine = check_refine(refine)
+    factors = subdivision_factors(spacing) if subdivide else (1,) * len(spacing)
+    return Lattice(tuple(float(s) for s in spacing), factors, refine)
+
+
+def check_refine(refine) -> int:
+    """`refine` as an int in ``0 .. MAX_REFINE``, or ValueError saying what to pass."""
+    if isinstance(refine, bool) or not isinstance(refine, (int, np.integer)) \
+            or not 0 <= int(refine) <= MAX_REFINE:
+        raise ValueError(f"refine must be a whole number from 0 to {MAX_REFINE} (elements at "
+                         f"interfaces are 2^-refine voxels); got {refine!r}.")
+    return int(refine)
+
+
+# ----------------------------------------------------------------------------- the tree
+
+
+def lattice_tree(lab: np.ndarray, lattice: Lattice, *, exclude: np.ndarray,
+                 max_size: float | None = None, periodic: bool = False) -> RegionTree:
+    """The region tree of `lab` on the lattice, refined at interfaces and capped in size.
+
+    Parameters
+    ----------
+    lab : ndarray of int
+        Checked label image (``as_labels``).
+    lattice : Lattice
+        From :func:`choose_lattice` for the image's spacing.
+    exclude : ndarray of int64
+        Materials left out of the mesh: interfaces between two of them are not refined.
+    max_size : float, optional
+        Longest element edge allowed (physical units); leaves whose body diagonal is
+        longer are split.
+    periodic : bool
+        Split every leaf that touches the image box down to one lattice cell. Cells of
+        one cell are always cut the same way (Kuhn), so opposite faces of the box then
+        carry the same vertices and facets, translated: what periodic conditions need.
+
+    Returns
+    -------
+    RegionTree
+        Leaves in lattice cells (``shape`` is the image shape times the cells per voxel).
+        For the voxel lattice and no cap, the tree of `lab` itself.
+    """
+    sub = lab
+    for axis, n in enumerate(lattice.factors):
+        if n > 1:
+            sub = np.repeat(sub, n, axis=axis)
+    tree = _build_tree(sub)
+    del sub
+    k = lattice.refine
+    if k:
+        tree = RegionTree(tree.origin << k, (tree.level + k).astype(np.int8), tree.label,
+                          tuple(n << k for n in tree.shape),
+                          tuple(n << k for n in tree.padded_shape), tree.top_level + k)
+        faces = _InterfaceFaces(lab, exclude)
+        cells = np.asarray(lattice.cells_per_voxel, dtype=np.int64)
+        tree = split_leaves(tree, lambda origin, size: faces.touches(origin, size, cells))
+    if periodic:
+        extent = np.asarray(tree.shape, dtype=np.int64)
+        tree = split_leaves(tree, lambda origin, size: (
+            (origin == 0) | (origin + size[:, None] >= extent)).any(axis=1))
+    if max_size is not None:
+        diagonal = float(np.linalg.norm(lattice.step))
+        # a leaf of side 2^l cells has edges up to 2^l diagonals long (its Kuhn diagonal)
+        tree = split_leaves(tree, lambda origin, size: size * diagonal > max_size)
+    return tree
+
+
+def split_leaves(tree: RegionTree, want) -> RegionTree:
+    """Split leaves into their 2^d children, recursively, while ``want(origin, size)``.
+
+    `want` gets the origins (L, d) and sides (L,) of the leaves still in question and
+    returns which to split; padding leaves and leaves of one cell are never split.
+    """
+    d = tree.ndim
+    corners = np.array(list(itertools.product((0, 1), repeat=d)), dtype=np.int64)
+    done_origin, done_level, done_label = [], [], []
+    origin, level, label = tree.origin, tree.level, tree.label
+    while len(level):
+        split = (level >= 1) & (label != PAD_LABEL)
+        idx = np.flatnonzero(split)
+        if idx.size:
+            size = np.left_shift(np.int64(1), level[idx].astype(np.int64))
+            split[idx] = np.asarray(want(origin[idx], size), dtype=bool)
+        done_origin.append(origin[~split])
+        done_level.append(level[~split])
+        done_label.append(label[~split])
+        if not split.any():
+            break
+        half = np.left_shift(np.int64(1), level[split].astype(np.int64) - 1)
+        origin = (origin[split][:, None, :] + corners[None] * half[:, None, None]).reshape(-1, d)
+        level = np.repeat(level[split] - 1, len(corners)).astype(np.int8)
+        label = np.repeat(label[split], len(corners))
+    return RegionTree(np.concatenate(done_origin), np.concatenate(done_level),
+                      np.concatenate(done_label), tree.shape, tree.padded_shape,
+                      tree.top_level)
+
+
+class _InterfaceFaces:
+    """Which voxel faces lie between two different labels (one of them meshed), with
+    summed-area tables so any rectangle of faces is counted in O(2^(d-1))."""
+
+    def __init__(self, lab: np.ndarray, exclude: np.ndarray):
+        self.shape = np.asarray(lab.shape, dtype=np.int64)
+        d = lab.ndim
+        meshed = ~np.isin(lab, exclude) if exclude.size else None
+        self.tables = []
+        for a in range(d):
+            lo = [slice(None)] * d
+            hi = [slice(None)] * d
+            lo[a], hi[a] = slice(None, -1), slice(1, None)
+            faces = lab[tuple(lo)] != lab[tuple(hi)]
+            if meshed is not None:
+                faces &= meshed[tuple(lo)] | meshed[tuple(hi)]
+            # planes 0 .. n_a along a (the box sides carry no interface), a zero row and
+            # column in front along every other axis for the summed-area table
+            pad = [(1, 1) if b == a else (1, 0) for b in range(d)]
+            counts = np.pad(faces, pad).astype(np.int32)
+            del faces
+            for b in range(d):
+                if b != a:
+                    np.cumsum(counts, axis=b, out=counts)
+            self.tables.append(counts)
+
+    def touches(self, origin: np.ndarray, size: np.ndarray, cells: np.ndarray) -> np.ndarray:
+        """(L,) bool: the leaf (lattice origin, side) shares a facet with an interface."""
+        d = origin.shape[1]
+        hit = np.zeros(len(origin), dtype=bool)
+        hi_corner = origin + size[:, None]
+        vlo = np.minimum(origin // cells, self.shape)                    # voxel ranges
+        vhi = np.minimum(-(-hi_corner // cells), self.shape)
+        for a in range(d):
+            table = self.tables[a]
+            for plane in (origin[:, a], hi_corner[:, a]):
+                on_face = (plane % cells[a] == 0) & ~hit
+                rows = np.flatnonzero(on_face)
+                if not rows.size:
+                    continue
+                c = plane[rows] // cells[a]
+                total = np.zeros(len(rows), dtype=np.int64)
+                # inclusion-exclusion over the other axes' ranges [vlo, vhi) of voxels;
+                # table index i+1 holds the sum over voxels < i+1 (zero row in front)
+                others = [b for b in range(d) if b != a]
+                for picks in itertools.product((0, 1), repeat=len(others)):
+                    index = [None] * d
+                    index[a] = c
+                    sign = 1
+                    for b, p in zip(others, picks):
+                        index[b] = vhi[rows, b] if p else vlo[rows, b]
+                        sign = -sign if not p else sign
+                    total += sign * table[tuple(index)]
+                hit[rows] = total > 0
+        return hit
+
+
+def labels_on_lattice(lab: np.ndarray, points: np.ndarray) -> np.ndarray:
+    """The labels on the lattice a mesh was cut from, found from its points (voxel units).
+
+    Anisotropic voxels are cut into ``n`` cells per axis (and refinement halves them
+    further): the blocks the elements must lie in are then homogeneous blocks of those
+    cells, which a tree of the voxels does not have. The points tell the lattice (read
+    from a file, the mesh has no record of it): per axis the fewest cells per voxel
+    ``c`` putting every coordinate on the grid. A power of two common to every axis
+    needs no repeat: the tree of labels repeated 2^k times along every axis is the
+    voxels' tree scaled.
+    """
+    if not len(points):
+        return lab
+    cells = []
+    for axis in range(lab.ndim):
+        coords = np.unique(points[:, axis])
+        for c in range(1, MAX_FACTOR * 2 ** MAX_REFINE + 1):
+            scaled = coords * c
+            if np.abs(scaled - np.rint(scaled)).max() <= 1e-6 * max(1.0, np.abs(scaled).max()):
+                break
+        else:
+            c = 1                         # off every lattice: the leaf check will say so
+        cells.append(c)
+    common = min((c & -c) for c in cells)          # largest power of two dividing all
+    for axis, c in enumerate(cells):
+        if c // common > 1:
+            lab = np.repeat(lab, c // common, axis=axis)
+    return lab

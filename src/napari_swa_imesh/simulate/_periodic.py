@@ -1,0 +1,152 @@
+"""The periodic-fluctuation protocol: the full effective conductivity tensor.
+
+For each axis i the potential is ``u_i = x_i + w_i`` with the fluctuation ``w_i``
+periodic over the box (equal on opposite faces): a mean gradient of one along x_i and
+no preferred face. Then ``K_ji = (1/V) x_j . A u_i`` where ``A`` is the stiffness
+matrix: ``A x_j`` assembles ``int grad(phi) . k e_j`` because the coordinate function
+is exactly a finite-element function, so no other form is assembled. The fluctuation
+solves ``P^T A P w = -P^T A x_i``, where ``P`` copies each degree of freedom on a
+``max`` face from its partner on the ``min`` face (and box edges and corners from theirs).
+
+The mesh must have the same degrees of freedom on opposite faces, translated: the
+IMESH mesh of ``mesh_labels(..., periodic=True)`` has them; any other mesh is checked and
+refused with a sentence if it has not.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from scipy import sparse
+
+from ._solve import SolverInfo, connected_parts, solve_dirichlet
+
+__all__ = ["PeriodicProblem", "PeriodicResult", "periodic_map", "periodic_tensor"]
+
+
+@dataclass
+class PeriodicResult:
+    """The tensor (image axis order), one potential per axis and the solver reports."""
+
+    tensor: np.ndarray
+    potential: list[np.ndarray]
+    solver: list[SolverInfo]
+
+
+def periodic_map(dof_coordinates: np.ndarray, lo: np.ndarray, hi: np.ndarray
+                 ) -> tuple[np.ndarray, int]:
+    """Each degree of freedom's representative when opposite box faces are identified.
+
+    Parameters
+    ----------
+    dof_coordinates : (d, n) ndarray
+        Coordinates of the degrees of freedom (image axis order).
+    lo, hi : (d,) ndarray
+        Corners of the box.
+
+    Returns
+    -------
+    reduced : (n,) ndarray of intp
+        Index of each dof among the dofs off every ``max`` face (``0 .. n_reduced-1``).
+    n_reduced : int
+
+    Raises
+    ------
+    ValueError
+        When a dof on a ``max`` face has no partner on the ``min`` face (the mesh's
+        opposite faces differ).
+    """
+    extent = hi - lo
+    tol = 1e-9 * extent[:, None]
+    at_max = np.abs(dof_coordinates - hi[:, None]) <= tol                # (d, n)
+    canonical = np.where(at_max, lo[:, None], dof_coordinates)
+    # integer keys on a grid far finer than any element: exact matching, no float ==
+    keys = np.rint((canonical - lo[:, None]) / (1e-7 * extent[:, None])).astype(np.int64).T
+    off_max = ~at_max.any(axis=0)
+    classes, reduced = np.unique(keys, axis=0, return_inverse=True)
+    reduced = reduced.ravel().astype(np.intp)
+    own = np.bincount(reduced[off_max], minlength=len(classes))
+    if (own > 1).any():
+        raise ValueError("two degrees of freedom share a position: the mesh is not "
+                         "conforming, so opposite faces cannot be matched.")
+    # a dof on m box faces has 2^m images (itself included): on a face 2, on an edge 4
+    on_faces = (at_max | (np.abs(dof_coordinates - lo[:, None]) <= tol)).sum(axis=0)
+    size = np.bincount(reduced, minlength=len(classes))
+    unmatched = size[reduced] != np.left_shift(1, on_faces)
+    if (own == 0).any() or unmatched.any():
+        missing = int(np.count_nonzero(unmatched))
+        raise ValueError(
+            f"{missing} degree(s) of freedom on the box faces have no partner on the "
+            "opposite face: the mesh is not periodic. Mesh the labels with periodic=True "
+            "(swa-imesh mesh --periodic), or use the mixed protocol.")
+    return reduced, int(len(classes))
+
+
+class PeriodicProblem:
+    """The folded system of one mesh, solved for one mean gradient at a time.
+
+    Parameters
+    ----------
+    matrix : (n, n) sparse matrix
+        Assembled stiffness of the whole mesh.
+    dof_coordinates : (d, n) ndarray
+        Coordinates of the dofs in image axis order (scikit-fem's ``doflocs``).
+    lo, hi : (d,) ndarray
+        Box corners.
+    """
+
+    def __init__(self, matrix: sparse.csr_matrix, dof_coordinates: np.ndarray,
+                 lo: np.ndarray, hi: np.ndarray):
+        n = matrix.shape[0]
+        reduced, n_reduced = periodic_map(dof_coordinates, lo, hi)
+        self.matrix, self.coordinates = matrix, dof_coordinates
+        self.copy = sparse.csr_matrix((np.ones(n), (np.arange(n), reduced)),
+                                      shape=(n, n_reduced))
+        self.folded = (self.copy.T @ matrix @ self.copy).tocsr()
+        # the fluctuation is free up to a constant per connected part: pin one dof each
+        _, self.pins = np.unique(connected_parts(self.folded), return_index=True)
+        self.volume = float(np.prod(hi - lo))
+
+    def solve(self, axis: int, *, tol: float) -> tuple[np.ndarray, np.ndarray, SolverInfo]:
+        """Column `axis` of the tensor (image axis order), the potential, the solve's report.
+
+        ``K[j, axis] = (1/V) x_j . A u`` with ``u = x_axis + P w``: the mean flux under a
+        unit mean gradient, as a conductivity.
+        """
+        x = self.coordinates[axis]
+        rhs = -(self.copy.T @ (self.matrix @ x))
+        w, info = solve_dirichlet(self.folded, self.pins, np.zeros(self.pins.size), rhs,
+                                  tol=tol)
+        u = x + self.copy @ w
+        column = self.coordinates @ (self.matrix @ u) / self.volume
+        return column, u, info
+
+
+def periodic_tensor(matrix: sparse.csr_matrix, dof_coordinates: np.ndarray,
+                    lo: np.ndarray, hi: np.ndarray, axes: list[int], *, tol: float
+                    ) -> PeriodicResult:
+    """Effective conductivity tensor by the periodic-fluctuation protocol.
+
+    Parameters
+    ----------
+    matrix, dof_coordinates, lo, hi
+        As for :class:`PeriodicProblem`.
+    axes : list of int
+        Image axes to apply a mean gradient along; the tensor's other columns are NaN.
+    tol : float
+        Relative residual of each solve.
+
+    Returns
+    -------
+    PeriodicResult
+        ``tensor`` (d, d) in image axis order.
+    """
+    problem = PeriodicProblem(matrix, dof_coordinates, lo, hi)
+    tensor = np.full((lo.size, lo.size), np.nan)
+    potentials, infos = [], []
+    for i in axes:
+        tensor[:, i], u, info = problem.solve(i, tol=tol)
+        potentials.append(u)
+        infos.append(info)
+    return PeriodicResult(tensor, potentials, infos)
