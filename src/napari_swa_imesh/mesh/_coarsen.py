@@ -20,11 +20,10 @@ MAX_COARSEN = 5
 
 def check_coarsen(coarsen) -> int:
     """`coarsen` as an int in ``0 .. MAX_COARSEN``, or ValueError saying what to pass."""
-    if isinstance(coarsen, bool) or not isinstance(coarsen, (int, np.integer)) \
-            or not 0 <= int(coarsen) <= MAX_COARSEN:
-        raise ValueError(f"coarsen must be a whole number from 0 to {MAX_COARSEN} (labels are "
-                         f"meshed in blocks of 2^coarsen voxels); got {coarsen!r}.")
-    return int(coarsen)
+    from ._lattice import check_level
+
+    return check_level(coarsen, "coarsen", MAX_COARSEN,
+                       "labels are meshed in blocks of 2^coarsen voxels")
 
 
 def coarsen_labels(lab: np.ndarray, level: int) -> tuple[np.ndarray, dict]:

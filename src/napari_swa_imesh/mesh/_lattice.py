@@ -231,13 +231,19 @@ def choose_lattice(spacing, *, refine: int = 0, subdivide: bool = True) -> Latti
     return Lattice(tuple(float(s) for s in spacing), factors, refine)
 
 
+def check_level(value, name: str, top: int, meaning: str) -> int:
+    """`value` as an int in ``0 .. top``, or ValueError naming it and what it means."""
+    if isinstance(value, bool) or not isinstance(value, (int, np.integer)) \
+            or not 0 <= int(value) <= top:
+        raise ValueError(f"{name} must be a whole number from 0 to {top} ({meaning}); got "
+                         f"{value!r}.")
+    return int(value)
+
+
 def check_refine(refine) -> int:
     """`refine` as an int in ``0 .. MAX_REFINE``, or ValueError saying what to pass."""
-    if isinstance(refine, bool) or not isinstance(refine, (int, np.integer)) \
-            or not 0 <= int(refine) <= MAX_REFINE:
-        raise ValueError(f"refine must be a whole number from 0 to {MAX_REFINE} (elements at "
-                         f"interfaces are 2^-refine voxels); got {refine!r}.")
-    return int(refine)
+    return check_level(refine, "refine", MAX_REFINE,
+                       "elements at interfaces are 2^-refine voxels")
 
 
 # ----------------------------------------------------------------------------- the tree
