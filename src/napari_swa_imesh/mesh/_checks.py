@@ -17,7 +17,7 @@ import numpy as np
 from .._tree import RegionTree, _build_tree, leaf_finder
 from .._validation import as_labels
 from ._facets import _blocks, _runs, _side_passes, _spread_bits
-from ._quality import _det
+from ._quality import _corner_det, _det
 from ._types import Mesh
 
 __all__ = ["MeshChecks", "check_mesh", "rasterize_materials"]
@@ -349,14 +349,7 @@ def _elements(points, cells, material, lab: np.ndarray, exclude: np.ndarray,
     for start in range(0, m, _CELLS_PER_CHUNK):
         ids = cells[start:start + _CELLS_PER_CHUNK]
         p = [[x[ids[:, k]] for x in coords] for k in range(d + 1)]  # p[corner][axis]: (n,)
-        e = [[p[k][a] - p[0][a] for a in range(d)] for k in range(1, d + 1)]
-        if d == 2:
-            det = e[0][0] * e[1][1] - e[0][1] * e[1][0]
-        else:
-            det = (e[0][0] * (e[1][1] * e[2][2] - e[1][2] * e[2][1])
-                   + e[0][1] * (e[1][2] * e[2][0] - e[1][0] * e[2][2])
-                   + e[0][2] * (e[1][0] * e[2][1] - e[1][1] * e[2][0]))
-        del e
+        det = _corner_det(p)
         vol = det / math.factorial(d)
         sign[start:start + len(vol)] = np.sign(det)
         total += float(det.sum())  # exact for integer corners, whatever the chunks
