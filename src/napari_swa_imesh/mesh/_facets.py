@@ -415,8 +415,10 @@ def facet_groups(mesh: Mesh) -> dict[str, FacetGroup]:
     """
     d = mesh.ndim
     cells = np.asarray(mesh.cells, dtype=np.intp)
-    facets, owners, opposite = paired_facets(cells)
     material = np.asarray(mesh.material)
+    # the pairs inside one material name no group: dropped pass by pass, never stored
+    facets, owners, opposite = _paired_result(cells, *_pair_rows(
+        cells, lambda one, two: material[one // (d + 1)] != material[two // (d + 1)]))
 
     groups: dict[str, FacetGroup] = {}
 
