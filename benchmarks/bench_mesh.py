@@ -151,51 +151,58 @@ def pipeline_command(spec: dict) -> dict:
     return out
 
 
-def run_pipeline(shape: tuple, folder: str) -> None:
+def run_pipeline(shape: tuple, folder: str, formats=PIPELINE_FORMATS) -> None:
     import os
 
     n = max(shape)
     labels = brain_like(n, len(shape))[tuple(slice((n - k) // 2, (n - k) // 2 + k) for k in shape)]
     path = os.path.join(folder, "labels.npy")
     np.save(path, labels)
-    rows = {}
-    steps = ["tree", "mesher", "checks", "facet groups", *PIPELINE_FORMATS]
-    for step in steps:
-        spec = {"step": step, "labels": path, "out": os.path.join(folder, "step" + step)}
-        rows[step] = _spawn_json(["--pipeline-step", json.dumps(spec)])
-    for suffix in PIPELINE_FORMATS:
-        spec = {"labels": path, "out": os.path.join(folder, "command" + suffix)}
-        rows["command " + suffix] = _spawn_json(["--pipeline-command", json.dumps(spec)])
+
+    def step(name):
+        spec = {"step": name, "labels": path, "out": os.path.join(folder, "step" + name)}
+        return _spawn_json(["--pipeline-step", json.dumps(spec)])
+
+    rows = {"tree": step("tree"), "mesher": step("mesher")}
     mesher = rows["mesher"]
-    shape_s = "x".join(map(str, shape))
-    print(f"\n{shape_s}: {mesher.get('elements')} elements, {mesher.get('vertices')} vertices; "
-          f"ratios to the mesher alone ({mesher.get('seconds', 0):.2f} s, "
-          f"{mesher.get('peak_mb', 0):.0f} MB peak)\n")
+    print(f"\n{'x'.join(map(str, shape))}: {mesher.get('elements')} elements, "
+          f"{mesher.get('vertices')} vertices; ratios to the mesher alone\n")
     print("| step | seconds | peak RSS MB | time / mesher | goal | memory / mesher | notes |")
     print("|---|---|---|---|---|---|---|")
-    for name, r in rows.items():
-        if "error" in r:
-            print(f"| {name} | error: {r['error']} |||||")
-            continue
-        ratio = r["seconds"] / mesher["seconds"]
-        mem = r["peak_mb"] / mesher["peak_mb"]
-        goal, notes = "", ""
-        if name in ("checks", ".vtu"):
-            g = PIPELINE_GOALS[name]
-            goal = f"<= {g:g}: {'PASS' if ratio <= g else 'MISS'}"
-        elif name.startswith("command"):
-            gt, gm = PIPELINE_GOALS["command_time"], PIPELINE_GOALS["command_memory"]
-            goal = (f"time <= {gt:g}: {'PASS' if ratio <= gt else 'MISS'}; memory <= {gm:g}: "
-                    f"{'PASS' if mem <= gm else 'MISS'}")
-            notes = f"{r['seconds'] / rows['tree']['seconds']:.1f} x tree; steps {r.get('steps')}"
-        if "passed" in r:
-            notes += f" checks {'pass' if r['passed'] else 'FAIL'}"
-        print(f"| {name} | {r['seconds']:.2f} | {r['peak_mb']:.0f} | {ratio:.2f} | {goal} | "
-              f"{mem:.2f} | {notes.strip()} |", flush=True)
+    names = ["tree", "mesher", "checks", "facet groups", *formats,
+             *("command " + f for f in formats)]
+    for name in names:
+        if name not in rows:
+            if name.startswith("command "):
+                spec = {"labels": path, "out": os.path.join(folder, "command" + name[8:])}
+                rows[name] = _spawn_json(["--pipeline-command", json.dumps(spec)])
+            else:
+                rows[name] = step(name)
+        print(_pipeline_row(name, rows[name], rows), flush=True)
     print("\nstep rows: seconds of the step alone (the mesher row: tree + mesh) in a process "
           "that read the labels and meshed first, so their peak RSS includes the mesher's. "
           "command rows: wall time of the whole command (interpreter start, read, mesh, "
-          "check, write) and its peak RSS.")
+          "check, write) and its peak RSS; x tree: the same time over the tree alone.")
+
+
+def _pipeline_row(name: str, r: dict, rows: dict) -> str:
+    if "error" in r or "error" in rows["mesher"]:
+        return f"| {name} | error: {r.get('error', rows['mesher'].get('error'))} |||||"
+    mesher = rows["mesher"]
+    ratio, mem = r["seconds"] / mesher["seconds"], r["peak_mb"] / mesher["peak_mb"]
+    goal, notes = "", ""
+    if name in ("checks", ".vtu"):
+        g = PIPELINE_GOALS[name]
+        goal = f"<= {g:g}: {'PASS' if ratio <= g else 'MISS'}"
+    elif name.startswith("command"):
+        gt, gm = PIPELINE_GOALS["command_time"], PIPELINE_GOALS["command_memory"]
+        goal = (f"time <= {gt:g}: {'PASS' if ratio <= gt else 'MISS'}; memory <= {gm:g}: "
+                f"{'PASS' if mem <= gm else 'MISS'}")
+        notes = f"{r['seconds'] / rows['tree']['seconds']:.0f} x tree; steps {r.get('steps')}"
+    if "passed" in r:
+        notes += f" checks {'pass' if r['passed'] else 'FAIL'}"
+    return (f"| {name} | {r['seconds']:.2f} | {r['peak_mb']:.0f} | {ratio:.2f} | {goal} | "
+            f"{mem:.2f} | {notes.strip()} |")
 
 
 def _spawn_json(args: list) -> dict:
@@ -245,6 +252,8 @@ def main(argv=None) -> int:
                              "writers, whole command per format) instead")
     parser.add_argument("--shape", type=int, nargs="+", default=None,
                         help="shape of the --pipeline volume (default 256 256 256)")
+    parser.add_argument("--formats", nargs="+", default=list(PIPELINE_FORMATS),
+                        help="suffixes written by --pipeline (default: .vtu .inp .msh .xdmf)")
     parser.add_argument("--one", help=argparse.SUPPRESS)
     parser.add_argument("--pipeline-step", help=argparse.SUPPRESS)
     parser.add_argument("--pipeline-command", help=argparse.SUPPRESS)
@@ -262,7 +271,7 @@ def main(argv=None) -> int:
 
         shape = tuple(args.shape or ((64,) * 3 if args.quick else (256,) * 3))
         with tempfile.TemporaryDirectory() as folder:
-            run_pipeline(shape, folder)
+            run_pipeline(shape, folder, tuple(args.formats))
         return 0
     n2, n3, nd = (256, 64, 32) if args.quick else (1024, 256, 64)
     specs = [

@@ -411,8 +411,8 @@ def _facets(points, cells, sign, lab: np.ndarray, exclude: np.ndarray) -> dict:
             two = starts[counts == 2]
             misoriented += int(np.count_nonzero(k[two + 1] - k[two] != 1))
             once.append(k[starts[counts == 1]])
+        once = np.concatenate(once) if once else keys[:0]
         del keys
-        once = np.concatenate(once)
         fpts = points[np.stack(packer.decode(once, d), axis=1)]  # (B, d, d), ids sorted
         on_box = ((np.abs(fpts).max(axis=1) <= _TOL) |
                   (np.abs(fpts - box).max(axis=1) <= _TOL)).any(axis=1)

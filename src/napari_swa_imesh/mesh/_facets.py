@@ -301,8 +301,7 @@ def _side_passes(cells: np.ndarray, sign: np.ndarray, spread_bits: int,
     for p, size in enumerate(sizes):
         lo, hi = bounds[p], bounds[p + 1]
         packer = _Packer(spread_bits, 1, lo)
-        keys = np.empty(size, dtype=np.int64)
-        parts = [] if ranked else None
+        keys, parts = (None, []) if ranked else (np.empty(size, dtype=np.int64), None)
         at = 0
         for cols, bits in chunks():
             if len(sizes) > 1:
