@@ -57,8 +57,8 @@ def add_commands(subparsers) -> None:
                         "(DC2D3/DC3D4, for *HEAT TRANSFER)")
     p.add_argument("--force", action="store_true", help="replace an existing output file")
     p.add_argument("--no-check", action="store_true",
-                   help="skip the conformity/volume/label checks (they take about 10 us per "
-                        "element, minutes for tens of millions of tetrahedra)")
+                   help="skip the conformity/volume/label checks (they take about as long "
+                        "as the meshing and one sort key per element facet of memory)")
     p.add_argument("--memory-limit", default="auto", metavar="BYTES|auto|off",
                    help="refuse to start when the estimated peak memory of the run "
                         "(labels, tree, balance, elements, checks, writing) exceeds this: "
