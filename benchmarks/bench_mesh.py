@@ -14,6 +14,12 @@ Cases:
 3. 3-D Delaunay (scipy's Qhull on the leaf corners) on a 64^3 volume of the same kind,
    beside the template on that volume: at 256^3 Qhull would need hours and many GB, so it
    is compared at the size it can do; its zero-volume count and conformity are printed.
+
+With ``--pipeline`` it measures instead the way to a file at volume size (the brain-like
+256^3 volume, or ``--shape``): the tree alone, the mesher alone (tree + mesh), the checks,
+the facet groups and each writer, each in its own process (time of the step, peak RSS of
+the process), then ``swa-imesh mesh LABELS.npy -o out.SUFFIX`` per format as a
+subprocess (wall time and its peak RSS), with the goals as ratios to the mesher.
 """
 
 from __future__ import annotations
@@ -88,6 +94,125 @@ def run_one(spec: dict) -> dict:
     return out
 
 
+#: goals of the path to a file, as ratios to the mesher alone (same run)
+PIPELINE_GOALS = {"checks": 1.0, ".vtu": 1.0, "command_time": 5.0, "command_memory": 1.5}
+PIPELINE_FORMATS = (".vtu", ".inp", ".msh", ".xdmf")
+
+
+def pipeline_step(spec: dict) -> dict:
+    """One step of the path to a file in this process: seconds of the step, peak RSS."""
+    from napari_swa_imesh.mesh._imesh import _mesh_labels
+
+    labels = np.load(spec["labels"])
+    step, extra = spec["step"], {}
+    t = time.perf_counter()
+    if step == "tree":
+        from napari_swa_imesh import build_tree
+
+        build_tree(labels)
+    else:
+        mesh, tree = _mesh_labels(labels, method="template", exclude=np.zeros(0, np.int64),
+                                  spacing=(1.0,) * labels.ndim)
+        extra = {"elements": mesh.n_cells, "vertices": len(mesh.points)}
+        if step != "mesher":  # the mesher row times tree + mesh; the others their step
+            t = time.perf_counter()
+        if step == "checks":
+            from napari_swa_imesh.mesh._checks import check_mesh
+
+            extra["passed"] = check_mesh(mesh, labels, tree=tree).all_passed
+        elif step == "facet groups":
+            from napari_swa_imesh.mesh import facet_groups
+
+            extra["groups"] = len(facet_groups(mesh))
+        elif step != "mesher":
+            from napari_swa_imesh.mesh._export import write_mesh
+
+            del tree
+            write_mesh(mesh, spec["out"], force=True)
+    return {"seconds": time.perf_counter() - t,
+            "peak_mb": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024, **extra}
+
+
+def pipeline_command(spec: dict) -> dict:
+    """``swa-imesh mesh`` as the user runs it, in a child process: wall time, peak RSS."""
+    t = time.perf_counter()
+    res = subprocess.run([sys.executable, "-m", "napari_swa_imesh.cli", "mesh", spec["labels"],
+                          "-o", spec["out"], "--force", "--json"], capture_output=True, text=True,
+                         check=False)
+    wall = time.perf_counter() - t
+    out = {"seconds": wall, "peak_mb": resource.getrusage(resource.RUSAGE_CHILDREN).ru_maxrss / 1024,
+           "exit": res.returncode}
+    if res.returncode in (0, 1):
+        report = json.loads(res.stdout)
+        out["steps"] = {k: round(v, 2) for k, v in report["seconds"].items() if k != "mesh_steps"}
+        out["passed"] = report["checks"].get("all_passed")
+    else:
+        out["error"] = res.stderr.strip().splitlines()[-1] if res.stderr else "failed"
+    return out
+
+
+def run_pipeline(shape: tuple, folder: str, formats=PIPELINE_FORMATS) -> None:
+    import os
+
+    n = max(shape)
+    labels = brain_like(n, len(shape))[tuple(slice((n - k) // 2, (n - k) // 2 + k) for k in shape)]
+    path = os.path.join(folder, "labels.npy")
+    np.save(path, labels)
+
+    def step(name):
+        spec = {"step": name, "labels": path, "out": os.path.join(folder, "step" + name)}
+        return _spawn_json(["--pipeline-step", json.dumps(spec)])
+
+    rows = {"tree": step("tree"), "mesher": step("mesher")}
+    mesher = rows["mesher"]
+    print(f"\n{'x'.join(map(str, shape))}: {mesher.get('elements')} elements, "
+          f"{mesher.get('vertices')} vertices; ratios to the mesher alone\n")
+    print("| step | seconds | peak RSS MB | time / mesher | goal | memory / mesher | notes |")
+    print("|---|---|---|---|---|---|---|")
+    names = ["tree", "mesher", "checks", "facet groups", *formats,
+             *("command " + f for f in formats)]
+    for name in names:
+        if name not in rows:
+            if name.startswith("command "):
+                spec = {"labels": path, "out": os.path.join(folder, "command" + name[8:])}
+                rows[name] = _spawn_json(["--pipeline-command", json.dumps(spec)])
+            else:
+                rows[name] = step(name)
+        print(_pipeline_row(name, rows[name], rows), flush=True)
+    print("\nstep rows: seconds of the step alone (the mesher row: tree + mesh) in a process "
+          "that read the labels and meshed first, so their peak RSS includes the mesher's. "
+          "command rows: wall time of the whole command (interpreter start, read, mesh, "
+          "check, write) and its peak RSS; x tree: the same time over the tree alone.")
+
+
+def _pipeline_row(name: str, r: dict, rows: dict) -> str:
+    if "error" in r or "error" in rows["mesher"]:
+        return f"| {name} | error: {r.get('error', rows['mesher'].get('error'))} |||||"
+    mesher = rows["mesher"]
+    ratio, mem = r["seconds"] / mesher["seconds"], r["peak_mb"] / mesher["peak_mb"]
+    goal, notes = "", ""
+    if name in ("checks", ".vtu"):
+        g = PIPELINE_GOALS[name]
+        goal = f"<= {g:g}: {'PASS' if ratio <= g else 'MISS'}"
+    elif name.startswith("command"):
+        gt, gm = PIPELINE_GOALS["command_time"], PIPELINE_GOALS["command_memory"]
+        goal = (f"time <= {gt:g}: {'PASS' if ratio <= gt else 'MISS'}; memory <= {gm:g}: "
+                f"{'PASS' if mem <= gm else 'MISS'}")
+        notes = f"{r['seconds'] / rows['tree']['seconds']:.0f} x tree; steps {r.get('steps')}"
+    if "passed" in r:
+        notes += f" checks {'pass' if r['passed'] else 'FAIL'}"
+    return (f"| {name} | {r['seconds']:.2f} | {r['peak_mb']:.0f} | {ratio:.2f} | {goal} | "
+            f"{mem:.2f} | {notes.strip()} |")
+
+
+def _spawn_json(args: list) -> dict:
+    res = subprocess.run([sys.executable, __file__, *args], capture_output=True, text=True,
+                         check=False)
+    if res.returncode:
+        return {"error": res.stderr.strip().splitlines()[-1] if res.stderr else "failed"}
+    return json.loads(res.stdout.strip().splitlines()[-1])
+
+
 def _spawn(spec: dict) -> dict:
     res = subprocess.run([sys.executable, __file__, "--one", json.dumps(spec)],
                          capture_output=True, text=True, check=False)
@@ -122,10 +247,31 @@ def main(argv=None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--quick", action="store_true", help="small sizes only (smoke run)")
     parser.add_argument("--only", type=int, nargs="*", help="run only these case numbers (0-5)")
+    parser.add_argument("--pipeline", action="store_true",
+                        help="time the way to a file (tree, mesher, checks, facet groups, "
+                             "writers, whole command per format) instead")
+    parser.add_argument("--shape", type=int, nargs="+", default=None,
+                        help="shape of the --pipeline volume (default 256 256 256)")
+    parser.add_argument("--formats", nargs="+", default=list(PIPELINE_FORMATS),
+                        help="suffixes written by --pipeline (default: .vtu .inp .msh .xdmf)")
     parser.add_argument("--one", help=argparse.SUPPRESS)
+    parser.add_argument("--pipeline-step", help=argparse.SUPPRESS)
+    parser.add_argument("--pipeline-command", help=argparse.SUPPRESS)
     args = parser.parse_args(argv)
     if args.one:
         print(json.dumps(run_one(json.loads(args.one)), default=float))
+        return 0
+    if args.pipeline_step or args.pipeline_command:
+        run = pipeline_step if args.pipeline_step else pipeline_command
+        print(json.dumps(run(json.loads(args.pipeline_step or args.pipeline_command)),
+                         default=float))
+        return 0
+    if args.pipeline:
+        import tempfile
+
+        shape = tuple(args.shape or ((64,) * 3 if args.quick else (256,) * 3))
+        with tempfile.TemporaryDirectory() as folder:
+            run_pipeline(shape, folder, tuple(args.formats))
         return 0
     n2, n3, nd = (256, 64, 32) if args.quick else (1024, 256, 64)
     specs = [

@@ -112,30 +112,22 @@ def test_dimension_mismatch():
         check_mesh(mesh, LABELS[3])
 
 
-@pytest.mark.parametrize("offset", [0, 2**22])  # packed int64 keys, then the two-key sort
-def test_facet_grouping_matches_numpy_unique(offset):
-    from napari_swa_imesh.mesh._checks import _group_rows
-
-    rng = np.random.default_rng(0)
-    rows = np.sort(rng.integers(0, 40, (3000, 3)), axis=1) + offset
-    inverse, counts = _group_rows(rows)
-    _, inv_ref, counts_ref = np.unique(rows, axis=0, return_inverse=True, return_counts=True)
-    np.testing.assert_array_equal(inverse, inv_ref.ravel())
-    np.testing.assert_array_equal(counts, counts_ref)
-
-
 def test_chunked_passes_give_the_same_answer(monkeypatch):
-    from napari_swa_imesh.mesh import _checks
+    from napari_swa_imesh.mesh import _checks, _facets
 
     lab = LABELS[3]
     mesh = mesh_labels(lab, exclude=(0,))
     keep = np.arange(mesh.n_cells) != 7
     broken = _broken(mesh, cells=mesh.cells[keep], material=mesh.material[keep])
     whole = [check_mesh(m, lab, exclude=(0,)) for m in (mesh, broken)]
-    monkeypatch.setattr(_checks, "_FACETS_PER_PASS", 97)
+    monkeypatch.setattr(_facets, "_KEYS_PER_PASS", 97)
     monkeypatch.setattr(_checks, "_CELLS_PER_CHUNK", 13)
+    monkeypatch.setattr(_facets, "_CHUNK", 11)
+    monkeypatch.setattr(_facets, "_RUN_BLOCK", 7)
     chunked = [check_mesh(m, lab, exclude=(0,)) for m in (mesh, broken)]
     assert chunked == whole
+    monkeypatch.setattr(_facets, "_MAX_PASSES", 1)       # ids ranked, not packed
+    assert [check_mesh(m, lab, exclude=(0,)) for m in (mesh, broken)] == whole
     assert whole[0]["all_passed"] and not whole[1]["conforming"]
 
 
@@ -179,3 +171,78 @@ def test_a_given_tree_is_used_and_must_match_the_labels(good):
         check_mesh(mesh, lab, tree=build_tree(lab[:-1]))
     with pytest.raises(TypeError, match="tree must be a RegionTree"):
         check_mesh(mesh, lab, tree=lab)
+
+
+def test_overlapping_tetrahedra_fail():
+    """Two tetrahedra on the same side of their shared face: caught by the side bits."""
+    from napari_swa_imesh.mesh._types import Mesh
+
+    points = np.array([[0.0, 0, 0], [1, 0, 0], [0, 1, 0], [0.2, 0.2, 1], [0.3, 0.3, 0.5]])
+    mesh = Mesh(points, np.array([[0, 1, 2, 3], [0, 1, 2, 4]]), np.array([1, 1]),
+                spacing=(1.0,) * 3, shape=(1, 1, 1))
+    mesh = dataclasses.replace(mesh, cells=np.where(
+        (np.sign(_volumes(mesh)) < 0)[:, None], mesh.cells[:, [1, 0, 2, 3]], mesh.cells))
+    checks = check_mesh(mesh, np.ones((1, 1, 1), int))
+    assert checks["positive_volume"] and checks["n_misoriented_facets"] == 1
+    assert not checks["conforming"]
+
+
+def _volumes(mesh):
+    from napari_swa_imesh.mesh._quality import signed_volumes
+
+    return signed_volumes(mesh.points, mesh.cells)
+
+
+def test_corner_order_does_not_matter_but_orientation_does(good):
+    """Even permutations of each cell's corners keep every check; odd ones invert cells."""
+    mesh, lab = good
+    d = mesh.ndim
+    rng = np.random.default_rng(d)
+    perms = [p for p in __import__("itertools").permutations(range(d + 1))]
+    even = np.array([p for p in perms if _parity(p) == 0])
+    odd = np.array([p for p in perms if _parity(p) == 1])
+    rows = np.arange(mesh.n_cells)[:, None]
+    shuffled = mesh.cells[rows, even[rng.integers(0, len(even), mesh.n_cells)]]
+    assert check_mesh(_broken(mesh, cells=shuffled), lab) == check_mesh(mesh, lab)
+    inverted = mesh.cells[rows, odd[rng.integers(0, len(odd), mesh.n_cells)]]
+    checks = check_mesh(_broken(mesh, cells=inverted), lab)
+    assert not checks["positive_volume"] and checks["n_misoriented_facets"] == 0
+
+
+def _parity(p) -> int:
+    return sum(p[i] > p[j] for i in range(len(p)) for j in range(i + 1, len(p))) % 2
+
+
+def test_gap_filled_by_an_overlap_in_one_leaf_fails(good):
+    """A dropped element replaced by a copy of its neighbour in the same leaf keeps the
+    leaf's volume only when the volumes agree; the facets still see the hole."""
+    mesh, lab = good
+    leaf = mesh.cell_data["leaf"]
+    volumes = _volumes(mesh)
+    # two elements of one leaf with equal volumes
+    key = np.stack([leaf, np.round(volumes * 1e9)], axis=1)
+    _, first, counts = np.unique(key, axis=0, return_index=True, return_counts=True)
+    a = first[counts >= 2][0]
+    b = np.flatnonzero((key == key[a]).all(axis=1))[1]
+    cells = mesh.cells.copy()
+    cells[b] = cells[a]
+    checks = check_mesh(_broken(mesh, cells=cells), lab)
+    assert checks["volume_sum"] and checks["labels_recovered"]  # volumes cannot tell
+    assert not checks["conforming"] and checks["n_unmatched_facets"] > 0
+    assert checks["n_facets_shared_3plus"] + checks["n_misoriented_facets"] > 0
+
+
+def test_element_moved_to_another_leaf_breaks_the_labels(good):
+    mesh, lab = good
+    points = mesh.points.copy()
+    shift = np.zeros(mesh.ndim)
+    shift[-1] = mesh.spacing[-1]
+    cells = mesh.cells.copy()
+    # a copy of one element's corners, moved by one pixel, replaces it
+    k = mesh.n_cells // 3
+    new = np.arange(len(points), len(points) + mesh.ndim + 1)
+    points = np.concatenate([points, mesh.points[cells[k]] + shift])
+    cells[k] = new
+    checks = check_mesh(_broken(mesh, points=points, cells=cells), lab)
+    assert not checks["labels_recovered"] and checks["n_pixels_wrong"] > 0
+    assert not checks["conforming"] and not checks["all_passed"]

@@ -72,3 +72,35 @@ def test_box_sides_cover_the_faces_of_the_image():
             assert area == pytest.approx(np.prod(np.delete(extent, axis)))
             coordinate = p[..., axis]
             assert np.allclose(coordinate, 0 if end == "min" else extent[axis])
+
+
+@pytest.mark.parametrize("passes", ["one", "many", "ranked"])
+@pytest.mark.parametrize("shape", [(9, 11), (6, 7, 5)])
+def test_paired_facets_match_counting_in_every_pass_plan(monkeypatch, shape, passes):
+    """One facet sort, whatever the passes: the pairs a dictionary of sorted ids gives,
+    lowest element first, facets in the order of their sorted ids."""
+    from napari_swa_imesh.mesh import _facets
+    from napari_swa_imesh.mesh._facets import FACE_CORNERS, paired_facets
+
+    rng = np.random.default_rng(len(shape))
+    mesh = mesh_labels(rng.integers(0, 4, shape), exclude=[0])
+    # scattered ids (wide keys), and three elements on one facet
+    cells = rng.permutation(len(mesh.points))[mesh.cells]
+    cells = np.concatenate([cells, cells[:3], cells[:1]])
+    if passes != "one":
+        monkeypatch.setattr(_facets, "_KEYS_PER_PASS", 40)
+    if passes == "ranked":
+        monkeypatch.setattr(_facets, "_MAX_PASSES", 1)
+    facets, owners, opposite = paired_facets(cells)
+    d = cells.shape[1] - 1
+    seen = {}
+    for i, cell in enumerate(cells.tolist()):
+        for k in range(d + 1):
+            seen.setdefault(tuple(sorted(cell[:k] + cell[k + 1:])), []).append((i, k))
+    expected = sorted(seen)
+    assert [tuple(sorted(f)) for f in facets.tolist()] == expected
+    for f, own, opp in zip(expected, owners.tolist(), opposite.tolist()):
+        pairs = seen[f]
+        assert own[0] == pairs[0][0] and opp[0] == pairs[0][1]
+        assert own[1:] == ([pairs[1][0]] if len(pairs) == 2 else [-1])
+    np.testing.assert_array_equal(facets, cells[owners[:, 0, None], FACE_CORNERS[d][opposite[:, 0]]])

@@ -15,17 +15,18 @@ from dataclasses import asdict, dataclass
 import numpy as np
 
 from .._tree import RegionTree, _build_tree, leaf_finder
-from ._lattice import labels_on_lattice
 from .._validation import as_labels
-from ._quality import _det, signed_volumes
+from ._facets import _blocks, _runs, _side_passes, _spread_bits
+from ._lattice import labels_on_lattice
+from ._quality import _corner_det, _det
 from ._types import Mesh
 
 __all__ = ["MeshChecks", "check_mesh", "rasterize_materials"]
 
 _TOL = 1e-9
 _CANDIDATES_PER_CHUNK = 1 << 22
-_CELLS_PER_CHUNK = 1 << 20
-_FACETS_PER_PASS = 1 << 23
+_CELLS_PER_CHUNK = 1 << 16      # small enough for the cache
+_RASTER_CELLS = 1 << 20
 _SLAB_VOXELS = 1 << 22
 
 
@@ -48,8 +49,10 @@ class MeshChecks(Mapping):
     inside_one_leaf : bool
         Every element inside one maximal homogeneous block of the labels.
     labels_recovered : bool
-        Element materials rasterised at pixel centres give the labels back, excluded
-        pixels uncovered.
+        Inside every maximal homogeneous block the elements carry its label and their
+        volumes add up to the block's (to nothing in an excluded block). With
+        ``conforming`` (no overlap, no hole) this is the label image given back at every
+        pixel centre, excluded pixels uncovered; :func:`rasterize_materials` paints it.
     finite : bool
         Every point coordinate and float value in ``cell_data`` is a number (NaN or inf
         means the spacing over- or underflowed).
@@ -57,7 +60,8 @@ class MeshChecks(Mapping):
     n_unmatched_facets, n_outside_leaf, n_nonfinite_values : int
         The counts behind the flags.
     n_pixels_wrong : int
-        Missed or wrongly covered pixels plus covering elements of a wrong material.
+        Pixels of the blocks where that fails (elements of another material, or volume
+        missing or too much).
     min_volume, volume_error : float
         Smallest element volume and (sum of volumes - included volume), physical units.
     """
@@ -150,9 +154,9 @@ def _rasterize(points: np.ndarray, cells: np.ndarray, material: np.ndarray, shap
     covered = np.zeros(n_pix, bool)
     last = np.full(n_pix, -1, np.int64) if labels is None else None
     n_wrong = 0
-    for start in range(0, len(cells), _CELLS_PER_CHUNK):
-        cc = cells[start:start + _CELLS_PER_CHUNK]
-        mat = material[start:start + _CELLS_PER_CHUNK]
+    for start in range(0, len(cells), _RASTER_CELLS):
+        cc = cells[start:start + _RASTER_CELLS]
+        mat = material[start:start + _RASTER_CELLS]
         p = points[cc]  # (m, d+1, d)
         lo = np.maximum(np.ceil(p.min(axis=1) - 0.5 - _TOL).astype(np.int64), 0)
         hi = np.minimum(np.floor(p.max(axis=1) - 0.5 + _TOL).astype(np.int64), np.array(shape) - 1)
@@ -226,88 +230,6 @@ def _inv(m: np.ndarray) -> np.ndarray:
     return np.stack([np.cross(b, c), np.cross(c, a), np.cross(a, b)], axis=2) / det
 
 
-def _group_rows(rows: np.ndarray):
-    """Group equal rows of an (F, k) int array: (inverse (F,), counts (U,)).
-
-    Packs each row into one int64 when the ids fit, else sorts lexicographically; both
-    are far faster than ``np.unique(axis=0)``.
-    """
-    n = int(rows.max()) + 1 if rows.size else 1
-    k = rows.shape[1]
-    if n ** k < 2**63:
-        key = np.zeros(len(rows), np.int64)
-        for j in range(k):
-            key = key * n + rows[:, j]
-        order = np.argsort(key, kind="stable")
-        sorted_key = key[order]
-        new = np.r_[True, sorted_key[1:] != sorted_key[:-1]]
-        del key, sorted_key
-    else:
-        # two int64 keys: all columns but the last packed, then the last
-        head = np.zeros(len(rows), np.int64)
-        for j in range(k - 1):
-            head = head * n + rows[:, j]
-        order = np.lexsort((rows[:, -1], head))
-        sorted_head, sorted_last = head[order], rows[order, -1]
-        new = np.r_[True, (sorted_head[1:] != sorted_head[:-1]) | (sorted_last[1:] != sorted_last[:-1])]
-        del head, sorted_head, sorted_last
-    group_sorted = np.cumsum(new) - 1
-    inverse = np.empty(len(rows), np.int64)
-    inverse[order] = group_sorted
-    counts = np.bincount(group_sorted)
-    return inverse, counts
-
-
-def _facet_passes(sorted_cells: np.ndarray, n_points: int):
-    """Yield (facets (F, d) sorted ids, opposite (F,)) in passes over ranges of the lowest id.
-
-    A facet of a cell whose ids are sorted is that cell without one column, still sorted;
-    every copy of a facet has the same lowest id, so each pass sees all copies of its
-    facets and memory stays bounded by ``_FACETS_PER_PASS``.
-    """
-    n_vert = sorted_cells.shape[1]
-    n_pass = max(1, -(-len(sorted_cells) * n_vert // _FACETS_PER_PASS))
-    bounds = np.linspace(0, n_points, n_pass + 1).astype(np.int64)
-    for lo, hi in zip(bounds[:-1], bounds[1:]):
-        facets, opposite = [], []
-        for i in range(n_vert):
-            lowest = sorted_cells[:, 1 if i == 0 else 0]
-            sel = np.flatnonzero((lowest >= lo) & (lowest < hi))
-            facets.append(np.delete(sorted_cells[sel], i, axis=1))
-            opposite.append(sorted_cells[sel, i])
-        yield np.concatenate(facets), np.concatenate(opposite)
-
-
-def _side(points, facets, opposite) -> np.ndarray:
-    """Sign of the opposite vertex relative to the facet with its vertices in sorted order."""
-    out = np.empty(len(facets))
-    for start in range(0, len(facets), _CELLS_PER_CHUNK):
-        f = facets[start:start + _CELLS_PER_CHUNK]
-        base = points[f[:, 0]]
-        a = points[f[:, 1]] - base
-        c = points[opposite[start:start + _CELLS_PER_CHUNK]] - base
-        if points.shape[1] == 2:
-            out[start:start + len(f)] = np.sign(a[:, 0] * c[:, 1] - a[:, 1] * c[:, 0])
-        else:
-            b = points[f[:, 2]] - base
-            out[start:start + len(f)] = np.sign(np.einsum("fi,fi->f", a, np.cross(b, c)))
-    return out
-
-
-def _outward_normal(points, facets, opposite) -> np.ndarray:
-    """Unit normal of each facet pointing away from its opposite vertex."""
-    fp = points[facets]  # (F, d, d)
-    if fp.shape[-1] == 2:
-        t = fp[:, 1] - fp[:, 0]
-        n = np.stack([-t[:, 1], t[:, 0]], axis=1)
-    else:
-        n = np.cross(fp[:, 1] - fp[:, 0], fp[:, 2] - fp[:, 0])
-    flip = np.einsum("fi,fi->f", n, points[opposite] - fp[:, 0]) > 0
-    n[flip] *= -1
-    with np.errstate(divide="ignore", invalid="ignore"):
-        return n / np.linalg.norm(n, axis=1, keepdims=True)
-
-
 def check_mesh(mesh: Mesh, labels, *, exclude=(), tree: RegionTree | None = None) -> MeshChecks:
     """Check that a mesh represents a label image faithfully.
 
@@ -341,9 +263,10 @@ def check_mesh(mesh: Mesh, labels, *, exclude=(), tree: RegionTree | None = None
 
     Notes
     -----
-    Works in chunks (elements, and facets in passes over vertex-id ranges), so memory stays
-    at a few hundred MB beyond the mesh itself plus one byte per pixel; time is
-    O(M log M) plus one barycentric test per pixel centre in each element's bounding box.
+    One chunked pass over the elements (volumes, the block at both corners of each
+    bounding box, per-block volumes) and one sort of integer facet keys (8 bytes per facet
+    of an element, in passes beyond ``2**27`` keys); memory beyond the mesh is about the
+    keys plus an int32 block index per pixel, time O(M log M) with a small constant.
 
     Examples
     --------
@@ -374,23 +297,43 @@ def check_mesh(mesh: Mesh, labels, *, exclude=(), tree: RegionTree | None = None
 def _check_mesh(mesh: Mesh, lab: np.ndarray, exclude: np.ndarray,
                 tree: RegionTree | None = None) -> MeshChecks:
     """The worker behind :func:`check_mesh`: `lab` from ``as_labels``, `exclude` int64,
-    `tree` the region tree of `lab` or None (then built here)."""
+    `tree` the region tree of `lab` (or of its lattice) or None (then built here)."""
+    lattice = mesh.info.get("lattice") if isinstance(mesh.info, dict) else None
+    if lattice:
+        return _check_on_lattice(mesh, lab, exclude, tree, lattice.get("factors"))
+    # a mesh read from a file does not say how its voxels were cut: the subdivision the
+    # mesher picks for this spacing when the points fit it, else the voxels themselves
+    checks = _check_on_lattice(mesh, lab, exclude, tree, None)
+    if not checks.all_passed and mesh.spacing and len(set(mesh.spacing)) > 1:
+        voxels = _check_on_lattice(mesh, lab, exclude, tree, (1,) * lab.ndim)
+        if voxels.all_passed:
+            return voxels
+    return checks
+
+
+def _check_on_lattice(mesh: Mesh, lab: np.ndarray, exclude: np.ndarray,
+                      tree: RegionTree | None, factors) -> MeshChecks:
     points = _index_points(mesh)
-    # int32 ids halve the memory of the facet arrays (4 per tetrahedron)
-    cells = np.asarray(mesh.cells, dtype=np.int32 if len(mesh.points) < 2**31 else np.int64)
+    cells = np.asarray(mesh.cells)
+    # anisotropic voxels cut into n cells per axis: check in those cells, whose
+    # homogeneous blocks hold the elements (refinement by 2^K needs no such change)
+    lattice_lab = labels_on_lattice(lab, points, factors=factors, spacing=mesh.spacing or None)
+    repeats = np.array(lattice_lab.shape) // np.array(lab.shape)
+    if (repeats != 1).any():
+        points = points * repeats
+        lab = lattice_lab
     n_excluded = count_excluded(lab, exclude)
-    voxel = float(np.prod(mesh.spacing)) if mesh.spacing else 1.0
-    if tree is None:
-        tree = _build_tree(labels_on_lattice(lab, _index_points(mesh)))
-    # a tree on a finer lattice (anisotropy subdivision, refinement) is in lattice cells
-    cells_per_voxel = np.array(tree.shape) // np.array(lab.shape)
-    leaf_points = points if (cells_per_voxel == 1).all() else points * cells_per_voxel
+    if tree is None or tuple(tree.shape) != lab.shape:
+        tree = _build_tree(lab)
+    elements, sign = _elements(points, cells, np.asarray(mesh.material), lab, exclude, tree,
+                               lab.size - n_excluded)
+    voxel = float(np.prod(mesh.spacing)) / float(np.prod(repeats)) if mesh.spacing else 1.0
+    for key in ("min_volume", "volume_error"):
+        elements[key] *= voxel
     parts = {
         "n_unused_points": _unused_points(cells, len(points)),
-        **_volumes(points, cells, lab.size - n_excluded, voxel),
-        **_facets(points, cells, lab, exclude),
-        **_leaves(leaf_points, cells, tree),
-        **_pixels(points, cells, mesh.material, lab, exclude, n_excluded),
+        **elements,
+        **_facets(points, cells, sign, lab, exclude),
         **_finite(mesh),
     }
     return MeshChecks(**{name: parts[name] for name in MeshChecks.__dataclass_fields__})
@@ -398,43 +341,117 @@ def _check_mesh(mesh: Mesh, lab: np.ndarray, exclude: np.ndarray,
 
 def _unused_points(cells: np.ndarray, n_points: int) -> int:
     used = np.zeros(n_points, dtype=bool)
-    used[cells.ravel()] = True
+    for start in range(0, len(cells), _CELLS_PER_CHUNK):
+        used[cells[start:start + _CELLS_PER_CHUNK]] = True
     return int(n_points - np.count_nonzero(used))
 
 
-def _volumes(points, cells, n_included: int, voxel: float) -> dict:
-    """Positive volumes that add up to the included pixels (computed in pixel units)."""
-    vol = signed_volumes(points, cells)
-    total = float(vol.sum())
-    return {"min_volume": float(vol.min() * voxel) if vol.size else 0.0,
-            "positive_volume": bool((vol > _TOL).all()),
-            "volume_error": (total - n_included) * voxel,
-            "volume_sum": abs(total - n_included) <= 1e-9 * max(1, n_included)}
+def _elements(points, cells, material, lab: np.ndarray, exclude: np.ndarray,
+              tree: RegionTree, n_included: int) -> tuple[dict, np.ndarray]:
+    """Volumes, leaves and labels, element by element in chunks (one gather of corners).
+
+    * volumes positive, adding up to the included pixels;
+    * every element inside one leaf: the pixels at the low and high corner of its
+      bounding box belong to the same leaf (leaves are boxes, so all pixels between do);
+    * labels: the elements inside each leaf carry its label and fill it exactly (their
+      volumes add up to the leaf's; zero for an excluded leaf). With the facets checked
+      (no overlap, no hole) this is the label image recovered at every pixel centre.
+
+    Returns the flags and counts (volumes in pixel units), and the sign of each volume.
+    """
+    d = lab.ndim
+    coords = [np.ascontiguousarray(points[:, a]) for a in range(d)]
+    shape = lab.shape
+    strides = [math.prod(shape[a + 1:]) for a in range(d)]
+    leaf_map = tree.to_image(values=np.arange(len(tree)))
+    leaf_map = leaf_map.astype(np.int32 if len(tree) < 2**31 else np.int64).reshape(-1)
+    lab_flat = lab.reshape(-1)  # a copy only for a non-contiguous image
+    m = len(cells)
+    sign = np.empty(m, dtype=np.int8)
+    leaf_volume = np.zeros(len(tree))
+    wrong_leaf = np.zeros(len(tree), dtype=bool)
+    total, min_volume, n_flat, outside = 0.0, math.inf, 0, 0
+    for start in range(0, m, _CELLS_PER_CHUNK):
+        ids = cells[start:start + _CELLS_PER_CHUNK]
+        p = [[x[ids[:, k]] for x in coords] for k in range(d + 1)]  # p[corner][axis]: (n,)
+        det = _corner_det(p)
+        vol = det / math.factorial(d)
+        sign[start:start + len(vol)] = np.sign(det)
+        total += float(det.sum())  # exact for integer corners, whatever the chunks
+        min_volume = min(min_volume, float(vol.min()))
+        n_flat += int(np.count_nonzero(vol <= _TOL))
+        # pixels at the low and high corner of the bounding box, flat
+        in_image = np.ones(len(vol), dtype=bool)
+        flat_lo = np.zeros(len(vol), dtype=np.int64)
+        flat_hi = np.zeros(len(vol), dtype=np.int64)
+        for a in range(d):
+            axis = [p[k][a] for k in range(d + 1)]
+            lo, hi = axis[0].copy(), axis[0].copy()
+            for x in axis[1:]:
+                np.minimum(lo, x, out=lo)
+                np.maximum(hi, x, out=hi)
+            lo = np.floor(lo + _TOL).astype(np.int64)
+            hi = np.maximum(np.ceil(hi - _TOL).astype(np.int64) - 1, lo)
+            in_image &= (lo >= 0) & (hi < shape[a])
+            flat_lo += np.clip(lo, 0, shape[a] - 1) * strides[a]
+            flat_hi += np.clip(hi, 0, shape[a] - 1) * strides[a]
+        del p
+        leaf = leaf_map[flat_lo]
+        inside = in_image & (leaf == leaf_map[flat_hi])
+        outside += len(vol) - int(np.count_nonzero(inside))
+        leaf, flat_lo = leaf[inside], flat_lo[inside]
+        if len(leaf):  # cells come leaf by leaf: add over the chunk's range of leaves only
+            first = int(leaf.min())
+            part = np.bincount(leaf - first, weights=vol[inside])
+            leaf_volume[first:first + len(part)] += part
+        wrong = material[start:start + len(vol)][inside] != lab_flat[flat_lo]
+        wrong_leaf[leaf[wrong]] = True
+    total /= math.factorial(d)
+    size = tree.size ** d
+    expected = np.where(tree.inside & ~_excluded(tree.label, exclude), size, 0)
+    wrong_leaf |= np.abs(leaf_volume - expected) > 1e-9 * np.maximum(size, 1)
+    n_wrong = int(size[wrong_leaf & tree.inside].sum())
+    return {"min_volume": min_volume if m else 0.0, "positive_volume": n_flat == 0,
+            "volume_error": total - n_included,
+            "volume_sum": abs(total - n_included) <= 1e-9 * max(1, n_included),
+            "n_outside_leaf": outside, "inside_one_leaf": outside == 0,
+            "n_pixels_wrong": n_wrong, "labels_recovered": n_wrong == 0}, sign
 
 
-def _facets(points, cells, lab: np.ndarray, exclude: np.ndarray) -> dict:
-    """Facets shared by at most two cells, from opposite sides; the rest on the boundary."""
+def _facets(points, cells, sign, lab: np.ndarray, exclude: np.ndarray) -> dict:
+    """Facets shared by at most two cells, from opposite sides; the rest on the boundary.
+
+    One sort of integer keys (:func:`._facets._side_passes`): a facet seen from both sides
+    is a key ending in 0 followed by the same key ending in 1.
+    """
+    d = lab.ndim
     box = np.array(lab.shape, dtype=float)
     shared_3plus = misoriented = off_box = unmatched = 0
-    for facets, opposite in _facet_passes(np.sort(cells, axis=1), len(points)):
-        inverse, counts = _group_rows(facets)
-        per_occurrence = counts[inverse]
-        shared_3plus += int((counts >= 3).sum())
-        twice = np.flatnonzero(per_occurrence == 2)
-        side_sum = np.bincount(inverse[twice], weights=_side(points, facets[twice], opposite[twice]),
-                               minlength=len(counts))
-        misoriented += int(((counts == 2) & (side_sum != 0)).sum())
-        once = np.flatnonzero(per_occurrence == 1)
-        del inverse, per_occurrence, twice
-        fpts = points[facets[once]]  # (B, d, d)
+    for keys, packer in _side_passes(cells, sign, _spread_bits(cells)):
+        once = []
+        for block in _blocks(keys, 1):
+            k = keys[block]
+            starts, counts = _runs(k, 1)
+            shared_3plus += int(np.count_nonzero(counts >= 3))
+            two = starts[counts == 2]
+            misoriented += int(np.count_nonzero(k[two + 1] - k[two] != 1))
+            once.append(k[starts[counts == 1]])
+        once = np.concatenate(once) if once else keys[:0]
+        del keys
+        fpts = points[np.stack(packer.decode(once, d), axis=1)]  # (B, d, d), ids sorted
         on_box = ((np.abs(fpts).max(axis=1) <= _TOL) |
                   (np.abs(fpts - box).max(axis=1) <= _TOL)).any(axis=1)
-        off = once[~on_box]
-        off_box += len(off)
+        off_box += int(np.count_nonzero(~on_box))
+        fpts, seen_from = fpts[~on_box], (once[~on_box] & 1).astype(np.int8)
+        # normal of the sorted facet; its cell lies on the side the key's bit says
+        t = fpts[:, 1] - fpts[:, 0]
+        normal = (np.stack([-t[:, 1], t[:, 0]], axis=1) if d == 2
+                  else np.cross(t, fpts[:, 2] - fpts[:, 0]))
+        normal *= (1 - 2 * seen_from)[:, None]                   # outward
+        with np.errstate(divide="ignore", invalid="ignore"):
+            normal /= np.linalg.norm(normal, axis=1, keepdims=True)
         # a boundary facet inside the box must face an excluded pixel
-        normal = _outward_normal(points, facets[off], opposite[off])
-        probe = fpts[~on_box].mean(axis=1) + 0.25 * normal
-        pix = np.floor(probe).astype(np.int64)
+        pix = np.floor(fpts.mean(axis=1) + 0.25 * normal).astype(np.int64)
         in_image = ((pix >= 0) & (pix < np.array(lab.shape))).all(axis=1)
         probe_included = np.zeros(len(pix), dtype=bool)
         probe_included[in_image] = ~_excluded(lab[tuple(pix[in_image].T)], exclude)
@@ -442,37 +459,6 @@ def _facets(points, cells, lab: np.ndarray, exclude: np.ndarray) -> dict:
     return {"n_facets_shared_3plus": shared_3plus, "n_misoriented_facets": misoriented,
             "n_boundary_facets_off_box": off_box, "n_unmatched_facets": unmatched,
             "conforming": shared_3plus == 0 and misoriented == 0 and unmatched == 0}
-
-
-def _leaves(points, cells, tree: RegionTree) -> dict:
-    """Every element inside one maximal homogeneous block: the leaf under its centroid."""
-    find = leaf_finder(tree)
-    shape = np.array(tree.shape)
-    outside = 0
-    for start in range(0, len(cells), _CELLS_PER_CHUNK):
-        corner_pts = points[cells[start:start + _CELLS_PER_CHUNK]]  # (m, d+1, d)
-        centroid = np.floor(corner_pts.mean(axis=1)).astype(np.int64)
-        in_image = ((centroid >= 0) & (centroid < shape)).all(axis=1)
-        leaf = np.zeros(len(corner_pts), dtype=np.intp)
-        leaf[in_image] = find(centroid[in_image])
-        lo = tree.origin[leaf][:, None, :]
-        hi = lo + tree.size[leaf][:, None, None]
-        inside = ((corner_pts >= lo - _TOL) & (corner_pts <= hi + _TOL)).all(axis=(1, 2)) & in_image
-        outside += int((~inside).sum())
-    return {"n_outside_leaf": outside, "inside_one_leaf": outside == 0}
-
-
-def _pixels(points, cells, material, lab: np.ndarray, exclude: np.ndarray,
-            n_excluded: int) -> dict:
-    """The label image recovered at pixel centres, excluded pixels left uncovered."""
-    covered, _, n_wrong_hits = _rasterize(points, cells, material, lab.shape, labels=lab)
-    uncovered = np.flatnonzero(np.logical_not(covered, out=covered))
-    del covered
-    excluded_uncovered = int(np.count_nonzero(_excluded(_at(lab, uncovered), exclude)))
-    missed = len(uncovered) - excluded_uncovered
-    covered_excluded = n_excluded - excluded_uncovered
-    wrong = missed + covered_excluded + n_wrong_hits
-    return {"n_pixels_wrong": wrong, "labels_recovered": wrong == 0}
 
 
 def _finite(mesh: Mesh) -> dict:

@@ -9,7 +9,7 @@ keeps; each cell is reordered so that its signed volume stays positive there.
 What each format holds
 ----------------------
 ========  ==========================================================================
-``.vtu``  VTK XML (zlib); points padded to z = 0 in 2-D; every per-cell array.
+``.vtu``  VTK XML (raw binary, streamed); points padded to z = 0 in 2-D; every per-cell array.
 ``.vtk``  legacy VTK 4.2 (readable by any VTK); points padded; every per-cell array.
 ``.msh``  Gmsh 4.1 ASCII; one physical group (and one entity) per material, named
           after it; every per-cell array as ``$ElementData``.
@@ -248,8 +248,7 @@ def write_mesh_vtu(mesh: Mesh, path, *, point_data: dict | None = None,
     """
     points = export_points(mesh)
     data = {"material": mesh.material, **mesh.cell_data, **(cell_data or {})}
-    write_vtu(path, points, _orient_positive(points, mesh.cells), cell_data=data,
-              point_data=point_data)
+    write_vtu(path, points, mesh.cells, cell_data=data, point_data=point_data, orient=True)
 
 
 def _write_vtk(mesh: Mesh, m, temps: list[str]) -> None:

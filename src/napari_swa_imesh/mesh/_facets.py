@@ -65,27 +65,329 @@ def paired_facets(cells: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray
     Returns
     -------
     facets : (G, d) ndarray of intp
-        Oriented out of its first owner.
+        Oriented out of its first owner, in the lexicographic order of the facets' sorted
+        vertex ids.
     owners : (G, 2) ndarray of intp
-        The elements on either side; the second is -1 on the boundary.
+        The elements on either side (the lower element index first); the second is -1 on
+        the boundary (and for a facet of three or more elements, which has no pair).
     opposite : (G, 2) ndarray of intp
         Each owner's corner opposite the facet (-1 where there is no second owner).
+
+    Examples
+    --------
+    >>> facets, owners, opposite = paired_facets(np.array([[0, 1, 2], [1, 3, 2]]))
+    >>> owners.tolist()
+    [[0, -1], [0, -1], [0, 1], [1, -1], [1, -1]]
     """
     cells = np.asarray(cells, dtype=np.intp)
+    return _paired_result(cells, *_pair_rows(cells))
+
+
+def _paired_result(cells: np.ndarray, one: np.ndarray, two: np.ndarray):
+    """(facets, owners, opposite) of :func:`paired_facets` from the face rows of the owners."""
     d = cells.shape[1] - 1
-    faces = cells[:, FACE_CORNERS[d]].reshape(-1, d)          # (M(d+1), d) outward
-    key = np.sort(faces, axis=1)                               # orientation-free
-    order = np.lexsort(key.T[::-1])
-    key = key[order]
-    new = np.ones(len(key), dtype=bool)
-    new[1:] = (key[1:] != key[:-1]).any(axis=1)
-    first = np.flatnonzero(new)                                # (G,) start of each facet
-    shared = np.diff(np.append(first, len(key))) == 2          # 1 boundary, 2 shared
-    one = order[first]                                         # rows of `faces`
-    two = np.where(shared, order[np.minimum(first + 1, len(key) - 1)], -1)
+    shared = two >= 0
     owners = np.stack([one // (d + 1), np.where(shared, two // (d + 1), -1)], axis=1)
     opposite = np.stack([one % (d + 1), np.where(shared, two % (d + 1), -1)], axis=1)
-    return faces[one], owners, opposite
+    return cells[owners[:, 0, None], FACE_CORNERS[d][opposite[:, 0]]], owners, opposite
+
+
+def _pair_rows(cells: np.ndarray, keep_pair=None) -> tuple[np.ndarray, np.ndarray]:
+    """Face rows (``cell * (d+1) + corner``) of each facet's first and second owner.
+
+    Facets come in the lexicographic order of their sorted vertex ids; `two` is -1 where a
+    facet has one owner or three and more. ``keep_pair(first, second)`` (face rows),
+    when given, says which two-owner facets to keep; single ones are always kept.
+    """
+    one, two = [], []
+    for keys, rows, _ in _facet_passes(cells):
+        starts, counts = _runs(keys, rows.bit_length)
+        first = rows.rows[keys[starts] & rows.mask]
+        pair = counts == 2
+        second = np.full(len(starts), -1, dtype=np.intp)
+        second[pair] = rows.rows[keys[starts[pair] + 1] & rows.mask]
+        if keep_pair is not None:
+            keep = ~pair
+            keep[pair] = keep_pair(first[pair], second[pair])
+            first, second = first[keep], second[keep]
+        one.append(first)
+        two.append(second)
+    if not one:
+        return np.zeros(0, dtype=np.intp), np.zeros(0, dtype=np.intp)
+    return np.concatenate(one), np.concatenate(two)
+
+
+# ----------------------------------------------------------------------------- facet keys
+# Every facet occurrence (cell, corner) becomes one int64 key: its sorted vertex ids
+# a < b (< c) packed as (a - lo, b - a, c - a) above `tail` low bits (the side it is seen
+# from, or its row in the pass). Equal facets get equal codes and one np.sort of plain
+# integers (far faster than lexsort or argsort) puts copies side by side. When the keys
+# do not fit 64 bits, facets are handled in passes over ranges of their lowest id.
+
+_KEYS_PER_PASS = 1 << 27          # keys sorted at once (8 bytes each)
+_CHUNK = 1 << 16                  # cells turned into keys at once
+_RUN_BLOCK = 1 << 18              # sorted keys scanned for runs at once
+_MAX_PASSES = 1 << 12             # beyond this, a pass sorts rows of ids instead
+
+
+def _sorted_facet(cols: list) -> tuple[list, np.ndarray]:
+    """The d columns of facets sorted per row (d = 2, 3), and whether the sort was odd."""
+    if len(cols) == 2:
+        x, y = cols
+        return [np.minimum(x, y), np.maximum(x, y)], x > y
+    x, y, z = cols
+    lo = np.minimum(np.minimum(x, y), z)
+    hi = np.maximum(np.maximum(x, y), z)
+    return [lo, x ^ y ^ z ^ lo ^ hi, hi], (x > y) ^ (x > z) ^ (y > z)
+
+
+def _sorted_cell(cols: list) -> tuple[list, np.ndarray]:
+    """The columns of cells sorted per row by a sorting network, and the parity of the
+    permutation (each exchange that swaps flips it)."""
+    cols = list(cols)
+    odd = np.zeros(len(cols[0]), dtype=bool)
+    pairs = {3: ((0, 1), (1, 2), (0, 1)), 4: ((0, 1), (2, 3), (0, 2), (1, 3), (1, 2))}
+    for i, j in pairs[len(cols)]:
+        swap = cols[i] > cols[j]
+        odd ^= swap
+        cols[i], cols[j] = np.minimum(cols[i], cols[j]), np.maximum(cols[i], cols[j])
+    return cols, odd
+
+
+def _lowest(cols: list) -> np.ndarray:
+    out = np.minimum(cols[0], cols[1])
+    for c in cols[2:]:
+        np.minimum(out, c, out=out)
+    return out
+
+
+def _spread_bits(cells: np.ndarray) -> int:
+    """Bits of the largest id difference inside one cell (bounds b - a and c - a)."""
+    spread = 0
+    for start in range(0, len(cells), _CHUNK):
+        chunk = cells[start:start + _CHUNK]
+        spread = max(spread, int((chunk.max(axis=1) - chunk.min(axis=1)).max()))
+    return max(1, spread.bit_length())
+
+
+def _windows(per_vertex: np.ndarray, span: int, cap: int,
+             limit: int | None = None) -> np.ndarray | None:
+    """Bounds of vertex ranges of at most `span` ids and `cap` occurrences (greedy), or
+    None past `limit` ranges."""
+    n = len(per_vertex)
+    cum = np.concatenate([[0], np.cumsum(per_vertex)])
+    bounds = [0]
+    while bounds[-1] < n:
+        b = bounds[-1]
+        e = min(b + span, int(np.searchsorted(cum, cum[b] + cap, side="right")) - 1, n)
+        bounds.append(max(e, b + 1))
+        if limit is not None and len(bounds) > limit + 1:
+            return None
+    return np.asarray(bounds, dtype=np.int64)
+
+
+class _Packer:
+    """Keys of one pass: (a - lo, b - a[, c - a]) in `w`-bit fields above `tail` bits."""
+
+    def __init__(self, w: int, tail: int, lo: int):
+        self.w, self.tail, self.lo = w, tail, lo
+
+    def encode(self, cols: list, low_bits: np.ndarray) -> np.ndarray:
+        """int64 keys (the caller keeps them below 2**63) of sorted facet columns."""
+        key = cols[0].astype(np.int64)
+        key -= self.lo
+        for c in cols[1:]:
+            key <<= self.w
+            key |= c - cols[0]
+        key <<= self.tail
+        key |= low_bits
+        return key
+
+    def decode(self, keys: np.ndarray, d: int) -> list:
+        """Sorted vertex ids (d int64 columns) of the facets of `keys`."""
+        code = keys >> self.tail
+        a = (code >> ((d - 1) * self.w)) + self.lo
+        return [a, *[((code >> (self.w * j)) & ((1 << self.w) - 1)) + a
+                     for j in range(d - 2, -1, -1)]]
+
+
+class _Ranked:
+    """Keys of one pass made from the facets' rank among the sorted rows (ids too wide)."""
+
+    def __init__(self, cols: list, low_bits: np.ndarray, tail: int):
+        order = np.lexsort((low_bits, *cols[::-1]))
+        self.cols = [c[order] for c in cols]
+        new = np.ones(len(order), dtype=bool)
+        new[1:] = np.any([c[1:] != c[:-1] for c in self.cols], axis=0)
+        self.first = np.flatnonzero(new)
+        self.tail = tail
+        self.keys = ((np.cumsum(new) - 1) << tail) | low_bits[order]
+
+    def decode(self, keys: np.ndarray, d: int) -> list:
+        at = self.first[keys >> self.tail]
+        return [c[at].astype(np.int64) for c in self.cols]
+
+
+def _runs(keys: np.ndarray, tail: int) -> tuple[np.ndarray, np.ndarray]:
+    """Start and length of each run of equal facets in sorted `keys`."""
+    code = keys >> tail
+    new = np.ones(len(code), dtype=bool)
+    np.not_equal(code[1:], code[:-1], out=new[1:])
+    starts = np.flatnonzero(new)
+    counts = np.empty(len(starts), dtype=np.int64)
+    counts[:-1] = starts[1:] - starts[:-1]
+    counts[-1:] = len(keys) - starts[-1:]
+    return starts, counts
+
+
+def _blocks(keys: np.ndarray, tail: int, size: int = _RUN_BLOCK):
+    """Slices of about `size` sorted keys that never split a run of equal facets (small
+    pieces stay in cache, and no temporary is as long as all the keys)."""
+    start, n = 0, len(keys)
+    while start < n:
+        end = min(start + size, n)
+        while end < n and keys[end] >> tail == keys[end - 1] >> tail:
+            end += 1
+        yield slice(start, end)
+        start = end
+
+
+def _side_passes(cells: np.ndarray, sign: np.ndarray, spread_bits: int,
+                 max_keys: int | None = None):
+    """Sorted keys of every facet occurrence with the side it is seen from as the low bit.
+
+    `sign` (M,) is the sign of each cell's volume and `spread_bits` the bits of the
+    largest id difference within a cell. The bit is 1 when the cell lies on the positive
+    side of its facet taken in sorted order (a flat cell counts as negative), so a facet
+    shared from opposite sides is one key ending in 0 followed by the same key ending in 1.
+    Keys are built from chunks of cells straight into the pass's array. Yields (keys,
+    packer) per pass.
+    """
+    m, n_vert = cells.shape
+    d = n_vert - 1
+    cap = max_keys or _KEYS_PER_PASS
+    n_points = int(cells.max()) + 1 if m else 1
+    dtype = np.int32 if n_points < 2**31 else np.int64
+
+    def chunks():
+        for start in range(0, m, _CHUNK):
+            chunk = cells[start:start + _CHUNK].astype(dtype)
+            ids, odd = _sorted_cell([chunk[:, j] for j in range(n_vert)])
+            del chunk
+            s = sign[start:start + _CHUNK]
+            # det of the sorted cell has sign s * (-1)^odd; the cell lies on side
+            # det * (-1)^(d-i) of its facet without sorted corner i (ids still sorted)
+            positive = [np.where(odd, s < 0, s > 0), np.where(odd, s > 0, s < 0)]
+            for i in range(n_vert):
+                yield ids[:i] + ids[i + 1:], positive[(d - i) % 2]
+
+    span_bits = 62 - (d - 1) * spread_bits       # bits left for a - lo (int64 keys)
+    ranked = span_bits < 1
+    if m * n_vert <= cap and (ranked or n_points <= 1 << span_bits):
+        bounds, sizes = [0, n_points], [m * n_vert]
+    else:  # count facets per block of lowest ids, then cut passes at block edges
+        shift = max(0, n_points.bit_length() - 16)
+        shift = shift if ranked else min(shift, span_bits)
+        per_block = np.zeros((n_points >> shift) + 1, dtype=np.int64)
+        for cols, _ in chunks():
+            per_block += np.bincount(cols[0] >> shift, minlength=len(per_block))
+        blocks = None if ranked else _windows(per_block, 1 << (span_bits - shift), cap,
+                                              _MAX_PASSES)
+        if blocks is None:  # ids too far apart to pack: rank sorted rows instead
+            ranked = True
+            blocks = _windows(per_block, len(per_block), cap)
+        bounds = (blocks << shift).tolist()
+        sizes = np.add.reduceat(per_block, blocks[:-1]).tolist()
+    for p, size in enumerate(sizes):
+        lo, hi = bounds[p], bounds[p + 1]
+        packer = _Packer(spread_bits, 1, lo)
+        keys, parts = (None, []) if ranked else (np.empty(size, dtype=np.int64), None)
+        at = 0
+        for cols, bits in chunks():
+            if len(sizes) > 1:
+                sel = (cols[0] >= lo) & (cols[0] < hi)
+                cols, bits = [c[sel] for c in cols], bits[sel]
+            if ranked:
+                parts.append((cols, bits))
+            else:
+                keys[at:at + len(bits)] = packer.encode(cols, bits)
+            at += len(bits)
+        if ranked:
+            packer = _Ranked([np.concatenate([c[j] for c, _ in parts]) for j in range(d)],
+                             np.concatenate([b for _, b in parts]), 1)
+            keys = packer.keys
+        else:
+            keys.sort(kind="stable")  # timsort: the keys come in long ordered runs
+        yield keys, packer
+
+
+class _PassRows:
+    """Face rows of a pass's occurrences, indexed by the low `bit_length` bits of a key."""
+
+    def __init__(self, rows: np.ndarray, bit_length: int):
+        self.rows, self.bit_length = rows, bit_length
+        self.mask = (1 << bit_length) - 1
+
+
+def _facet_passes(cells: np.ndarray):
+    """Sorted keys of every facet occurrence with its row in the pass as the low bits.
+
+    Among equal facets the lower face row (``cell * (d+1) + corner``) comes first, as a
+    stable sort would give. Yields (keys, _PassRows, packer) per pass, passes in
+    increasing lowest id.
+    """
+    m, n_vert = cells.shape
+    d = n_vert - 1
+    if m == 0:
+        return
+    n_points = int(cells.max()) + 1
+    flat = cells.reshape(-1)
+    columns = [cells[:, j] for j in range(n_vert)]
+    low = np.stack([_lowest([columns[j] for j in FACE_CORNERS[d][k]]) for k in range(n_vert)],
+                   axis=1).reshape(-1)                      # (M(d+1),) lowest id per face row
+    per_vertex = np.bincount(low, minlength=n_points)
+    w = _spread_bits(cells)
+    total = m * n_vert
+    # widest id range per pass such that the rows of a pass still fit beside the codes
+    best = None
+    for span_bits in range(max(1, n_points.bit_length()), 0, -1):
+        row_bits = 63 - (d - 1) * w - span_bits
+        if row_bits < 1:
+            continue
+        cap = min(_KEYS_PER_PASS, 1 << row_bits)
+        guess = max(-(-n_points >> span_bits), -(-total // cap))
+        if best is None or guess < best[0]:
+            best = (guess, span_bits, cap)
+    bounds = None
+    if best is not None and best[0] <= _MAX_PASSES:
+        bounds = _windows(per_vertex, 1 << best[1], best[2], _MAX_PASSES)
+    ranked = bounds is None
+    if ranked:
+        bounds = _windows(per_vertex, n_points, _KEYS_PER_PASS)
+    n_pass = len(bounds) - 1
+    vertex_pass = np.repeat(np.arange(n_pass, dtype=np.uint16 if n_pass < 1 << 16
+                                      else np.uint32), np.diff(bounds))
+    face_pass = vertex_pass[low]
+    del low
+    # counting sort of the face rows by pass (radix sort for 16-bit ids), stable
+    order = np.argsort(face_pass, kind="stable") if n_pass > 1 else np.arange(total)
+    ends = np.cumsum(np.bincount(face_pass, minlength=n_pass))
+    del face_pass
+    corners = FACE_CORNERS[d]
+    for p in range(n_pass):
+        rows = order[(ends[p - 1] if p else 0):ends[p]]
+        cell, corner = rows // n_vert * n_vert, rows % n_vert
+        cols, _ = _sorted_facet([flat[cell + corners[corner, j]] for j in range(d)])
+        del cell, corner
+        local = np.arange(len(rows))
+        if ranked:
+            packer = _Ranked(cols, local, max(1, (len(rows) - 1).bit_length()))
+            keys = packer.keys
+        else:
+            packer = _Packer(w, max(1, (len(rows) - 1).bit_length()), int(bounds[p]))
+            keys = packer.encode(cols, local)
+            keys.sort(kind="stable")  # timsort: the keys come in long ordered runs
+        yield keys, _PassRows(rows, packer.tail), packer
 
 
 def facet_groups(mesh: Mesh) -> dict[str, FacetGroup]:
@@ -112,8 +414,10 @@ def facet_groups(mesh: Mesh) -> dict[str, FacetGroup]:
     """
     d = mesh.ndim
     cells = np.asarray(mesh.cells, dtype=np.intp)
-    facets, owners, opposite = paired_facets(cells)
     material = np.asarray(mesh.material)
+    # the pairs inside one material name no group: dropped pass by pass, never stored
+    facets, owners, opposite = _paired_result(cells, *_pair_rows(
+        cells, lambda one, two: material[one // (d + 1)] != material[two // (d + 1)]))
 
     groups: dict[str, FacetGroup] = {}
 

@@ -387,31 +387,39 @@ class _InterfaceFaces:
         return hit
 
 
-def labels_on_lattice(lab: np.ndarray, points: np.ndarray) -> np.ndarray:
-    """The labels on the lattice a mesh was cut from, found from its points (voxel units).
+def labels_on_lattice(lab: np.ndarray, points: np.ndarray, *, factors=None,
+                      spacing=None) -> np.ndarray:
+    """The labels repeated by the anisotropy subdivision a mesh was cut with.
 
-    Anisotropic voxels are cut into ``n`` cells per axis (and refinement halves them
-    further): the blocks the elements must lie in are then homogeneous blocks of those
-    cells, which a tree of the voxels does not have. The points tell the lattice (read
-    from a file, the mesh has no record of it): per axis the fewest cells per voxel
-    ``c`` putting every coordinate on the grid. A power of two common to every axis
-    needs no repeat: the tree of labels repeated 2^k times along every axis is the
-    voxels' tree scaled.
+    Anisotropic voxels are cut into ``n`` cells per axis: the blocks a mesh's elements
+    must lie in are then homogeneous blocks of those cells, which a tree of the voxels
+    does not have (refinement by ``2**K`` along every axis needs no repeat: the tree of
+    labels repeated ``2**K`` times is the voxels' tree scaled).
+
+    Parameters
+    ----------
+    lab : ndarray
+        The label image.
+    points : (N, d) ndarray
+        The mesh's points in voxel units.
+    factors : sequence of int, optional
+        The subdivision the mesh records (``info["lattice"]["factors"]``).
+    spacing : sequence of float, optional
+        Without `factors` (a mesh read from a file): the voxel spacing. The subdivision
+        the mesher chooses for it is used when every point lies on its lattice, else none.
     """
-    if not len(points):
-        return lab
-    cells = []
-    for axis in range(lab.ndim):
-        coords = np.unique(points[:, axis])
-        for c in range(1, MAX_FACTOR * 2 ** MAX_REFINE + 1):
-            scaled = coords * c
+    if factors is None:
+        factors = (1,) * lab.ndim
+        if spacing is not None and len(points):
+            try:
+                guess = subdivision_factors(spacing)
+            except ValueError:
+                guess = factors
+            fine = np.asarray(guess, dtype=float) * 2.0 ** (MAX_REFINE + 4)
+            scaled = points * fine
             if np.abs(scaled - np.rint(scaled)).max() <= 1e-6 * max(1.0, np.abs(scaled).max()):
-                break
-        else:
-            c = 1                         # off every lattice: the leaf check will say so
-        cells.append(c)
-    common = min((c & -c) for c in cells)          # largest power of two dividing all
-    for axis, c in enumerate(cells):
-        if c // common > 1:
-            lab = np.repeat(lab, c // common, axis=axis)
+                factors = guess
+    for axis, n in enumerate(factors):
+        if int(n) > 1:
+            lab = np.repeat(lab, int(n), axis=axis)
     return lab

@@ -5,15 +5,14 @@ The model
 A run (read, region tree, balance, template cutting, checks, writing) holds, at its peak,
 
 * a fixed part: the interpreter and libraries, plus the working buffers of the checks,
-  which run in chunks of a few million candidates (``BASE_BYTES``, ``CHECK_BYTES``);
+  which run in chunks of elements and facet keys (``BASE_BYTES``, ``CHECK_BYTES``);
 * a part per voxel of the padded grid: the labels themselves (their own dtype), the bool
   and int64 lattices of the mesher (a cumulative vertex numbering, 8 bytes per lattice
-  point), and with checks the int64 leaf map and the two int64 rasters of the pixel
-  check (``VOXEL_BYTES``, ``CHECK_VOXEL_BYTES``);
+  point), and with checks the leaf map (``VOXEL_BYTES``, ``CHECK_VOXEL_BYTES``);
 * a part per leaf of the balanced tree (origins, levels, labels, the unbalanced tree
   beside it, the per-leaf site flags; ``LEAF_BYTES``);
 * a part per element (vertex ids, leaf, template, quality and angle arrays, material,
-  the vertices, meshio's copies when writing and the facet arrays of the checks;
+  the vertices, meshio's copies when writing and the facet keys of the checks;
   ``ELEMENT_BYTES``).
 
 Leaves and elements are predicted from the number of *boundary voxels* (voxels with a
@@ -42,19 +41,19 @@ __all__ = ["available_memory", "count_boundary_voxels", "estimate_mesh_memory"]
 
 #: Interpreter, numpy/scipy/meshio and the reader: resident before the labels arrive.
 BASE_BYTES = 150 * 2**20
-#: Chunked working buffers of the checks (candidates of the pixel test, facet passes).
-CHECK_BYTES = 700 * 2**20
+#: Chunked working buffers of the checks (elements and facet keys in cache-sized chunks).
+CHECK_BYTES = 200 * 2**20
 #: Per voxel of the padded grid, beyond the labels' own bytes: tree build temporaries,
 #: the mesher's bool lattices and its int64 vertex numbering.
 VOXEL_BYTES = 16
-#: Per voxel, added by the checks: the leaf map and the two rasters (int64 each).
-CHECK_VOXEL_BYTES = 28
+#: Per voxel, added by the checks: the leaf map (int64 painted, kept as int32).
+CHECK_VOXEL_BYTES = 12
 #: Per balanced leaf: two trees (origin, level, label), site flags and keys.
 LEAF_BYTES = 160
 #: Per element while meshing and writing (vertex ids, per-cell data, vertices, meshio's
 #: copies), and added by the checks (sorted ids, facets, volumes).
 ELEMENT_BYTES = 260
-CHECK_ELEMENT_BYTES = 120
+CHECK_ELEMENT_BYTES = 50  # facet keys (4 x int64), the sort's buffer, volume signs
 #: Balanced leaves and elements per boundary voxel, ``a * top_level + b`` (at least 1
 #: and d!): every level between the boundary and the roots adds a graded layer, so the
 #: ratios grow with the image (brain-like volumes, elements per boundary voxel: 12.5 at
