@@ -224,3 +224,14 @@ def test_bad_report_options_exit_2_before_any_work(capsys, tmp_path, monkeypatch
     assert rc == 2 and message in err and out == ""
     assert (tmp_path / "existing.csv").read_text() == "keep me"
     assert not (tmp_path / "r.csv").exists()
+
+
+def test_rounding_in_the_volume_fractions_does_not_void_the_reuss_bound():
+    from napari_swa_imesh.simulate._protocols import voigt_reuss
+
+    # a 7M-tetrahedra mesh sums its volumes to about 1e-11 of the box (measured): that is
+    # no void, so the harmonic mean stands; a real void (1 %) makes it 0
+    tensors = np.stack([np.eye(3), 4 * np.eye(3)])
+    voigt, reuss = voigt_reuss(tensors, np.array([0.5, 0.5 - 2e-11]), 0)
+    assert reuss == pytest.approx(1 / (0.5 + 0.5 / 4)) and voigt == pytest.approx(2.5)
+    assert voigt_reuss(tensors, np.array([0.5, 0.49]), 0)[1] == 0.0
