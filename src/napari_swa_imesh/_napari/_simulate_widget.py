@@ -306,10 +306,11 @@ class SimulateWidget(QWidget):
         else:
             translate = mesh_layer.translate if mesh_layer is not None else np.zeros(mesh.ndim)
             affine = mesh_layer.affine.affine_matrix if mesh_layer is not None else None
+            # unlit: every colour reads against the colour bar, faces turned away included
             self.field_layer = self.viewer.add_surface(
                 data, name="potential", colormap=COLORMAP, contrast_limits=limits,
-                translate=translate, affine=affine,
-                shading="smooth" if mesh.ndim == 3 else "none", metadata={FIELD_KEY: axis})
+                translate=translate, affine=affine, shading="none",
+                metadata={FIELD_KEY: axis})
         self.field_layer.metadata[FIELD_KEY] = axis
 
     def _draw_figure(self, figure: "Figure") -> None:
