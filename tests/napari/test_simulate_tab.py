@@ -158,6 +158,10 @@ def test_report_joins_the_classification_signatures_to_k_eff(mosaic_viewer, qtbo
     assert sim.labels_combo.value is labels
     assert panel.source_label.value == f"signatures: classification of {labels.name!r} " \
                                        "(2 materials)"
+    sim.labels_combo.value = truth                   # not classified: no signatures of its own
+    assert panel.signatures is None and panel.source_label.value.startswith("no signatures")
+    sim.labels_combo.value = labels
+    assert len(panel.signatures) == 2
     sim.table.set_value(2, "10")
     sim.run()
     wait_idle(qtbot, sim, timeout=120_000)

@@ -85,3 +85,13 @@ def test_labels_that_are_not_the_mesh_image_are_refused(labels):
     coarse = mesh_labels(labels, coarsen=1)
     with pytest.raises(ValueError, match="coarsened"):
         remesh(coarse, labels, refine=1, periodic=False)
+
+
+def test_a_mesh_read_from_a_file_is_not_meshed_again(labels, tmp_path):
+    from napari_swa_imesh.mesh import read_mesh, write_mesh
+
+    write_mesh(mesh_labels(labels), tmp_path / "m.vtu")
+    read = read_mesh(tmp_path / "m.vtu")
+    assert not read.records_box
+    with pytest.raises(ValueError, match="does not record the label image"):
+        remesh(read, labels, refine=1, periodic=False)

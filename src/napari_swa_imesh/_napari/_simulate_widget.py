@@ -98,6 +98,7 @@ class SimulateWidget(QWidget):
         self.plot = ThemedFigure(self.viewer, self._draw_figure, min_height=160)
         self.tasks = TaskPanel()
         self.clip = ClipPanel(self.show_field)
+        self.clip.status.value = "simulate to clip the field"
         self.report = ReportPanel()
 
         layout = scroll_body(self)
@@ -168,6 +169,8 @@ class SimulateWidget(QWidget):
         rows = classification_signatures(layer)
         if rows:
             self.report.set_signatures(rows, f"classification of {layer.name!r}")
+        elif self.report.source.startswith("classification of"):
+            self.report.set_signatures(None, "")        # another image's: not these labels'
         self._update_note()
 
     def axes(self, ndim: int) -> list[str]:

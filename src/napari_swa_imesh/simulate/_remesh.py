@@ -62,8 +62,8 @@ def remesh(mesh: Mesh, labels, *, refine: int, periodic: bool) -> Mesh:
     ------
     ValueError
         Labels of another shape, or whose materials' volumes differ from the mesh's (not
-        the image the mesh was made from); a coarsened mesh (mesh it again with the refine
-        level instead).
+        the image the mesh was made from); a coarsened mesh, or one that does not record
+        its image (mesh the labels with the refine level wanted instead).
 
     Examples
     --------
@@ -75,6 +75,10 @@ def remesh(mesh: Mesh, labels, *, refine: int, periodic: bool) -> Mesh:
     """
     labels = np.asarray(labels)
     info = mesh.info
+    if not mesh.records_box:
+        raise ValueError("this mesh does not record the label image it was made from (a "
+                         "mesh read from a file?); mesh the labels with the refine level "
+                         "and periodic faces wanted instead.")
     if "coarsen" in info:
         raise ValueError("this mesh was coarsened, so its labels cannot be meshed again "
                          "the same way here; mesh them with the refine level wanted "
