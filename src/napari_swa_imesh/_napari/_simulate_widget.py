@@ -2,25 +2,37 @@
 
 Thin: the conductivity table is a view of a list of records, the computation is
 :func:`napari_swa_imesh.simulate.simulate_steps` in the task panel's worker, and the result
-is drawn as a Surface coloured by the potential plus a figure with the colour bar and each
-k_eff inside its Reuss-Voigt interval.
+is drawn as a Surface coloured by the potential (on the mesh's boundary and interface
+faces, or on the surface of the whole elements on one side of a clipping plane, as the Mesh
+tab's clip: :class:`~napari_swa_imesh.mesh.MeshClipper`), with a figure holding the colour
+bar and each k_eff inside its Reuss-Voigt interval; the periodic tensor is a small table
+and the signatures + k_eff report a box of its own (:mod:`._report_panel`).
+
+The tab simulates the Mesh tab's mesh as it is. Interface refinement and periodic faces
+are made by the mesher, so a refine level other than the mesh's, or the periodic protocol
+on a mesh without periodic faces, meshes the labels again for the run with every other
+setting of the mesh (:func:`napari_swa_imesh.simulate._remesh.remesh`, which checks the
+labels are the mesh's image); a line under the controls says which mesh the run will use.
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass
 from typing import TYPE_CHECKING
 
 import numpy as np
-from magicgui.widgets import CheckBox, ComboBox, Container, PushButton
+from magicgui.widgets import CheckBox, ComboBox, Container, PushButton, SpinBox
 from qtpy.QtCore import Qt, Signal
-from qtpy.QtWidgets import QFileDialog, QLabel, QTableWidget, QTableWidgetItem, QWidget
+from qtpy.QtWidgets import QFileDialog, QLabel, QTableWidget, QWidget
 
-from ..mesh import shown_faces
+from ..mesh import MeshClipper, shown_faces
 from ..simulate import simulate_steps, write_field
+from ..simulate._remesh import mesh_refine, needs_remesh, remesh
+from ._clip_panel import ClipPanel
+from ._conductivity_table import Conductivity, ConductivityTable, parse_conductivity
 from ._dock import scroll_body, side_by_side, wrapped_label
 from ._layers import MESH_KEY, layer_picker, pick
 from ._plots import ThemedFigure
+from ._report_panel import ReportPanel, classification_signatures, fill_table
 from ._tasks import TaskPanel, notify_error, notify_info
 
 if TYPE_CHECKING:
@@ -29,84 +41,14 @@ if TYPE_CHECKING:
 
     from ..simulate import SimulationResult
 
-__all__ = ["SimulateWidget", "Conductivity", "FIELD_KEY"]
+__all__ = ["SimulateWidget", "Conductivity", "ConductivityTable", "parse_conductivity",
+           "FIELD_KEY", "PROTOCOLS"]
 
 FIELD_KEY = "swa_imesh_field"
 ORDERS = {"P1 (linear)": 1, "P2 (quadratic, more accurate)": 2}
+PROTOCOLS = [("mixed: k_eff per axis (potential 0 and 1 on two faces)", "mixed"),
+             ("periodic: the full tensor (unit mean gradient)", "periodic")]
 COLORMAP = "turbo"
-
-
-@dataclass(frozen=True)
-class Conductivity:
-    """One row of the table: a material and the text of its conductivity."""
-
-    label: int
-    name: str
-    text: str = "1"
-
-
-def parse_conductivity(text: str) -> float | list[float]:
-    """``"2.5"`` -> 2.5; ``"1, 2, 3"`` -> the diagonal in x, y(, z) order.
-
-    Raises
-    ------
-    ValueError
-        Text that is not a number or a comma list of numbers.
-    """
-    try:
-        numbers = [float(t) for t in text.replace(";", ",").split(",") if t.strip()]
-    except ValueError:
-        numbers = []
-    if not numbers:
-        raise ValueError(f"conductivity {text!r} is not a number (or a comma list of "
-                         "numbers for the diagonal in x, y, z order).")
-    return numbers[0] if len(numbers) == 1 else numbers
-
-
-class ConductivityTable(QTableWidget):
-    """Material | name | conductivity; the records list is the data, the table its view."""
-
-    edited = Signal()
-
-    def __init__(self, parent: QWidget | None = None):
-        super().__init__(0, 3, parent)
-        self.setHorizontalHeaderLabels(["material", "name", "conductivity k"])
-        self.horizontalHeader().setStretchLastSection(True)
-        self.verticalHeader().setVisible(False)
-        self.setMaximumHeight(150)
-        self.setToolTip("Conductivity (or diffusivity) per material: a positive number, or "
-                        "one number per axis (x, y in 2-D; x, y, z in 3-D) for a diagonal "
-                        "tensor.")
-        self.records: list[Conductivity] = []
-        self.itemChanged.connect(self._on_item_changed)
-
-    def set_records(self, records: list[Conductivity]) -> None:
-        self.records = list(records)
-        self.blockSignals(True)
-        self.setRowCount(len(self.records))
-        for row, record in enumerate(self.records):
-            for col, text in enumerate((str(record.label), record.name, record.text)):
-                item = QTableWidgetItem(text)
-                if col < 2:
-                    item.setFlags(item.flags() & ~Qt.ItemIsEditable)
-                self.setItem(row, col, item)
-        self.blockSignals(False)
-
-    def set_value(self, label: int, text: str) -> None:
-        """Set one material's conductivity text (as an edit in the table would)."""
-        self.set_records([Conductivity(r.label, r.name, text) if r.label == label else r
-                          for r in self.records])
-        self.edited.emit()
-
-    def conductivity(self) -> dict[int, float | list[float]]:
-        """{label: value} of every row; ValueError names a row that is not a number."""
-        return {r.label: parse_conductivity(r.text) for r in self.records}
-
-    def _on_item_changed(self, item: QTableWidgetItem) -> None:
-        if item.column() == 2 and item.row() < len(self.records):
-            record = self.records[item.row()]
-            self.records[item.row()] = Conductivity(record.label, record.name, item.text())
-            self.edited.emit()
 
 
 class SimulateWidget(QWidget):
@@ -125,10 +67,22 @@ class SimulateWidget(QWidget):
         self.viewer = napari_viewer
         self.result: SimulationResult | None = None
         self.field_layer = None
+        self._faces: np.ndarray | None = None       # boundary and interface faces
         self.mesh_combo = layer_picker(self.viewer, "Surface", label="mesh",
                                        accept=lambda layer: MESH_KEY in layer.metadata)
+        self.labels_combo = layer_picker(
+            self.viewer, "Labels", label="labels", none_text="(none)",
+            tooltip="The label image the mesh was made from: meshed again when the refine "
+                    "level or the periodic protocol needs another mesh; its classification "
+                    "gives the signatures of the report.")
         self.table = ConductivityTable()
         self.order_combo = ComboBox(label="elements", choices=list(ORDERS))
+        self.protocol_combo = ComboBox(label="protocol", choices=PROTOCOLS)
+        self.refine_spin = SpinBox(
+            label="refine", value=0, min=0, max=4,
+            tooltip="Elements at material interfaces are 2^-K voxels. Another level than "
+                    "the mesh's meshes the labels again for the run.")
+        self.mesh_note = wrapped_label()
         self.axis_boxes = {a: CheckBox(text=a, value=True) for a in "xyz"}
         self.show_combo = ComboBox(label="show potential of", choices=["x", "y", "z"])
         self.run_button = PushButton(text="Simulate")
@@ -137,41 +91,66 @@ class SimulateWidget(QWidget):
                                                 "axis (.vtu or .xdmf, for ParaView).")
         self.summary = wrapped_label()
         self.summary.native.setTextInteractionFlags(Qt.TextSelectableByMouse)
+        self.tensor_table = QTableWidget(0, 0)
+        self.tensor_table.setEditTriggers(QTableWidget.NoEditTriggers)
+        self.tensor_table.setMaximumHeight(110)
+        self.tensor_table.setVisible(False)
         self.plot = ThemedFigure(self.viewer, self._draw_figure, min_height=160)
         self.tasks = TaskPanel()
+        self.clip = ClipPanel(self.show_field)
+        self.clip.status.value = "simulate to clip the field"
+        self.report = ReportPanel()
 
         layout = scroll_body(self)
-        layout.addWidget(Container(widgets=[self.mesh_combo]).native)
+        layout.addWidget(Container(widgets=[self.mesh_combo, self.labels_combo]).native)
         layout.addWidget(QLabel("conductivity per material"))
         layout.addWidget(self.table)
-        layout.addWidget(Container(widgets=[self.order_combo]).native)
+        layout.addWidget(Container(widgets=[self.order_combo, self.protocol_combo,
+                                            self.refine_spin]).native)
+        layout.addWidget(self.mesh_note.native)
         layout.addWidget(QLabel("k_eff along (x = column, y = row, z = plane)"))
         layout.addWidget(side_by_side(*self.axis_boxes.values()))
         layout.addWidget(Container(widgets=[self.show_combo, self.run_button]).native)
         layout.addWidget(self.tasks)
         layout.addWidget(self.summary.native)
+        layout.addWidget(self.tensor_table)
         layout.addWidget(self.plot, 1)
+        self.clip_box = self.clip.widget()
+        layout.addWidget(self.clip_box)
+        self.report_box = self.report.widget()
+        layout.addWidget(self.report_box)
         layout.addWidget(self.export_button.native)
-        self.mesh_combo.changed.connect(self._refresh_materials)
-        self.show_combo.changed.connect(self.show_field)
+        self.mesh_combo.changed.connect(self._on_mesh_changed)
+        self.labels_combo.changed.connect(self._on_labels_changed)
+        for control in (self.protocol_combo, self.refine_spin):
+            control.changed.connect(self._update_note)
+        self.show_combo.changed.connect(self._on_show_changed)
         self.run_button.changed.connect(self.run)
         self.export_button.changed.connect(self._on_export_clicked)
-        self._refresh_materials()
+        self._on_mesh_changed()
 
     @property
     def figure(self) -> "Figure":
         return self.plot.figure
 
     # -- inputs ----------------------------------------------------------------------------
-    def select_mesh(self, layer) -> None:
-        """Simulate on this mesh layer next (the workflow passes the new mesh)."""
+    def select_mesh(self, layer, labels=None) -> None:
+        """Simulate on this mesh layer next (the workflow passes the new mesh and the labels
+        it was made from; without them, the Labels layer named as the mesh's source)."""
         pick(self.mesh_combo, layer)
-        self._refresh_materials()
+        if labels is None and layer is not None and layer.name.endswith(" mesh"):
+            source = layer.name[:-len(" mesh")]
+            layers = self.viewer.layers
+            labels = layers[source] if source in layers else None
+        if labels is not None:
+            pick(self.labels_combo, labels)
+        self._on_mesh_changed()
 
-    def _refresh_materials(self, *_) -> None:
+    def _on_mesh_changed(self, *_) -> None:
         layer = self.mesh_combo.value
         if layer is None:
             self.table.set_records([])
+            self._update_note()
             return
         mesh = layer.metadata[MESH_KEY]
         old = {r.label: r.text for r in self.table.records}
@@ -181,13 +160,54 @@ class SimulateWidget(QWidget):
         for name, box in self.axis_boxes.items():
             box.visible = name != "z" or mesh.ndim == 3
         self.show_combo.choices = ["x", "y", "z"][:mesh.ndim]
+        with self.refine_spin.changed.blocked():
+            self.refine_spin.value = mesh_refine(mesh)    # by default, the mesh as it is
+        self._update_note()
+
+    def _on_labels_changed(self, *_) -> None:
+        layer = self.labels_combo.value
+        rows = classification_signatures(layer)
+        if rows:
+            self.report.set_signatures(rows, f"classification of {layer.name!r}")
+        elif self.report.source.startswith("classification of"):
+            self.report.set_signatures(None, "")        # another image's: not these labels'
+        self._update_note()
 
     def axes(self, ndim: int) -> list[str]:
         return [a for a, box in self.axis_boxes.items() if box.value and "xyz".index(a) < ndim]
 
+    def _remeshing(self) -> bool:
+        layer = self.mesh_combo.value
+        return layer is not None and needs_remesh(
+            layer.metadata[MESH_KEY], refine=int(self.refine_spin.value),
+            periodic=self.protocol_combo.value == "periodic")
+
+    def _update_note(self, *_) -> None:
+        """Say which mesh the run will use: the one shown, or the labels meshed again."""
+        layer = self.mesh_combo.value
+        if layer is None:
+            self.mesh_note.value = "mesh a Labels layer first (Mesh tab)"
+            return
+        mesh = layer.metadata[MESH_KEY]
+        shown = (f"refine {mesh_refine(mesh)}"
+                 + (", periodic faces" if mesh.info.get("periodic") else ""))
+        if not self._remeshing():
+            self.mesh_note.value = f"the run uses the mesh as shown ({mesh.n_cells} " \
+                                   f"elements, {shown})"
+            return
+        wanted = f"refine {int(self.refine_spin.value)}" + (
+            " with periodic faces" if self.protocol_combo.value == "periodic" else "")
+        labels = self.labels_combo.value
+        self.mesh_note.value = (
+            f"{wanted} needs another mesh than the one shown ({shown}): the run meshes "
+            f"{labels.name!r} again with the mesh's other settings" if labels is not None
+            else f"{wanted} needs another mesh than the one shown ({shown}): pick the labels "
+                 "it was made from, or set refine back to the mesh's")
+
     # -- run -------------------------------------------------------------------------------
     def run(self, *_):
-        """Solve on the selected mesh in a worker; show k_eff and the field when done."""
+        """Solve on the selected mesh (or its labels meshed again) in a worker; show k_eff
+        and the field when done."""
         layer = self.mesh_combo.value
         if layer is None:
             notify_error("no mesh to simulate on: mesh a Labels layer first (mesh widget).")
@@ -203,42 +223,96 @@ class SimulateWidget(QWidget):
             notify_error("tick at least one axis to compute k_eff along.")
             return None
         order = ORDERS[self.order_combo.value]
+        protocol, refine = self.protocol_combo.value, int(self.refine_spin.value)
+        labels = None
+        if self._remeshing():
+            if self.labels_combo.value is None:
+                notify_error(f"refine {refine}" + (" and periodic faces" if protocol ==
+                                                    "periodic" else "") +
+                             " need a new mesh: pick the labels the mesh was made from, or "
+                             "set refine to the mesh's and use the mixed protocol.")
+                return None
+            labels = np.asarray(self.labels_combo.value.data)
 
         def steps():
-            return simulate_steps(mesh, conductivity, order=order, axes=axes)
+            run_mesh = mesh
+            if labels is not None:
+                yield 0, 1, f"meshing the labels again (refine {refine}, {protocol})"
+                run_mesh = remesh(mesh, labels, refine=refine, periodic=protocol == "periodic")
+            result = yield from simulate_steps(run_mesh, conductivity, order=order, axes=axes,
+                                               protocol=protocol)
+            shown = shown_faces(result.mesh.cells, result.mesh.material)
+            clipper = MeshClipper(result.mesh, shown=shown)
+            return result, shown[0], clipper
 
         return self.tasks.run(steps, title="Simulation",
-                              on_result=lambda result: self._show_result(layer, result))
+                              on_result=lambda out: self._show_result(layer, conductivity,
+                                                                      *out))
 
     # -- results (main thread) -------------------------------------------------------------
-    def _show_result(self, mesh_layer, result: "SimulationResult") -> None:
-        self.result = result
+    def _show_result(self, mesh_layer, conductivity, result: "SimulationResult",
+                     faces: np.ndarray, clipper: MeshClipper) -> None:
+        self.result, self._faces = result, faces
         self.summary.value = result.describe()
-        self.show_combo.value = next(iter(result.k_eff))
+        self.clip.set_clipper(clipper)
+        with self.show_combo.changed.blocked():
+            self.show_combo.value = next(iter(result.k_eff))
         self.show_field(mesh_layer=mesh_layer)
+        self._show_tensor(result)
         self.plot.redraw()
         self.export_button.enabled = True
+        self.report.set_result(result, conductivity)
         self.simulated.emit(result)
 
+    def _show_tensor(self, result: "SimulationResult") -> None:
+        tensor = result.tensor
+        self.tensor_table.setVisible(tensor is not None)
+        if tensor is None:
+            return
+        axes = ["x", "y", "z"][:len(tensor)]
+        rows = [["K", *axes]] + [[a] + ["" if np.isnan(v) else f"{v:.6g}" for v in row]
+                                 for a, row in zip(axes, tensor)]
+        fill_table(self.tensor_table, rows, row_header=True)
+
+    def field_limits(self) -> tuple[float, float]:
+        """Colour range of the shown potential: its extent over the whole mesh (0 to 1 for
+        the mixed protocol), so colours keep their meaning as the clip moves."""
+        values = self.result.potential[self.show_combo.value]
+        lo, hi = float(values.min()), float(values.max())
+        return lo, max(hi, lo + 1e-12)
+
+    def _on_show_changed(self, *_) -> None:
+        self.show_field()
+        self.plot.redraw()                   # the colour bar's range is the axis's
+
     def show_field(self, *_, mesh_layer=None) -> None:
-        """Show the potential along the chosen axis on the boundary and interface faces."""
+        """Show the potential along the chosen axis on the boundary and interface faces, or
+        on the surface of the elements the clip keeps."""
         result = self.result
         axis = self.show_combo.value
         if result is None or axis not in result.potential:
             return
         mesh = result.mesh
-        faces, _ = shown_faces(mesh.cells, mesh.material)
+        if self.clip.active:
+            normal, position, keep = self.clip.settings()
+            kept, faces, _ = self.clip.clipper.faces(normal, position, keep=keep)
+            self.clip.show_counts({"n_kept": int(np.count_nonzero(kept)),
+                                   "n_faces": len(faces)})
+        else:
+            faces = self._faces
+            self.clip.show_counts(None)
         data = (mesh.points, faces, result.potential[axis])
-        name = "potential"
+        limits = self.field_limits()
         if self.field_layer is not None and self.field_layer in self.viewer.layers:
             self.field_layer.data = data
-            self.field_layer.name = name
+            self.field_layer.contrast_limits = limits
         else:
             translate = mesh_layer.translate if mesh_layer is not None else np.zeros(mesh.ndim)
             affine = mesh_layer.affine.affine_matrix if mesh_layer is not None else None
+            # unlit: every colour reads against the colour bar, faces turned away included
             self.field_layer = self.viewer.add_surface(
-                data, name=name, colormap=COLORMAP, contrast_limits=(0.0, 1.0),
-                translate=translate, affine=affine, shading="smooth" if mesh.ndim == 3 else "none",
+                data, name="potential", colormap=COLORMAP, contrast_limits=limits,
+                translate=translate, affine=affine, shading="none",
                 metadata={FIELD_KEY: axis})
         self.field_layer.metadata[FIELD_KEY] = axis
 
@@ -251,9 +325,14 @@ class SimulateWidget(QWidget):
         import matplotlib as mpl
 
         bar_ax, k_ax = figure.subplots(2, 1, height_ratios=[1, 3])
-        figure.colorbar(mpl.cm.ScalarMappable(norm=mpl.colors.Normalize(0, 1), cmap=COLORMAP),
+        lo, hi = self.field_limits()
+        figure.colorbar(mpl.cm.ScalarMappable(norm=mpl.colors.Normalize(lo, hi),
+                                              cmap=COLORMAP),
                         cax=bar_ax, orientation="horizontal")
-        bar_ax.set_title("potential (0 on the min face, 1 on the max face)", fontsize=8)
+        axis = self.show_combo.value
+        bar_ax.set_title(f"potential {axis}: 0 on the {axis}min face, 1 on the {axis}max face"
+                         if result.protocol == "mixed" else
+                         f"potential {axis}: {axis} + periodic fluctuation", fontsize=8)
         bar_ax.tick_params(labelsize=7)
         names = list(result.k_eff)
         y = np.arange(len(names))

@@ -9,17 +9,21 @@
   conditions on the mesh's named facet groups and volume sources;
 * :func:`simulate_transient` (and :func:`transient_steps`): implicit Euler on the same
   assembly, a heat front from a face or a substance released from a material;
-* :func:`conductivity_tensors`, :func:`parse_conductivity_args`: the conductivity table.
+* :func:`conductivity_tensors`, :func:`parse_conductivity_args`: the conductivity table;
+* :func:`simulation_report` (with :func:`read_signatures`, :func:`write_report`): the
+  per-material signatures of the segmentation and k_eff in one table.
 """
 
 from ._boundary import BoundaryResult, solve_boundary_value
 from ._conductivity import conductivity_tensors, parse_conductivity_args
 from ._output import write_field, write_series
+from ._report import SimulationReport, read_signatures, simulation_report, write_report
 from ._simulate import SimulationResult, simulate, simulate_steps
 from ._solve import SolverInfo
 from ._transient import TransientResult, simulate_transient, transient_steps
 
-__all__ = ["BoundaryResult", "SimulationResult", "SolverInfo", "TransientResult", "conductivity_tensors",
-           "parse_conductivity_args", "simulate", "simulate_steps", "simulate_transient",
-           "solve_boundary_value",
-           "transient_steps", "write_field", "write_series"]
+__all__ = ["BoundaryResult", "SimulationReport", "SimulationResult", "SolverInfo",
+           "TransientResult", "conductivity_tensors", "parse_conductivity_args",
+           "read_signatures", "simulate", "simulate_steps", "simulate_transient",
+           "simulation_report", "solve_boundary_value", "transient_steps", "write_field",
+           "write_report", "write_series"]

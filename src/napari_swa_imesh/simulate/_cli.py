@@ -86,6 +86,16 @@ def add_commands(subparsers) -> None:
                    help=f"write the mesh with potential and flux per axis "
                         f"({' or '.join(FIELD_SUFFIXES)}, for ParaView); with --transient "
                         "the time series (.xdmf with its .h5)")
+    r = p.add_argument_group(
+        "report", "the per-material signatures of the segmentation and k_eff in one table "
+        "(k_eff runs only)")
+    r.add_argument("--signatures", default=None, metavar="SIG.csv",
+                   help="per-material signatures (swa-imesh segment --signatures), joined "
+                        "by label (or name) to each material's volume fraction and "
+                        "conductivity; printed, and \"materials\" in --json; their names "
+                        "can be used in --conductivity")
+    r.add_argument("--report", default=None, metavar="REPORT",
+                   help="write the material table and k_eff (.csv, .json or .md)")
     p.add_argument("--force", action="store_true", help="replace an existing output file")
     p.add_argument("--json", action="store_true", help="print one JSON object on stdout")
     p.set_defaults(func=_run_simulate)
@@ -98,6 +108,13 @@ def _run_simulate(args: argparse.Namespace) -> int:
     from ..mesh._cli import parse_material_names
     from ._conductivity import parse_conductivity_args
     from ._output import check_field_path, check_series_path, write_field, write_series
+    from ._report import (
+        check_report_path,
+        match_signatures,
+        read_signatures,
+        simulation_report,
+        write_report,
+    )
     from ._simulate import ORDERS, simulate
 
     # the door: every argument and the output path before any work
@@ -114,6 +131,17 @@ def _run_simulate(args: argparse.Namespace) -> int:
         raise ValueError("--dirichlet/--neumann/--robin/--source solve one boundary-value "
                          "problem; they do not combine with --transient, --axes or "
                          "--protocol.")
+    if (args.signatures or args.report) and (boundary is not None or transient is not None):
+        raise ValueError("--signatures and --report join materials to k_eff; they do not "
+                         "combine with --transient or boundary conditions.")
+    signatures = None
+    if args.signatures:
+        signatures = read_signatures(args.signatures)
+        # names from the signatures serve --conductivity too; --material-names must agree
+        by_label, _ = match_signatures(signatures, names)
+        names = {**{k: r["name"] for k, r in by_label.items() if r.get("name")}, **names}
+    if args.report:
+        check_report_path(args.report, force=args.force)
     if args.output and transient is None:
         check_field_path(args.output, force=args.force)
     elif args.output:
@@ -143,6 +171,8 @@ def _run_simulate(args: argparse.Namespace) -> int:
             if not source.info.get("has_material", True):
                 raise ValueError(f"{Path(args.input).name} has no material per element; "
                                  "simulate needs one (mesh the labels with swa-imesh mesh).")
+            if signatures is not None:
+                match_signatures(signatures, {**source.material_names, **names})
     if boundary is not None:
         from ._boundary import solve_boundary_value
         from ._simulate import prepare_mesh
@@ -163,19 +193,30 @@ def _run_simulate(args: argparse.Namespace) -> int:
         result = simulate(source, conductivity, spacing=spacing, order=args.order,
                           axes=args.axes, tol=args.tol, exclude=tuple(args.exclude),
                           material_names=names, refine=args.refine, protocol=args.protocol)
+    table = None
+    if signatures is not None or args.report:
+        table = simulation_report(result, conductivity, signatures)
     written = []
-    if args.output:
+    if args.output or args.report:
         with timer("write"):
-            write = write_series if transient is not None else write_field
-            written = write(result, args.output, force=args.force)
+            if args.output:
+                write = write_series if transient is not None else write_field
+                written = write(result, args.output, force=args.force)
+            if args.report:
+                written.append(write_report(table, args.report, force=args.force))
     seconds = {**timer.seconds, **result.seconds}
     if args.json:
         report = {"command": "simulate", "input": str(args.input), **result.summary(),
                   "output": [str(p) for p in written]}
+        if table is not None:
+            summary = table.summary()
+            report.update(materials=summary["materials"], warnings=summary["warnings"])
         report["seconds"] = seconds
         print_json(report)
     else:
         print(result.describe())
+        if table is not None:
+            print(table.describe())
         if written:
             print(f"wrote {', '.join(map(str, written))}")
     return 0
