@@ -94,3 +94,16 @@ def test_error_texts_print_plain_numbers_not_python_reprs(call, bad):
     assert bad in text
     for leak in ("np.float64(", "np.int64(", "np.uint", "max_ndim", "min_ndim", "array("):
         assert leak not in text, text
+
+
+def test_json_output_turns_every_non_finite_number_into_null():
+    import json
+
+    import numpy as np
+
+    from napari_swa_imesh._cli_util import to_jsonable
+
+    data = {"a": np.float64("nan"), "b": [np.float32("inf"), float("-inf")],
+            "c": np.array([1.0, np.nan]), "d": np.int64(3)}
+    text = json.dumps(to_jsonable(data), allow_nan=False)
+    assert json.loads(text) == {"a": None, "b": [None, None], "c": [1.0, None], "d": 3}
