@@ -54,7 +54,7 @@ def test_mesh_2d_json_end_to_end(tmp_path, capsys):
     assert report["checks"]["all_passed"] is True
     assert report["leaves_after_balance"] >= report["leaves_before_balance"]
     assert set(report["seconds"]) >= {"read", "mesh", "check", "write"}
-    assert report["output"] == [str(out)]
+    assert report["output"] == [str(out), str(tmp_path / "mesh_facets.vtu")]
     mesh = read_mesh(out)
     assert mesh.n_cells == report["elements"]
     assert len(mesh.points) == report["vertices"]
@@ -76,8 +76,8 @@ def test_mesh_3d_gmsh_with_names_exclude_and_spacing(tmp_path, capsys):
     assert {"min_dihedral", "max_dihedral"} <= set(report)
     assert report["checks"]["all_passed"] is True
     assert report["spacing"] == [2.0, 1.0, 0.5]
-    text = out.read_text()
-    assert '3 1 "matrix"' in text and '3 2 "inclusion"' in text
+    text = out.read_bytes()                   # binary Gmsh; the names are text
+    assert b'3 1 "matrix"' in text and b'3 2 "inclusion"' in text
     mesh = read_mesh(out)
     assert 0 not in set(mesh.material.tolist())
     np.testing.assert_allclose(mesh.points.max(axis=0), np.array(labels.shape) * [2, 1, 0.5])

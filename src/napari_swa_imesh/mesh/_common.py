@@ -1,4 +1,5 @@
-"""What every file format shares: meshio's cell-type names and the material names.
+"""What every file format shares: suffixes, meshio's cell-type names, the exported frame,
+orientation and the material names.
 
 Conventions written once for the writers (``_export`` and one module per awkward format):
 exported coordinates are x, y(, z) = column, row(, plane), the reverse of the numpy axis
@@ -6,20 +7,46 @@ order a ``Mesh`` keeps, and a material without a name is called ``material_<id>`
 
 Format writers
 --------------
-A writer of one format (``write_gmsh``, ``write_abaqus``) takes ``names`` (the mesh's
-material names, dict of int to str), ``m`` (the ``meshio.Mesh`` from ``to_meshio``: one
-cell block, ``material`` and the other per-cell arrays as cell data) and ``path`` (the
-temporary file ``io.atomic_write`` gave for the target).
+A writer of one format (``write_gmsh``, ``write_abaqus``, ``write_node_ele``, ...) takes
+an ``_prepare.ExportMesh`` (points and cells in the files' frame, order 1 or 2, the facet
+groups chosen) and the temporary path(s) ``io.atomic_write`` gave for the target(s).
 """
 
 from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["CELL_TYPE", "material_names", "export_points"]
+from ._quality import signed_volumes
 
-#: meshio's name of the linear simplex of each dimension.
+__all__ = ["CELL_TYPE", "CELL_TYPE_2", "MESH_SUFFIXES", "material_names", "export_points",
+           "orient_positive"]
+
+#: meshio's name of the simplex of each dimension, linear and of second order.
 CELL_TYPE = {2: "triangle", 3: "tetra"}
+CELL_TYPE_2 = {2: "triangle6", 3: "tetra10"}
+
+#: Suffix -> short description, in the order shown to users.
+MESH_SUFFIXES = {
+    ".vtu": "VTK XML unstructured grid (+ <stem>_facets.vtu)",
+    ".vtk": "legacy VTK",
+    ".msh": "Gmsh 4.1 with physical groups",
+    ".xdmf": "XDMF with its HDF5 .h5 file (+ <stem>_facets.vtu)",
+    ".inp": "Abaqus with element sets and facet surfaces",
+    ".node": "Triangle (2-D) / TetGen (3-D) .node + .ele (+ .poly / .face)",
+    ".ele": "Triangle (2-D) / TetGen (3-D) .node + .ele (+ .poly / .face)",
+}
+
+
+def orient_positive(points: np.ndarray, cells: np.ndarray) -> np.ndarray:
+    """Copy of `cells` with the first two corners swapped where the volume is negative.
+
+    The volumes are computed in chunks (:func:`signed_volumes`): the corners of ten
+    million tetrahedra at once would take a gigabyte.
+    """
+    cells = np.array(cells, dtype=np.intp, copy=True)
+    flip = signed_volumes(points, cells) < 0
+    cells[flip, 0], cells[flip, 1] = cells[flip, 1], cells[flip, 0].copy()
+    return cells
 
 
 def export_points(mesh) -> np.ndarray:

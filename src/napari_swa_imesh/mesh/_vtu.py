@@ -15,13 +15,15 @@ from __future__ import annotations
 import base64
 import sys
 from pathlib import Path
+from xml.sax.saxutils import quoteattr
 
 import numpy as np
 
 __all__ = ["write_vtu"]
 
-#: VTK cell type ids of the simplices (VTK_TRIANGLE, VTK_TETRA).
-VTK_CELL_TYPE = {3: 5, 4: 10}
+#: VTK cell type id by nodes per cell: VTK_TRIANGLE, VTK_TETRA, VTK_QUADRATIC_TRIANGLE,
+#: VTK_QUADRATIC_TETRA (lines, VTK_LINE 3 and VTK_QUADRATIC_EDGE 21, are asked by name).
+VTK_CELL_TYPE = {3: 5, 4: 10, 6: 22, 10: 24}
 _VTK_TYPE = {"i1": "Int8", "u1": "UInt8", "i2": "Int16", "u2": "UInt16", "i4": "Int32",
              "u4": "UInt32", "i8": "Int64", "u8": "UInt64", "f4": "Float32", "f8": "Float64"}
 _ORDER = "LittleEndian" if sys.byteorder == "little" else "BigEndian"
@@ -54,10 +56,24 @@ def _type_name(values: np.ndarray) -> str:
     return _VTK_TYPE[f"{values.dtype.kind}{values.dtype.itemsize}"]
 
 
+def _field_data(arrays: dict) -> str:
+    """``<FieldData>`` of small integer arrays, inline as text (names escaped)."""
+    if not arrays:
+        return ""
+    tags = "".join(
+        f'<DataArray type="Int64" Name={quoteattr(str(name))} '
+        f'NumberOfTuples="{np.size(v)}" format="ascii">'
+        f'{" ".join(str(int(x)) for x in np.ravel(v))}</DataArray>'
+        for name, v in arrays.items())
+    return f"<FieldData>{tags}</FieldData>"
+
+
 def write_vtu(path, points: np.ndarray, cells: np.ndarray, *,
               cell_data: dict[str, np.ndarray] | None = None,
-              point_data: dict[str, np.ndarray] | None = None) -> None:
-    """Write a triangle or tetrahedron mesh as a ``.vtu`` file.
+              point_data: dict[str, np.ndarray] | None = None,
+              field_data: dict[str, np.ndarray] | None = None,
+              cell_type: int | None = None) -> None:
+    """Write a mesh of one cell type (triangles or tetrahedra by default) as a ``.vtu`` file.
 
     Parameters
     ----------
@@ -68,6 +84,11 @@ def write_vtu(path, points: np.ndarray, cells: np.ndarray, *,
         Triangles or tetrahedra, oriented as the file should have them.
     cell_data, point_data : dict of str to (M,) / (N,) or (M, k) / (N, k) array_like
         Arrays per cell and per point (k components).
+    field_data : dict of str to (n,) array_like of int, optional
+        Small integer arrays of the whole grid (``<FieldData>``, written as text; VTK
+        and meshio read them).
+    cell_type : int, optional
+        VTK cell type id; by default from the nodes per cell (:data:`VTK_CELL_TYPE`).
     """
     points = np.asarray(points, dtype=np.float64)
     if points.shape[1] == 2:
@@ -79,7 +100,8 @@ def write_vtu(path, points: np.ndarray, cells: np.ndarray, *,
         ("Cells", "connectivity", _vtk_array(cells.astype(np.int64, copy=False).ravel())),
         ("Cells", "offsets", np.arange(corners, corners * n_cells + 1, corners,
                                        dtype=np.int64)),
-        ("Cells", "types", np.full(n_cells, VTK_CELL_TYPE[corners], dtype=np.uint8)),
+        ("Cells", "types", np.full(n_cells, cell_type or VTK_CELL_TYPE[corners],
+                                   dtype=np.uint8)),
     ]
     for section, data in (("CellData", cell_data or {}), ("PointData", point_data or {})):
         arrays += [(section, str(name), _vtk_array(values)) for name, values in data.items()]
@@ -97,7 +119,7 @@ def write_vtu(path, points: np.ndarray, cells: np.ndarray, *,
     body = "".join(f"<{s}>{''.join(t)}</{s}>" for s, t in tags.items() if t)
     header = (f'<?xml version="1.0"?>\n<VTKFile type="UnstructuredGrid" version="1.0" '
               f'byte_order="{_ORDER}" header_type="UInt64"><UnstructuredGrid>'
-              f'<Piece NumberOfPoints="{len(points)}" NumberOfCells="{n_cells}">{body}'
+              f'{_field_data(field_data or {})}<Piece NumberOfPoints="{len(points)}" NumberOfCells="{n_cells}">{body}'
               f'</Piece></UnstructuredGrid><AppendedData encoding="base64">_')
     with open(Path(path), "wb") as fh:
         fh.write(header.encode("ascii"))
