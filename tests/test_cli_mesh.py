@@ -396,3 +396,47 @@ def test_mesh_command_builds_one_tree_and_one_balance(tmp_path, capsys, monkeypa
     report = one_json(stdout)
     assert report["checks"]["all_passed"] is True and report["exclude"] == [0]
     assert "face_balance_count" not in report["seconds"]["mesh_steps"]
+
+
+def test_mesh_order_2_with_chosen_facet_groups_as_ascii_gmsh(tmp_path, capsys):
+    import meshio
+
+    np.save(tmp_path / "vol.npy", blob_3d())
+    out = tmp_path / "vol.msh"
+    code, stdout, stderr = run(capsys, "mesh", tmp_path / "vol.npy", "-o", out, "--order", "2",
+                               "--facet-groups", "xmin,interface_*", "--msh-ascii", "--json")
+    assert code == 0, stderr
+    assert one_json(stdout)["order"] == 2
+    assert out.read_bytes().startswith(b"$MeshFormat\n4.1 0 8\n")
+    m = meshio.read(out)
+    assert {b.type for b in m.cells} == {"tetra10", "triangle6"}
+    facet_groups = {n for n, (_, d) in m.field_data.items() if d == 2}
+    assert facet_groups == {"xmin", "interface_material_0_material_1",
+                            "interface_material_0_material_2", "interface_material_1_material_2"}
+
+
+def test_mesh_facet_groups_none_writes_the_vtu_alone(tmp_path, capsys):
+    np.save(tmp_path / "l.npy", three_materials_2d())
+    code, stdout, stderr = run(capsys, "mesh", tmp_path / "l.npy", "-o", tmp_path / "m.vtu",
+                               "--facet-groups", "none", "--json")
+    assert code == 0, stderr
+    assert one_json(stdout)["output"] == [str(tmp_path / "m.vtu")]
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["l.npy", "m.vtu"]
+
+
+@pytest.mark.parametrize(("flags", "match"), [
+    (["--facet-groups", "zmin"], "unknown facet group 'zmin'; the groups are xmin, xmax, "
+                                 "ymin, ymax,"),
+    (["--order", "3"], "--order must be 1 or 2, not '3'"),
+    (["--msh-ascii"], "--msh-ascii applies to .msh output only"),
+])
+def test_mesh_write_options_fail_before_meshing(tmp_path, capsys, monkeypatch, flags, match):
+    import napari_swa_imesh.mesh._imesh as imesh
+
+    def no_meshing(*args, **kwargs):
+        raise AssertionError("meshed before checking the options")
+
+    monkeypatch.setattr(imesh, "_mesh_labels", no_meshing)
+    np.save(tmp_path / "l.npy", three_materials_2d())
+    code, _, stderr = run(capsys, "mesh", tmp_path / "l.npy", "-o", tmp_path / "m.vtu", *flags)
+    assert code == 2 and re.search(re.escape(match), stderr), stderr
