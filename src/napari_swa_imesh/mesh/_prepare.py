@@ -20,7 +20,7 @@ from fnmatch import fnmatchcase
 import numpy as np
 
 from ._common import export_points, material_names
-from ._facets import facet_groups
+from ._facets import FACE_CORNERS, facet_groups
 from ._order2 import MidEdges, with_mid_nodes
 from ._quality import signed_volumes
 from ._types import Mesh
@@ -153,7 +153,7 @@ class ExportMesh:
         self.material = np.asarray(mesh.material, dtype=np.int64)
         self.names = material_names(mesh.material_names, np.unique(self.material))
         chosen = select_facet_groups(facet_groups(mesh), groups) if groups != "none" else {}
-        self.groups = {name: self._in_file_frame(k + 1, corners, g)
+        self.groups = {name: self._in_file_frame(k + 1, g)
                        for k, (name, g) in enumerate(chosen.items())}
 
     @property
@@ -168,22 +168,25 @@ class ExportMesh:
     def cells(self, rows=slice(None), family: str = "vtk") -> np.ndarray:
         """Cells `rows` as written: positive in the files' frame, mid-edge nodes after the
         corners in `family`'s order (see ``_order2``)."""
+        return with_mid_nodes(self._corners(rows), self.edges, family)
+
+    def _corners(self, rows) -> np.ndarray:
         cells = np.array(self.mesh.cells[rows], dtype=np.intp, copy=True)
         flip = self.flip[rows]
         cells[flip, 0], cells[flip, 1] = cells[flip, 1], cells[flip, 0].copy()
-        return with_mid_nodes(cells, self.edges, family)
+        return cells
 
     def facet_nodes(self, group: FileFacets) -> np.ndarray:
         """The facets of `group` with their mid-edge nodes (second order) after the corners."""
         return with_mid_nodes(group.facets, self.edges, "vtk")
 
-    def _in_file_frame(self, gid: int, corners: np.ndarray, group) -> FileFacets:
-        facets = np.array(group.facets, dtype=np.intp, copy=True)
-        opposite = self.mesh.cells[group.owner, group.opposite]
-        # outward iff the simplex (opposite corner, facet...) is positive (both dimensions)
-        inward = signed_volumes(corners, np.column_stack([opposite, facets])) < 0
-        facets[inward, 0], facets[inward, 1] = facets[inward, 1], facets[inward, 0].copy()
+    def _in_file_frame(self, gid: int, group) -> FileFacets:
+        owner = np.asarray(group.owner, dtype=np.intp)
         corner = np.array(group.opposite, dtype=np.intp, copy=True)
-        swapped = self.flip[group.owner] & (corner < 2)
+        swapped = self.flip[owner] & (corner < 2)
         corner[swapped] = 1 - corner[swapped]
-        return FileFacets(gid, facets, np.asarray(group.owner, dtype=np.intp), corner)
+        # the face opposite `corner` of the cell as written (positive in the files'
+        # frame), by FACE_CORNERS: oriented out of it
+        facets = self._corners(owner)[np.arange(len(owner))[:, None],
+                                   FACE_CORNERS[self.ndim][corner]]
+        return FileFacets(gid, facets, owner, corner)
