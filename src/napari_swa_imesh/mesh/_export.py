@@ -107,7 +107,7 @@ def _meshio_of(ex: ExportMesh):
         kind = values.dtype.kind
         cell_data[key] = [values.astype(np.int64 if kind in "biu" else np.float64)]
     kind = (CELL_TYPE if ex.order == 1 else CELL_TYPE_2)[ex.ndim]
-    return meshio.Mesh(ex.points, [(kind, ex.cells())], cell_data=cell_data)
+    return meshio.Mesh(ex.points, [(kind, ex.all_cells())], cell_data=cell_data)
 
 
 # ----------------------------------------------------------------------------- options
@@ -283,7 +283,7 @@ def _write(ex: ExportMesh, temps: list[Path], *, abaqus_elements: str, binary: b
 
     suffix = temps[0].suffix.lower()
     if suffix == ".vtu":
-        write_vtu(temps[0], ex.points, ex.cells(),
+        write_vtu(temps[0], ex.points, ex.all_cells(),
                   cell_data={"material": ex.material, **ex.mesh.cell_data})
     elif suffix == ".msh":
         write_gmsh(ex, temps[0], binary=binary)

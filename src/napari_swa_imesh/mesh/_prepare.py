@@ -30,6 +30,7 @@ __all__ = ["ExportMesh", "FileFacets", "check_facet_selection", "select_facet_gr
 
 ORDERS = (1, 2)
 _WILDCARDS = "*?["
+_SLICE = 1 << 17                  # elements per pass of the orientation test
 
 
 def box_sides(ndim: int) -> list[str]:
@@ -146,7 +147,11 @@ class ExportMesh:
         self.order = order
         corners = export_points(mesh)                              # (N, d)
         self.n_corners = len(corners)
-        self.flip = signed_volumes(corners, mesh.cells) < 0        # (M,) swap corners 0, 1
+        # (M,) swap corners 0 and 1; in slices, so the corner coordinates of a slice are
+        # all the memory it takes
+        self.flip = np.concatenate([np.zeros(0, bool)] + [
+            signed_volumes(corners, mesh.cells[start:start + _SLICE]) < 0
+            for start in range(0, mesh.n_cells, _SLICE)])
         self.edges = MidEdges(mesh.cells, len(corners)) if order == 2 else None
         self.points = (corners if self.edges is None
                        else np.concatenate([corners, self.edges.midpoints(corners)]))
@@ -169,6 +174,14 @@ class ExportMesh:
         """Cells `rows` as written: positive in the files' frame, mid-edge nodes after the
         corners in `family`'s order (see ``_order2``)."""
         return with_mid_nodes(self._corners(rows), self.edges, family)
+
+    def all_cells(self, family: str = "vtk") -> np.ndarray:
+        """Every cell as :meth:`cells` gives it, filled block by block into one array (no
+        temporaries of the whole mesh)."""
+        out = np.empty((self.n_cells, self.nodes_per_cell), dtype=np.intp)
+        for start in range(0, self.n_cells, _SLICE):
+            out[start:start + _SLICE] = self.cells(slice(start, start + _SLICE), family)
+        return out
 
     def _corners(self, rows) -> np.ndarray:
         cells = np.array(self.mesh.cells[rows], dtype=np.intp, copy=True)
