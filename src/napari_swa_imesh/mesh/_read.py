@@ -59,10 +59,11 @@ def read_mesh(path) -> Mesh:
         cell_data = attributes
     else:
         points, cells, material, cell_data, names = _read_meshio(p, suffix)
-    used = np.unique(cells)
-    if len(used) < len(points):                   # mid-edge nodes of a second-order file
-        points = points[used]
-        cells = np.searchsorted(used, cells)
+    used = np.zeros(len(points), dtype=bool)
+    used[cells.ravel()] = True
+    if not used.all():                             # mid-edge nodes of a second-order file
+        new_id = np.cumsum(used) - 1
+        points, cells = points[used], new_id[cells]
     if points.shape[1] == 3 and cells.shape[1] == 3:
         if np.any(points[:, 2] != 0):
             raise ValueError(
