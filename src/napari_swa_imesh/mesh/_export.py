@@ -270,7 +270,7 @@ def write_mesh(mesh: Mesh, path, *, force: bool = False,
     targets = mesh_output_paths(path, force=force, facet_groups=selection, ndim=mesh.ndim)
     if suffix == ".xdmf":
         require_h5py("write")
-    ex = ExportMesh(mesh, order=order, groups=selection)   # unknown groups fail here
+    ex = ExportMesh(mesh, order=int(order), groups=selection)  # unknown groups fail here
     with atomic_write(targets, force=force) as temps:
         _write(ex, temps, abaqus_elements=abaqus_elements, binary=binary)
     return targets
