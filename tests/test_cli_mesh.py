@@ -54,7 +54,7 @@ def test_mesh_2d_json_end_to_end(tmp_path, capsys):
     assert report["checks"]["all_passed"] is True
     assert report["leaves_after_balance"] >= report["leaves_before_balance"]
     assert set(report["seconds"]) >= {"read", "mesh", "check", "write"}
-    assert report["output"] == [str(out)]
+    assert report["output"] == [str(out), str(tmp_path / "mesh_facets.vtu")]
     mesh = read_mesh(out)
     assert mesh.n_cells == report["elements"]
     assert len(mesh.points) == report["vertices"]
@@ -76,8 +76,8 @@ def test_mesh_3d_gmsh_with_names_exclude_and_spacing(tmp_path, capsys):
     assert {"min_dihedral", "max_dihedral"} <= set(report)
     assert report["checks"]["all_passed"] is True
     assert report["spacing"] == [2.0, 1.0, 0.5]
-    text = out.read_text()
-    assert '3 1 "matrix"' in text and '3 2 "inclusion"' in text
+    text = out.read_bytes()                   # binary Gmsh; the names are text
+    assert b'3 1 "matrix"' in text and b'3 2 "inclusion"' in text
     mesh = read_mesh(out)
     assert 0 not in set(mesh.material.tolist())
     np.testing.assert_allclose(mesh.points.max(axis=0), np.array(labels.shape) * [2, 1, 0.5])
@@ -396,3 +396,47 @@ def test_mesh_command_builds_one_tree_and_one_balance(tmp_path, capsys, monkeypa
     report = one_json(stdout)
     assert report["checks"]["all_passed"] is True and report["exclude"] == [0]
     assert "face_balance_count" not in report["seconds"]["mesh_steps"]
+
+
+def test_mesh_order_2_with_chosen_facet_groups_as_ascii_gmsh(tmp_path, capsys):
+    import meshio
+
+    np.save(tmp_path / "vol.npy", blob_3d())
+    out = tmp_path / "vol.msh"
+    code, stdout, stderr = run(capsys, "mesh", tmp_path / "vol.npy", "-o", out, "--order", "2",
+                               "--facet-groups", "xmin,interface_*", "--msh-ascii", "--json")
+    assert code == 0, stderr
+    assert one_json(stdout)["order"] == 2
+    assert out.read_bytes().startswith(b"$MeshFormat\n4.1 0 8\n")
+    m = meshio.read(out)
+    assert {b.type for b in m.cells} == {"tetra10", "triangle6"}
+    facet_groups = {n for n, (_, d) in m.field_data.items() if d == 2}
+    assert facet_groups == {"xmin", "interface_material_0_material_1",
+                            "interface_material_0_material_2", "interface_material_1_material_2"}
+
+
+def test_mesh_facet_groups_none_writes_the_vtu_alone(tmp_path, capsys):
+    np.save(tmp_path / "l.npy", three_materials_2d())
+    code, stdout, stderr = run(capsys, "mesh", tmp_path / "l.npy", "-o", tmp_path / "m.vtu",
+                               "--facet-groups", "none", "--json")
+    assert code == 0, stderr
+    assert one_json(stdout)["output"] == [str(tmp_path / "m.vtu")]
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["l.npy", "m.vtu"]
+
+
+@pytest.mark.parametrize(("flags", "match"), [
+    (["--facet-groups", "zmin"], "unknown facet group 'zmin'; the groups are xmin, xmax, "
+                                 "ymin, ymax,"),
+    (["--order", "3"], "--order must be 1 or 2, not '3'"),
+    (["--msh-ascii"], "--msh-ascii applies to .msh output only"),
+])
+def test_mesh_write_options_fail_before_meshing(tmp_path, capsys, monkeypatch, flags, match):
+    import napari_swa_imesh.mesh._imesh as imesh
+
+    def no_meshing(*args, **kwargs):
+        raise AssertionError("meshed before checking the options")
+
+    monkeypatch.setattr(imesh, "_mesh_labels", no_meshing)
+    np.save(tmp_path / "l.npy", three_materials_2d())
+    code, _, stderr = run(capsys, "mesh", tmp_path / "l.npy", "-o", tmp_path / "m.vtu", *flags)
+    assert code == 2 and re.search(re.escape(match), stderr), stderr

@@ -381,6 +381,16 @@ FAILING_CALLS = [
     ["mesh", "existing.npy", "-o", "m.abc"],
     ["mesh", "img.npy", "-o", "m.vtu"],
     ["mesh", "existing.npy", "-o", "m.vtu", "--spacing", "1", "2", "3"],
+    ["mesh", "existing.npy", "-o", "m.vtu", "--order", "3"],
+    ["mesh", "existing.npy", "-o", "m.msh", "--order", "two"],
+    ["mesh", "existing.npy", "-o", "m.vtu", "--facet-groups", "zmin"],
+    ["mesh", "existing.npy", "-o", "m.inp", "--facet-groups", "xmin,sides"],
+    ["mesh", "existing.npy", "-o", "m.msh", "--facet-groups", "interface_material_1_bone"],
+    ["mesh", "existing.npy", "-o", "m.vtu", "--facet-groups", "exterior_*"],
+    ["mesh", "existing.npy", "-o", "m.vtk", "--facet-groups", "xmin"],
+    ["mesh", "existing.npy", "-o", "m.vtu", "--msh-ascii"],
+    ["mesh", "existing.npy", "-o", "taken.vtu"],
+    ["mesh", "existing.npy", "-o", "taken.ele", "--order", "2"],
     ["evaluate", "existing.npy", "--truth", "missing.npy"],
 ]
 
@@ -395,6 +405,8 @@ def workdir(tmp_path):
     save_samples(band_samples(truth, labels={1: 1, 2: 70000, 3: 3}), tmp_path / "big.json")
     (tmp_path / "bad.json").write_text('{"boxes": [{"label": 1, "start": [0.5, 0]}]}')
     (tmp_path / "junk.npz").write_bytes(b"\x93NUMPY" + bytes(range(200)))
+    (tmp_path / "taken_facets.vtu").write_text("the facet groups of another mesh")
+    (tmp_path / "taken.poly").write_text("a Triangle file of the user's")
     return tmp_path
 
 

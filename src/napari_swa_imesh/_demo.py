@@ -16,7 +16,7 @@ from ._cli_util import print_json
 __all__ = ["add_command", "run_demo"]
 
 DEMO_FILES = ("training.tif", "samples.json", "mosaic.tif", "truth.tif", "res.png",
-              "model.npz", "labels.tif", "signatures.csv", "mesh.vtu")
+              "model.npz", "labels.tif", "signatures.csv", "mesh.vtu", "mesh_facets.vtu")
 
 
 def add_command(subparsers) -> None:

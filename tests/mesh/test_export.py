@@ -105,7 +105,7 @@ def test_round_trip_keeps_points_cells_and_materials(tmp_path, ndim, suffix):
 def test_unique_points_survive_exactly(tmp_path, ndim):
     mesh = sample_mesh(ndim)
     for suffix in FORMATS:
-        back = read_mesh(write_mesh(mesh, tmp_path / f"m{suffix}")[0])
+        back = read_mesh(write_mesh(mesh, tmp_path / f"m_{suffix[1:]}{suffix}")[0])
         np.testing.assert_array_equal(
             np.unique(back.points, axis=0), np.unique(mesh.points, axis=0), err_msg=suffix
         )
@@ -132,7 +132,8 @@ def test_files_read_by_meshio_are_positively_oriented(tmp_path, ndim, suffix):
     m = meshio.read(path)
     points = m.points[:, :ndim]
     for block in m.cells:
-        assert (signed_volumes(points, block.data) > 0).all()
+        if block.type == ("triangle" if ndim == 2 else "tetra"):  # not the facet blocks
+            assert (signed_volumes(points, block.data) > 0).all()
     # Gmsh files come back with nodes grouped by entity, so compare point sets
     np.testing.assert_array_equal(np.unique(points, axis=0),
                                   np.unique(mesh.points[:, ::-1], axis=0))
@@ -141,8 +142,9 @@ def test_files_read_by_meshio_are_positively_oriented(tmp_path, ndim, suffix):
 @pytest.mark.parametrize("ndim", [2, 3])
 def test_node_ele_follows_the_documented_layout(tmp_path, ndim):
     mesh = sample_mesh(ndim)
-    node, ele = write_mesh(mesh, tmp_path / "mesh.ele")
+    node, ele, facets = write_mesh(mesh, tmp_path / "mesh.ele")
     assert (node.name, ele.name) == ("mesh.node", "mesh.ele")
+    assert facets.name == ("mesh.poly" if ndim == 2 else "mesh.face")
     header = [ln for ln in ele.read_text().splitlines() if not ln.startswith("#")][0]
     n_attr = 2 if ndim == 2 else 1  # Triangle: material, quality; TetGen: region attribute
     assert header.split() == [str(mesh.n_cells), str(ndim + 1), str(n_attr)]
@@ -157,7 +159,7 @@ def test_node_ele_follows_the_documented_layout(tmp_path, ndim):
 
 def test_tetgen_files_read_by_meshio(tmp_path):
     mesh = sample_mesh(3)
-    node, _ = write_mesh(mesh, tmp_path / "mesh.node")
+    node, *_ = write_mesh(mesh, tmp_path / "mesh.node")
     m = meshio.read(node)
     np.testing.assert_array_equal(m.points, mesh.points[:, ::-1])
     np.testing.assert_array_equal(m.cell_data["tetgen:ref"][0], mesh.material)
@@ -171,20 +173,24 @@ def test_node_ele_reader_accepts_zero_based_files(tmp_path):
     assert mesh.material.tolist() == [5]
 
 
+@pytest.mark.parametrize("binary", [True, False])
 @pytest.mark.parametrize("ndim", [2, 3])
-def test_gmsh_physical_groups_are_named_after_materials(tmp_path, ndim):
+def test_gmsh_physical_groups_are_named_after_materials(tmp_path, ndim, binary):
     mesh = sample_mesh(ndim)
-    path = write_mesh(mesh, tmp_path / "mesh.msh")[0]
-    text = path.read_text()
-    assert text.startswith("$MeshFormat\n4.1 0 8\n")
-    assert f'{ndim} 1 "bone"' in text and f'{ndim} 2 "soft tissue"' in text
-    assert f'{ndim} 3 "material_3"' in text
+    path = write_mesh(mesh, tmp_path / "mesh.msh", binary=binary)[0]
+    text = path.read_bytes()
+    assert text.startswith(f"$MeshFormat\n4.1 {int(binary)} 8\n".encode())
+    assert f'{ndim} 1 "bone"'.encode() in text and f'{ndim} 2 "soft tissue"'.encode() in text
+    assert f'{ndim} 3 "material_3"'.encode() in text
     m = meshio.read(path)
     assert m.field_data["bone"].tolist() == [1, ndim]
     assert m.field_data["soft tissue"].tolist() == [2, ndim]
-    # every element's physical group is its material (material 0 gets tag max+1 = 4)
-    physical = np.concatenate(m.cell_data["gmsh:physical"])
-    material = np.concatenate(m.cell_data["material"]).astype(int)
+    # every element's physical group is its material (material 0 gets tag max+1 = 4);
+    # the facet blocks (one dimension less) follow
+    blocks = [i for i, b in enumerate(m.cells) if b.type == ("triangle", "tetra")[ndim - 2]]
+    assert blocks == list(range(len(blocks)))
+    physical = np.concatenate([m.cell_data["gmsh:physical"][i] for i in blocks])
+    material = np.concatenate([m.cell_data["material"][i] for i in blocks]).astype(int)
     np.testing.assert_array_equal(np.where(material == 0, 4, material), physical)
     assert read_mesh(path).material_names[2] == "soft tissue"
 
@@ -231,7 +237,8 @@ def test_refuses_to_overwrite_without_force(tmp_path):
     assert target.read_text() == "user data"
     write_mesh(mesh, target, force=True)
     assert read_mesh(target).n_cells == mesh.n_cells
-    assert [p.name for p in tmp_path.iterdir()] == ["mesh.vtu"]  # no temporary left
+    # no temporary left
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["mesh.vtu", "mesh_facets.vtu"]
 
 
 def test_node_ele_checks_both_files_before_writing_either(tmp_path):
@@ -273,7 +280,7 @@ def test_write_does_not_mutate_the_mesh(tmp_path):
     mesh = sample_mesh(3)
     before = (mesh.points.copy(), mesh.cells.copy(), mesh.material.copy(), mesh.quality.copy())
     for suffix in FORMATS:
-        write_mesh(mesh, tmp_path / f"m{suffix}")
+        write_mesh(mesh, tmp_path / f"m_{suffix[1:]}{suffix}")
     for old, new in zip(before, (mesh.points, mesh.cells, mesh.material, mesh.quality)):
         np.testing.assert_array_equal(old, new)
 
@@ -297,8 +304,9 @@ def test_suffix_table_matches_formats():
 def test_xdmf_writes_its_h5_twin_and_checks_both(tmp_path):
     mesh = sample_mesh(3)
     written = write_mesh(mesh, tmp_path / "m.xdmf")
-    assert [p.name for p in written] == ["m.xdmf", "m.h5"]
-    assert sorted(p.name for p in tmp_path.iterdir()) == ["m.h5", "m.xdmf"]  # no temporaries
+    assert [p.name for p in written] == ["m.xdmf", "m.h5", "m_facets.vtu"]
+    # no temporaries
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["m.h5", "m.xdmf", "m_facets.vtu"]
     text = written[0].read_text()
     assert "m.h5:/" in text and ".swa-imesh-" not in text
     (tmp_path / "m.h5").write_bytes(b"user")
@@ -320,7 +328,7 @@ def test_xdmf_without_h5py_is_a_clear_error(tmp_path, monkeypatch):
 def test_vtk_itself_reads_the_files(tmp_path, ndim, suffix):
     pv = pytest.importorskip("pyvista")
     mesh = sample_mesh(ndim)
-    grid = pv.read(write_mesh(mesh, tmp_path / f"m{suffix}")[0])
+    grid = pv.read(write_mesh(mesh, tmp_path / f"m_{suffix[1:]}{suffix}")[0])
     assert grid.n_cells == mesh.n_cells
     np.testing.assert_array_equal(grid.cell_data["material"], mesh.material)
     sizes = grid.compute_cell_sizes(length=False, area=ndim == 2, volume=ndim == 3)
@@ -364,7 +372,7 @@ def test_mesher_output_passes_every_check_after_a_round_trip(tmp_path, shape, sp
     labels = np.random.default_rng(len(shape)).integers(0, 3, shape)
     mesh = mesh_labels(labels, spacing=spacing, exclude=(0,))
     for suffix in FORMATS:
-        back = read_mesh(write_mesh(mesh, tmp_path / f"m{suffix}")[0])
+        back = read_mesh(write_mesh(mesh, tmp_path / f"m_{suffix[1:]}{suffix}")[0])
         # the files hold no spacing or image shape: give back what the checks measure in
         back = dataclasses.replace(back, spacing=mesh.spacing, shape=mesh.shape)
         checks = check_mesh(back, labels, exclude=(0,))

@@ -7,8 +7,9 @@
 * quality: :func:`radius_edge_ratio`, :func:`min_angle`, :func:`dihedral_angles`,
   :func:`signed_volumes`, :data:`QUALITY_METRICS`, and the method's proven bounds,
   :func:`quality_table` and the ranges they prove per metric, :func:`quality_bounds`;
-* export: :func:`write_mesh`, :func:`read_mesh`, :func:`to_meshio`, and
-  :func:`write_mesh_vtu` (the ``.vtu`` writer, with extra fields);
+* export: :func:`write_mesh` (every format, order 1 or 2, with the facet groups asked
+  for), :func:`read_mesh`, :func:`to_meshio`, and :func:`write_mesh_vtu` (the ``.vtu``
+  writer, with extra fields);
 * placement: ``mesh_labels(..., affine=...)`` puts the files in an image's world frame
   (NIfTI); :func:`world_from_affine` gives the spacing and ``Mesh.world`` it uses;
 * facet groups for boundary conditions: :func:`facet_groups` (box sides, material

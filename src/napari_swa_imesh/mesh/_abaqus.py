@@ -1,20 +1,25 @@
-"""Abaqus ``.inp`` through meshio, with the fixes CalculiX and FE users need.
+"""Abaqus ``.inp``, written by our own streaming writer with what CalculiX and FE users need.
 
+* ``*NODE`` (2 or 3 coordinates; mid-edge nodes after the corners at second order) and
+  one ``*ELEMENT`` block, element ids 1..M in the mesh's order.
 * One ``*ELSET`` per material, named after it and made a valid Abaqus label (start with
   a letter; letters, digits, underscores; at most 80 characters): ``soft tissue`` ->
   ``soft_tissue``.
-* Element types: meshio names triangles ``R3D3`` (a rigid surface); a 2-D solid wants the
-  continuum ``CPS3``, tetrahedra are ``C3D4``; for heat transfer ``DC2D3``/``DC3D4``.
+* Element types (:data:`ABAQUS_ELEMENTS`): continuum ``CPS3``/``C3D4`` (``CPS6``/``C3D10``
+  at second order, mid-edge nodes in the element's edge order 12 23 31 (14 24 34)), or
+  for ``*HEAT TRANSFER`` ``DC2D3``/``DC3D4`` (``DC2D6``/``DC3D10``).
 * Material ids ride along as comment lines on top, ``** swa-imesh material <id> <set>``,
   so reading recovers them (sets named ``material_<id>`` are understood too).
 * Numbers with 13 significant digits, so every field fits the 20 characters CalculiX (the
   common free reader) takes; longer fields are rejected there.
 * The facet groups (:func:`~napari_swa_imesh.mesh.facet_groups`: ``xmin`` ... ``zmax``,
-  ``interface_<A>_<B>``, ``exterior_<A>``) as a ``*NSET`` of their nodes (for
-  ``*BOUNDARY``) and an element-face ``*SURFACE`` (for ``*DSLOAD``, ``*DFLUX``, ``*FILM``),
-  built from ``*ELSET``s ``<group>_S<k>`` of the elements whose face k it is.
+  ``interface_<A>_<B>``, ``exterior_<A>``) as a ``*NSET`` of their nodes (mid-edge nodes
+  included at second order; for ``*BOUNDARY``) and an element-face ``*SURFACE`` (for
+  ``*DSLOAD``, ``*DFLUX``, ``*FILM``), built from ``*ELSET``s ``<group>_S<k>`` of the
+  elements whose face k it is (second-order elements number their faces as the linear).
 
-The format has no per-cell arrays, so quality and angles are not written.
+Every table is written in blocks of rows (no text of the whole file). The format has no
+per-cell arrays, so quality and angles are not written.
 """
 
 from __future__ import annotations
@@ -24,20 +29,22 @@ from pathlib import Path
 
 import numpy as np
 
-from ._common import material_names
+from ._triangle_tetgen import write_rows
 
-__all__ = ["write_abaqus", "abaqus_materials", "facet_sets_text", "ABAQUS_ELEMENTS",
-           "ABAQUS_TYPE", "FACE_NUMBER"]
+__all__ = ["write_abaqus", "abaqus_materials", "ABAQUS_ELEMENTS", "FACE_NUMBER"]
 
-#: Element type per dimension.
-ABAQUS_TYPE = {2: "CPS3", 3: "C3D4"}
-#: Element types per analysis: continuum mechanics, or heat transfer (``*HEAT TRANSFER``).
-ABAQUS_ELEMENTS = {"mechanical": ABAQUS_TYPE, "heat": {2: "DC2D3", 3: "DC3D4"}}
+#: Element type per analysis, then per (dimension, order): continuum mechanics, or heat
+#: transfer (``*HEAT TRANSFER``).
+ABAQUS_ELEMENTS = {
+    "mechanical": {(2, 1): "CPS3", (3, 1): "C3D4", (2, 2): "CPS6", (3, 2): "C3D10"},
+    "heat": {(2, 1): "DC2D3", (3, 1): "DC3D4", (2, 2): "DC2D6", (3, 2): "DC3D10"},
+}
 #: Abaqus face number (S1..) of the face opposite corner k (0-based) of a triangle
 #: (S1 = nodes 1-2, S2 = 2-3, S3 = 3-1) or a tetrahedron (S1 = 1-2-3, S2 = 1-4-2,
 #: S3 = 2-4-3, S4 = 3-4-1).
 FACE_NUMBER = {2: np.array([2, 3, 1]), 3: np.array([3, 4, 2, 1])}
 _NAME_NOTE = "** swa-imesh material"  # comment line: "<note> <id> <set name>"
+_ROWS = 1 << 16
 
 
 def _set_names(names: dict[int, str]) -> dict[int, str]:
@@ -54,65 +61,53 @@ def _set_names(names: dict[int, str]) -> dict[int, str]:
     return out
 
 
-def _id_lines(ids: np.ndarray) -> str:
-    """1-based ids, 16 to a line (the Abaqus limit for data lines)."""
-    ids = np.asarray(ids) + 1
-    return "".join(", ".join(map(str, ids[i:i + 16])) + "\n" for i in range(0, len(ids), 16))
+def _write_ids(fh, ids: np.ndarray) -> None:
+    """0-based `ids` as 1-based, 16 to a line (the Abaqus limit for data lines)."""
+    ids = np.asarray(ids, dtype=np.int64) + 1
+    full = len(ids) // 16 * 16
+    write_rows(fh, ids[:full].reshape(-1, 16), sep=", ")
+    if full < len(ids):
+        fh.write(", ".join(map(str, ids[full:].tolist())) + "\n")
 
 
-def facet_sets_text(groups: dict, cells_written: np.ndarray, cells_mesh: np.ndarray) -> str:
-    """``*NSET``, ``*ELSET`` and ``*SURFACE`` keywords of the facet groups.
-
-    Parameters
-    ----------
-    groups : dict of str to FacetGroup
-        From :func:`facet_groups` on the mesh.
-    cells_written : (M, d+1) ndarray
-        The cells as written (corners 0 and 1 may have been swapped to keep the volume
-        positive in x, y(, z) order), which fixes the face numbers.
-    cells_mesh : (M, d+1) ndarray
-        The mesh's own cells, in which the groups' corners are counted.
-    """
-    d = cells_mesh.shape[1] - 1
-    swapped = cells_written[:, 0] != cells_mesh[:, 0]
-    labels = _set_names({i: name for i, name in enumerate(groups)})
-    out = []
-    for i, group in enumerate(groups.values()):
-        name = labels[i]
-        out.append(f"*NSET, NSET={name}\n{_id_lines(np.unique(group.facets))}")
-        corner = group.opposite.copy()
-        flip = swapped[group.owner] & (corner < 2)
-        corner[flip] = 1 - corner[flip]
-        face = FACE_NUMBER[d][corner]
+def _write_facet_sets(fh, ex) -> None:
+    """``*NSET``, ``*ELSET`` and ``*SURFACE`` keywords of the facet groups of `ex`."""
+    labels = _set_names({g.id: name for name, g in ex.groups.items()})
+    for g in ex.groups.values():
+        name = labels[g.id]
+        fh.write(f"*NSET, NSET={name}\n")
+        _write_ids(fh, np.unique(ex.facet_nodes(g)))
+        face = FACE_NUMBER[ex.ndim][g.corner]
         surface = [f"*SURFACE, NAME={name}, TYPE=ELEMENT\n"]
         for number in np.unique(face):
-            elements = np.sort(group.owner[face == number])
-            out.append(f"*ELSET, ELSET={name}_S{number}\n{_id_lines(elements)}")
+            fh.write(f"*ELSET, ELSET={name}_S{number}\n")
+            _write_ids(fh, np.sort(g.owner[face == number]))
             surface.append(f"{name}_S{number}, S{number}\n")
-        out.append("".join(surface))
-    return "".join(out)
+        fh.write("".join(surface))
 
 
-def write_abaqus(names: dict[int, str], m, path: str, *, groups: dict | None = None,
-                 cells_mesh: np.ndarray | None = None, elements: str = "mechanical") -> None:
-    """Write `m` as Abaqus ``.inp`` (arguments: see ``_common``, "Format writers"), with
-    the facet `groups` of the mesh whose own cells are `cells_mesh`, and the element
-    types of `elements` (a key of :data:`ABAQUS_ELEMENTS`)."""
-    import meshio
-
-    material = m.cell_data["material"][0]
-    materials = np.unique(material)
-    set_names = _set_names(material_names(names, materials))
-    cell_sets = {set_names[int(mat)]: [np.flatnonzero(material == mat)] for mat in materials}
-    out = meshio.Mesh(m.points, m.cells, cell_sets=cell_sets)
-    meshio.write(path, out, file_format="abaqus", float_fmt=".12e")
-    text = Path(path).read_text()
-    element = ABAQUS_ELEMENTS[elements][m.points.shape[1]]
-    text = re.sub(r"(?im)^\*ELEMENT, TYPE=\w+$", f"*ELEMENT, TYPE={element}", text)
-    notes = "".join(f"{_NAME_NOTE} {mat} {name}\n" for mat, name in set_names.items())
-    if groups:
-        text = text.rstrip("\n") + "\n" + facet_sets_text(groups, m.cells[0].data, cells_mesh)
-    Path(path).write_text(notes + text)
+def write_abaqus(ex, path, *, elements: str = "mechanical") -> None:
+    """Write `ex` (an ``_prepare.ExportMesh``) as Abaqus ``.inp`` with the element types of
+    `elements` (a key of :data:`ABAQUS_ELEMENTS`)."""
+    set_names = _set_names(ex.names)
+    element = ABAQUS_ELEMENTS[elements][(ex.ndim, ex.order)]
+    with open(path, "w") as fh:
+        fh.write("".join(f"{_NAME_NOTE} {mat} {name}\n" for mat, name in set_names.items()))
+        fh.write("*HEADING\nwritten by napari-swa-imesh\n*NODE\n")
+        n = len(ex.points)
+        for start in range(0, n, _ROWS):
+            block = ex.points[start:start + _ROWS]
+            write_rows(fh, np.arange(start + 1, start + len(block) + 1)[:, None], block,
+                       sep=", ", float_format="%.12e")
+        fh.write(f"*ELEMENT, TYPE={element}\n")
+        for start in range(0, ex.n_cells, _ROWS):
+            cells = ex.cells(slice(start, start + _ROWS)) + 1
+            write_rows(fh, np.column_stack([np.arange(start + 1, start + len(cells) + 1),
+                                            cells]), sep=", ")
+        for mat, name in set_names.items():
+            fh.write(f"*ELSET, ELSET={name}\n")
+            _write_ids(fh, np.flatnonzero(ex.material == mat))
+        _write_facet_sets(fh, ex)
 
 
 def abaqus_materials(path: Path, m, keep: list[int], n_cells: int):

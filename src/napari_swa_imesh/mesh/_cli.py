@@ -57,8 +57,20 @@ def add_commands(subparsers) -> None:
                    metavar="ID=NAME", help="names for materials, e.g. 1=bone 2=soft "
                                            "(Gmsh physical groups, Abaqus element sets)")
     p.add_argument("--abaqus-elements", choices=("mechanical", "heat"), default="mechanical",
-                   help="element types of an .inp: mechanical (CPS3/C3D4, default) or heat "
-                        "(DC2D3/DC3D4, for *HEAT TRANSFER)")
+                   help="element types of an .inp: mechanical (CPS3/C3D4, order 2 "
+                        "CPS6/C3D10; default) or heat (DC2D3/DC3D4, order 2 DC2D6/DC3D10; "
+                        "for *HEAT TRANSFER)")
+    p.add_argument("--order", default="1", metavar="1|2",
+                   help="element order: 1 (default) or 2 (a node at the midpoint of every "
+                        "edge: 6-node triangles, 10-node tetrahedra; facets of order 2)")
+    p.add_argument("--facet-groups", default="all", metavar="all|none|NAME,NAME",
+                   help="facet groups to write (box sides xmin..zmax, interface_<A>_<B>, "
+                        "exterior_<A>; * patterns allowed, e.g. xmin,xmax,interface_*): "
+                        "all (default) or none; .vtu/.xdmf get them in <stem>_facets.vtu, "
+                        ".node/.ele in .poly (2-D) / .face (3-D), .msh as physical groups, "
+                        ".inp as *NSET/*SURFACE")
+    p.add_argument("--msh-ascii", action="store_true",
+                   help="write .msh as Gmsh 4.1 ASCII instead of binary")
     p.add_argument("--refine", type=int, default=0, metavar="K",
                    help="elements sharing a facet with a material interface are 2^-K voxels "
                         "(0..4; default 0); the interior coarsens as before, bounds unchanged")
@@ -137,8 +149,11 @@ def _run_mesh(args: argparse.Namespace) -> int:
     from ._imesh import _mesh_arguments
 
     timer = StepTimer()
-    # fail before the (possibly long) meshing on a bad suffix or an existing file
-    mesh_output_paths(args.output, force=args.force)
+    # fail before the (possibly long) meshing on a bad option, suffix or existing file
+    peek = _peek_shape_dtype(args.labels)
+    write_options = _write_options(args, None if peek is None else len(peek[0]))
+    mesh_output_paths(args.output, force=args.force,
+                      facet_groups=write_options["facet_groups"])
     names = parse_material_names(args.material_names)
     limit = parse_memory_size(args.memory_limit)
     if args.spacing:
@@ -148,7 +163,6 @@ def _run_mesh(args: argparse.Namespace) -> int:
         raise ValueError("--periodic needs the template method (the delaunay method cannot "
                          "match opposite faces).")
     # from the file's header: refuse a volume whose labels and grids alone cannot fit
-    peek = _peek_shape_dtype(args.labels)
     placement = _placement(args, peek)
     if peek is not None and len(peek[0]) in (2, 3) and limit != 0:
         _check_memory(args, estimate_mesh_memory(peek[0], peek[1], n_boundary=0,
@@ -172,6 +186,10 @@ def _run_mesh(args: argparse.Namespace) -> int:
     lattice, max_size, coarsen = resolution_arguments(
         spacing, method=args.method, refine=args.refine, max_size=args.max_size,
         subdivide=not args.no_subdivide, coarsen=args.coarsen)
+    # the dimension is known now: the box sides it has, and .poly or .face
+    write_options = _write_options(args, labels.ndim)
+    mesh_output_paths(args.output, force=args.force,
+                      facet_groups=write_options["facet_groups"], ndim=labels.ndim)
     with timer("estimate"):
         estimate = estimate_mesh_memory(labels.shape, labels.dtype,
                                         n_boundary=count_boundary_voxels(labels),
@@ -200,8 +218,7 @@ def _run_mesh(args: argparse.Namespace) -> int:
             checks = _check_mesh(mesh, labels, exclude, tree).to_dict()
     del tree, labels  # the writers need only the mesh
     with timer("write"):
-        written = write_mesh(mesh, args.output, force=args.force,
-                             abaqus_elements=args.abaqus_elements)
+        written = write_mesh(mesh, args.output, force=args.force, **write_options)
 
     report = _mesh_report(args, mesh, checks, written, timer.seconds)
     report["memory_estimate_bytes"] = estimate
@@ -257,6 +274,33 @@ def _placement(args, peek) -> tuple | None:
     if peek is None or len(peek[0]) not in (2, 3):
         return None                   # the reader or the mesher's door says what is wrong
     return world_from_affine(affine, len(peek[0]), name=f"the affine of {name}")
+
+
+def _write_options(args, ndim: int | None) -> dict:
+    """The keyword arguments of ``write_mesh`` from the flags, checked (ValueError in the
+    flags' words) before any meshing."""
+    from ._export import check_write_options
+
+    if args.order not in ("1", "2"):
+        raise ValueError(f"--order must be 1 or 2, not {args.order!r}.")
+    if args.msh_ascii and Path(args.output).suffix.lower() != ".msh":
+        raise ValueError(f"--msh-ascii applies to .msh output only, not "
+                         f"{Path(args.output).name}; leave it out or write .msh.")
+    text = args.facet_groups.strip()
+    groups = text if text in ("all", "none") else [n.strip() for n in text.split(",")]
+    if isinstance(groups, list) and not all(groups):
+        raise ValueError(f"--facet-groups expects all, none or names separated by commas "
+                         f"(e.g. xmin,xmax,interface_*); got {args.facet_groups!r}.")
+    options = {"order": int(args.order), "binary": not args.msh_ascii,
+               "facet_groups": groups, "abaqus_elements": args.abaqus_elements}
+    try:
+        options["facet_groups"] = check_write_options(args.output, ndim=ndim, **options)
+    except ValueError as exc:
+        if "legacy .vtk" in str(exc):
+            raise ValueError("legacy .vtk holds no facet groups; write .vtu (its groups go "
+                             "to <stem>_facets.vtu) or .msh, or drop --facet-groups.") from None
+        raise ValueError(str(exc).replace("facet_groups", "--facet-groups")) from None
+    return options
 
 
 def _check_memory(args, estimate: int, limit: int | None, shape, dtype, *,
@@ -321,6 +365,7 @@ def _mesh_report(args, mesh, checks, written, seconds) -> dict:
         "input": str(args.labels),
         "output": [str(p) for p in written],
         "method": args.method,
+        "order": int(args.order),
         "dim": mesh.ndim,
         "shape": list(mesh.shape),
         "spacing": list(mesh.spacing),

@@ -1,4 +1,5 @@
-"""What every file format shares: meshio's cell-type names and the material names.
+"""What every file format shares: suffixes, meshio's cell-type names, the exported frame,
+orientation and the material names.
 
 Conventions written once for the writers (``_export`` and one module per awkward format)
 and the pyvista bridge (``_pyvista``): exported coordinates are :func:`export_points` (x,
@@ -9,10 +10,9 @@ name is called ``material_<id>``.
 
 Format writers
 --------------
-A writer of one format (``write_gmsh``, ``write_abaqus``) takes ``names`` (the mesh's
-material names, dict of int to str), ``m`` (the ``meshio.Mesh`` from ``to_meshio``: one
-cell block, ``material`` and the other per-cell arrays as cell data) and ``path`` (the
-temporary file ``io.atomic_write`` gave for the target).
+A writer of one format (``write_gmsh``, ``write_abaqus``, ``write_node_ele``, ...) takes
+an ``_prepare.ExportMesh`` (points and cells in the files' frame, order 1 or 2, the facet
+groups chosen) and the temporary path(s) ``io.atomic_write`` gave for the target(s).
 """
 
 from __future__ import annotations
@@ -21,10 +21,23 @@ import numpy as np
 
 from ._quality import signed_volumes
 
-__all__ = ["CELL_TYPE", "material_names", "export_points", "export_vectors", "orient_positive"]
+__all__ = ["CELL_TYPE", "CELL_TYPE_2", "MESH_SUFFIXES", "material_names", "export_points",
+           "export_vectors", "orient_positive"]
 
-#: meshio's name of the linear simplex of each dimension.
+#: meshio's name of the simplex of each dimension, linear and of second order.
 CELL_TYPE = {2: "triangle", 3: "tetra"}
+CELL_TYPE_2 = {2: "triangle6", 3: "tetra10"}
+
+#: Suffix -> short description, in the order shown to users.
+MESH_SUFFIXES = {
+    ".vtu": "VTK XML unstructured grid (+ <stem>_facets.vtu)",
+    ".vtk": "legacy VTK",
+    ".msh": "Gmsh 4.1 with physical groups",
+    ".xdmf": "XDMF with its HDF5 .h5 file (+ <stem>_facets.vtu)",
+    ".inp": "Abaqus with element sets and facet surfaces",
+    ".node": "Triangle (2-D) / TetGen (3-D) .node + .ele (+ .poly / .face)",
+    ".ele": "Triangle (2-D) / TetGen (3-D) .node + .ele (+ .poly / .face)",
+}
 
 
 def export_points(mesh) -> np.ndarray:

@@ -1,26 +1,35 @@
-"""Writing and reading meshes in the formats finite-element users expect: the dispatcher.
+"""Writing meshes in the formats finite-element users expect: the dispatcher.
 
-This module picks a writer by suffix and sends every write through ``io.atomic_write``;
-each awkward format keeps its workarounds in a module of its own (``_gmsh``, ``_abaqus``,
-``_xdmf``, ``_triangle_tetgen``), the rest is a plain meshio call. Exported coordinates
-are x, y(, z) = column, row(, plane), the reverse of the numpy axis order the ``Mesh``
-keeps; each cell is reordered so that its signed volume stays positive there.
+This module checks the options once (before any meshing, when the command line asks),
+prepares the mesh once (``_prepare.ExportMesh``: the files' frame, order 1 or 2, the facet
+groups asked for), picks a writer by suffix and sends every write through
+``io.atomic_write``; each format keeps its layout in a module of its own (``_gmsh``,
+``_abaqus``, ``_vtu`` and ``_facet_vtu``, ``_xdmf``, ``_triangle_tetgen``). Exported
+coordinates are x, y(, z) = column, row(, plane) (``_common.export_points``); each cell is
+reordered so that its signed volume stays positive there. Reading is in ``_read``.
 
 What each format holds
 ----------------------
 ========  ==========================================================================
-``.vtu``  VTK XML (raw binary, streamed); points padded to z = 0 in 2-D; every per-cell array.
-``.vtk``  legacy VTK 4.2 (readable by any VTK); points padded; every per-cell array.
-``.msh``  Gmsh 4.1 ASCII; one physical group (and one entity) per material, named
-          after it; every per-cell array as ``$ElementData``.
+``.vtu``  VTK XML (raw binary, streamed); points padded to z = 0 in 2-D; every per-cell array; facet groups
+          in ``<stem>_facets.vtu`` (cell data ``group`` and ``owner``, names in field
+          data; see ``_facet_vtu``).
+``.vtk``  legacy VTK 4.2 (readable by any VTK); points padded; every per-cell array;
+          no facet groups.
+``.msh``  Gmsh 4.1, binary (or ASCII with ``binary=False``); one physical group of
+          dimension d per material and one of dimension d-1 per facet group, named
+          after them; every per-cell array as ``$ElementData`` (see ``_gmsh``).
 ``.xdmf`` XDMF 3 with its arrays in a ``.h5`` beside it (same stem; needs h5py); every
-          array.
-``.inp``  Abaqus; one ``*ELSET`` per material named after it (made a valid Abaqus
-          label: ``soft tissue`` -> ``soft_tissue``); CPS3 triangles in 2-D, C3D4
-          tetrahedra in 3-D; no per-cell arrays (the format has none).
+          array; facet groups in ``<stem>_facets.vtu`` as for ``.vtu``.
+``.inp``  Abaqus; one ``*ELSET`` per material; ``*NSET`` and element-face ``*SURFACE``
+          per facet group; no per-cell arrays (see ``_abaqus``).
 ``.node`` Triangle (2-D; attributes material, quality) or TetGen (3-D; region
-``.ele``  attribute material); both files are written, with the same stem.
+``.ele``  attribute material); both files are written, with the same stem, and the
+          facet groups as boundary markers in a Triangle ``.poly`` / TetGen ``.face``.
 ========  ==========================================================================
+
+At second order (``order=2``) every format gets 6-node triangles / 10-node tetrahedra
+with one node at the midpoint of each edge (``_order2``), and facets of second order.
 """
 
 from __future__ import annotations
@@ -30,32 +39,19 @@ from pathlib import Path
 import numpy as np
 
 from ..io import atomic_write, check_writable
-from ._abaqus import ABAQUS_ELEMENTS, abaqus_materials, write_abaqus
-from ._common import CELL_TYPE, export_points
-from ._common import orient_positive as _orient_positive  # shared with the pyvista bridge
-from ._facets import facet_groups
-from ._gmsh import gmsh_materials, write_gmsh
-from ._triangle_tetgen import read_node_ele, write_node_ele
+from ._abaqus import ABAQUS_ELEMENTS, write_abaqus
+from ._common import CELL_TYPE, CELL_TYPE_2, MESH_SUFFIXES, export_points
+from ._facet_vtu import facets_companion, write_facets_vtu
+from ._gmsh import write_gmsh
+from ._prepare import ORDERS, ExportMesh, check_facet_selection
+from ._read import read_mesh
+from ._triangle_tetgen import FACET_SUFFIX, write_facet_markers, write_node_ele
 from ._types import Mesh
 from ._vtu import write_vtu
 from ._xdmf import require_h5py, write_xdmf
 
 __all__ = ["to_meshio", "write_mesh", "write_mesh_vtu", "read_mesh", "mesh_output_paths",
-           "MESH_SUFFIXES"]
-
-#: Suffix -> short description, in the order shown to users.
-MESH_SUFFIXES = {
-    ".vtu": "VTK XML unstructured grid",
-    ".vtk": "legacy VTK",
-    ".msh": "Gmsh 4.1 with physical groups",
-    ".xdmf": "XDMF with its HDF5 .h5 file",
-    ".inp": "Abaqus with one element set per material",
-    ".node": "Triangle (2-D) / TetGen (3-D) .node + .ele",
-    ".ele": "Triangle (2-D) / TetGen (3-D) .node + .ele",
-}
-
-
-# ----------------------------------------------------------------------------- helpers
+           "check_write_options", "MESH_SUFFIXES"]
 
 
 def _check_mesh_arg(mesh) -> None:
@@ -97,31 +93,24 @@ def to_meshio(mesh: Mesh):
     >>> to_meshio(m).points.tolist()
     [[0.0, 0.0], [1.0, 0.0], [0.0, 1.0]]
     """
+    _check_mesh_arg(mesh)
+    return _meshio_of(ExportMesh(mesh, groups="none"))
+
+
+def _meshio_of(ex: ExportMesh):
     import meshio
 
-    _check_mesh_arg(mesh)
-    points = export_points(mesh)
-    cells = _orient_positive(points, mesh.cells)
-    cell_data = {"material": [np.asarray(mesh.material, dtype=np.int64)]}
-    for key, values in mesh.cell_data.items():
+    cell_data = {"material": [ex.material]}
+    for key, values in ex.mesh.cell_data.items():
         values = np.asarray(values)
         # every writer takes int64/float64; some reject int8 or bool (XDMF as XML)
         kind = values.dtype.kind
         cell_data[key] = [values.astype(np.int64 if kind in "biu" else np.float64)]
-    return meshio.Mesh(points, [(CELL_TYPE[mesh.ndim], cells)], cell_data=cell_data)
+    kind = (CELL_TYPE if ex.order == 1 else CELL_TYPE_2)[ex.ndim]
+    return meshio.Mesh(ex.points, [(kind, ex.all_cells())], cell_data=cell_data)
 
 
-def _padded(m):
-    """The same meshio mesh with 2-D points given z = 0 (VTK formats need 3-D points)."""
-    import meshio
-
-    if m.points.shape[1] == 3:
-        return m
-    points = np.column_stack([m.points, np.zeros(len(m.points))])
-    return meshio.Mesh(points, m.cells, cell_data=m.cell_data)
-
-
-# ----------------------------------------------------------------------------- writing
+# ----------------------------------------------------------------------------- options
 
 
 def _targets(path: Path) -> list[Path]:
@@ -139,7 +128,44 @@ def _targets(path: Path) -> list[Path]:
     return [path]
 
 
-def mesh_output_paths(path, *, force: bool = False) -> list[Path]:
+def check_write_options(path, *, order: int = 1, binary: bool = True, facet_groups="all",
+                        abaqus_elements: str = "mechanical", ndim: int | None = None):
+    """Check the options of :func:`write_mesh` for `path` before any work.
+
+    Everything that can be known without the mesh is checked here (the facet-group names
+    of a mesh only once it exists); `ndim` may be None when the dimension is not known yet.
+
+    Returns
+    -------
+    "all", "none" or tuple of str
+        The facet-group selection in one form.
+
+    Raises
+    ------
+    ValueError
+        Unknown suffix, order, element kind or facet group; ASCII asked for a format
+        other than ``.msh``; facet groups named for legacy ``.vtk``, which holds none.
+    """
+    suffix = _targets(Path(path))[0].suffix.lower()
+    if abaqus_elements not in ABAQUS_ELEMENTS:
+        raise ValueError(f"abaqus_elements must be one of {', '.join(ABAQUS_ELEMENTS)}, not "
+                         f"{abaqus_elements!r}.")
+    if isinstance(order, bool) or order not in ORDERS:
+        raise ValueError(f"order must be 1 (linear) or 2 (mid-edge nodes), not {order!r}.")
+    if not isinstance(binary, bool):
+        raise TypeError(f"binary must be True or False, not {binary!r}.")
+    if not binary and suffix != ".msh":
+        raise ValueError(f"binary=False (ASCII) applies to .msh only; {suffix} has one "
+                         "encoding, so leave it out or write .msh.")
+    selection = check_facet_selection(facet_groups, ndim)
+    if suffix == ".vtk" and isinstance(selection, tuple):
+        raise ValueError("legacy .vtk holds no facet groups; write .vtu (its groups go to "
+                         "<stem>_facets.vtu) or .msh, or leave the facet groups out.")
+    return selection
+
+
+def mesh_output_paths(path, *, force: bool = False, facet_groups="all",
+                      ndim: int | None = None) -> list[Path]:
     """The files `write_mesh` would write for `path`, after checking it may write them.
 
     Lets a caller fail fast (before meshing) on a bad suffix or an existing file.
@@ -150,11 +176,17 @@ def mesh_output_paths(path, *, force: bool = False) -> list[Path]:
         As for :func:`write_mesh`.
     force : bool
         Whether existing files may be replaced.
+    facet_groups : "all", "none" or list of str
+        As for :func:`write_mesh`: unless ``"none"``, ``.vtu`` and ``.xdmf`` add
+        ``<stem>_facets.vtu``, and ``.node``/``.ele`` add ``.poly`` (2-D) or ``.face``
+        (3-D).
+    ndim : int, optional
+        Dimension of the mesh; without it the ``.poly``/``.face`` file is not listed.
 
     Returns
     -------
     list of Path
-        One path, or two (``.node`` and ``.ele``; ``.xdmf`` and its ``.h5``).
+        The main file first, then its twin (``.ele``, ``.h5``), then the facet file.
 
     Raises
     ------
@@ -166,13 +198,23 @@ def mesh_output_paths(path, *, force: bool = False) -> list[Path]:
         The target folder does not exist.
     """
     targets = _targets(Path(path))
+    suffix = targets[0].suffix.lower()
+    if facet_groups != "none":
+        if suffix in (".vtu", ".xdmf"):
+            targets.append(facets_companion(targets[0]))
+        elif suffix == ".node" and ndim in FACET_SUFFIX:
+            targets.append(targets[0].with_suffix(FACET_SUFFIX[ndim]))
     for target in targets:
         check_writable(target, force=force)
     return targets
 
 
+# ----------------------------------------------------------------------------- writing
+
+
 def write_mesh(mesh: Mesh, path, *, force: bool = False,
-               abaqus_elements: str = "mechanical") -> list[Path]:
+               abaqus_elements: str = "mechanical", order: int = 1, binary: bool = True,
+               facet_groups="all") -> list[Path]:
     """Write `mesh` in the format named by the suffix of `path`.
 
     Parameters
@@ -186,8 +228,19 @@ def write_mesh(mesh: Mesh, path, *, force: bool = False,
         Replace existing files. Without it, any existing target is an error and nothing
         is written.
     abaqus_elements : {"mechanical", "heat"}
-        Element types of an ``.inp``: continuum (``CPS3``/``C3D4``) or heat transfer
-        (``DC2D3``/``DC3D4``, for ``*HEAT TRANSFER``).
+        Element types of an ``.inp``: continuum (``CPS3``/``C3D4``, order 2
+        ``CPS6``/``C3D10``) or heat transfer (``DC2D3``/``DC3D4``, order 2
+        ``DC2D6``/``DC3D10``, for ``*HEAT TRANSFER``).
+    order : {1, 2}
+        2 adds a node at the midpoint of every edge (shared by the elements around it):
+        6-node triangles, 10-node tetrahedra, in each format's node order.
+    binary : bool
+        ``.msh`` only: Gmsh's binary encoding (default) or ASCII (``False``).
+    facet_groups : "all", "none" or list of str
+        Which facet groups (:func:`facet_groups`) to write: box sides, interfaces and
+        exteriors by name, or patterns such as ``"interface_*"``. Every name must be a
+        group of this mesh. ``.vtu``/``.xdmf`` get them in ``<stem>_facets.vtu``,
+        ``.node``/``.ele`` in a ``.poly``/``.face`` file; legacy ``.vtk`` holds none.
 
     Returns
     -------
@@ -197,7 +250,8 @@ def write_mesh(mesh: Mesh, path, *, force: bool = False,
     Raises
     ------
     ValueError
-        Unknown suffix, or a mesh that cannot be written.
+        Unknown suffix or option, a facet group this mesh does not have, or a mesh that
+        cannot be written.
     FileExistsError
         A target exists and `force` is false (all targets are checked first).
 
@@ -207,34 +261,61 @@ def write_mesh(mesh: Mesh, path, *, force: bool = False,
     into place, so a failed write never leaves a half file where the user's was.
     """
     _check_mesh_arg(mesh)
-    if abaqus_elements not in ABAQUS_ELEMENTS:
-        raise ValueError(f"abaqus_elements must be one of {', '.join(ABAQUS_ELEMENTS)}, not "
-                         f"{abaqus_elements!r}.")
-    targets = mesh_output_paths(path, force=force)
+    selection = check_write_options(path, order=order, binary=binary,
+                                    facet_groups=facet_groups,
+                                    abaqus_elements=abaqus_elements, ndim=mesh.ndim)
+    suffix = Path(path).suffix.lower()
+    if suffix == ".vtk":
+        selection = "none"
+    targets = mesh_output_paths(path, force=force, facet_groups=selection, ndim=mesh.ndim)
+    if suffix == ".xdmf":
+        require_h5py("write")
+    ex = ExportMesh(mesh, order=int(order), groups=selection)  # unknown groups fail here
     with atomic_write(targets, force=force) as temps:
-        write_mesh_to(mesh, temps, abaqus_elements=abaqus_elements)
+        _write(ex, temps, abaqus_elements=abaqus_elements, binary=binary)
     return targets
 
 
-def write_mesh_to(mesh: Mesh, temps: list[Path], *, abaqus_elements: str = "mechanical"
-                  ) -> None:
-    """Write `mesh` to the temporary paths that :func:`atomic_write` gave for the targets
-    of :func:`mesh_output_paths` (same names, so twins name each other right)."""
+def _write(ex: ExportMesh, temps: list[Path], *, abaqus_elements: str, binary: bool) -> None:
+    """Write `ex` to the temporary paths that :func:`atomic_write` gave for the targets of
+    :func:`mesh_output_paths` (same names, so twins name each other right)."""
     import meshio
 
     suffix = temps[0].suffix.lower()
-    if suffix == ".vtu":                      # our own writer: no meshio copy of the mesh
-        write_mesh_vtu(mesh, temps[0])
-        return
-    m = to_meshio(mesh)
-    try:
-        if suffix == ".inp":
-            write_abaqus(mesh.material_names, m, str(temps[0]), groups=facet_groups(mesh),
-                         cells_mesh=mesh.cells, elements=abaqus_elements)
-            return
-        _WRITERS[suffix](mesh, m, [str(t) for t in temps])
-    except (meshio.WriteError, KeyError) as exc:  # meshio's own failures, as one clear line
-        raise ValueError(f"meshio could not write {temps[0].name}: {exc}") from exc
+    if suffix == ".vtu":
+        write_vtu(temps[0], ex.points, ex.all_cells(),
+                  cell_data={"material": ex.material, **ex.mesh.cell_data})
+    elif suffix == ".msh":
+        write_gmsh(ex, temps[0], binary=binary)
+    elif suffix == ".inp":
+        write_abaqus(ex, temps[0], elements=abaqus_elements)
+    elif suffix in (".node", ".ele"):
+        write_node_ele(ex, temps[0], temps[1])
+    else:
+        try:
+            m = _meshio_of(ex)
+            if suffix == ".xdmf":
+                write_xdmf(m, str(temps[0]))
+            else:
+                meshio.write(str(temps[0]), _padded(m), file_format="vtk42", binary=True)
+        except (meshio.WriteError, KeyError) as exc:  # meshio's own failures, in one line
+            raise ValueError(f"meshio could not write {temps[0].name}: {exc}") from exc
+    facet_file = temps[2 if suffix in (".node", ".ele", ".xdmf") else 1:]
+    if facet_file:
+        if suffix in (".node", ".ele"):
+            write_facet_markers(ex, facet_file[0])
+        else:
+            write_facets_vtu(ex, facet_file[0])
+
+
+def _padded(m):
+    """The same meshio mesh with 2-D points given z = 0 (VTK formats need 3-D points)."""
+    import meshio
+
+    if m.points.shape[1] == 3:
+        return m
+    points = np.column_stack([m.points, np.zeros(len(m.points))])
+    return meshio.Mesh(points, m.cells, cell_data=m.cell_data)
 
 
 def write_mesh_vtu(mesh: Mesh, path, *, point_data: dict | None = None,
@@ -249,119 +330,3 @@ def write_mesh_vtu(mesh: Mesh, path, *, point_data: dict | None = None,
     points = export_points(mesh)
     data = {"material": mesh.material, **mesh.cell_data, **(cell_data or {})}
     write_vtu(path, points, mesh.cells, cell_data=data, point_data=point_data, orient=True)
-
-
-def _write_vtk(mesh: Mesh, m, temps: list[str]) -> None:
-    import meshio
-
-    meshio.write(temps[0], _padded(m), file_format="vtk42", binary=True)
-
-
-def _write_xdmf(mesh: Mesh, m, temps: list[str]) -> None:
-    write_xdmf(m, temps[0])
-
-
-def _write_gmsh(mesh: Mesh, m, temps: list[str]) -> None:
-    write_gmsh(mesh.material_names, m, temps[0])
-
-
-def _write_node_ele(mesh: Mesh, m, temps: list[str]) -> None:
-    write_node_ele(temps[0], temps[1], m.points, m.cells[0].data, m.cell_data["material"][0],
-                   mesh.cell_data.get("quality"))
-
-
-#: suffix -> writer(mesh, the meshio mesh in x, y(, z) order, temporary paths of targets)
-_WRITERS = {".vtk": _write_vtk, ".xdmf": _write_xdmf, ".msh": _write_gmsh,
-            ".node": _write_node_ele, ".ele": _write_node_ele}
-
-
-# ----------------------------------------------------------------------------- reading
-
-
-def read_mesh(path) -> Mesh:
-    """Read a mesh written by `write_mesh` (or a compatible file) back into a `Mesh`.
-
-    Parameters
-    ----------
-    path : str or Path
-        Any suffix `write_mesh` writes; for Triangle/TetGen either ``.node`` or ``.ele``.
-
-    Returns
-    -------
-    Mesh
-        Points back in numpy axis order (plane, row, col), 2-D when the file holds
-        triangles with z = 0; cells positively oriented there; ``material`` from the
-        ``material`` array, Gmsh physical groups, Abaqus element sets or the
-        Triangle/TetGen region attribute (0 for every element when the file has none,
-        and then ``info["has_material"]`` is False); other per-cell arrays as stored. ``spacing``
-        and ``shape`` are unknown (empty). Cell order may differ from the written mesh
-        (Gmsh groups cells by material).
-    """
-    p = Path(path)
-    if not p.exists() and p.suffix.lower() not in (".node", ".ele"):
-        raise FileNotFoundError(f"no mesh file at {p}; check the path.")
-    suffix = p.suffix.lower()
-    if suffix not in MESH_SUFFIXES:
-        raise ValueError(
-            f"cannot read a mesh from {p.name!r}: unknown suffix {suffix!r}; use one of "
-            f"{', '.join(MESH_SUFFIXES)}."
-        )
-    names: dict[int, str] = {}
-    if suffix in (".node", ".ele"):
-        points, cells, attributes = read_node_ele(p)
-        material = attributes.pop("material", None)
-        cell_data = attributes
-    else:
-        points, cells, material, cell_data, names = _read_meshio(p, suffix)
-    if points.shape[1] == 3 and cells.shape[1] == 3:
-        if np.any(points[:, 2] != 0):
-            raise ValueError(
-                f"{p} holds triangles in 3-D space; only flat 2-D meshes are supported."
-            )
-        points = points[:, :2]
-    points = np.ascontiguousarray(points[:, ::-1], dtype=np.float64)
-    cells = _orient_positive(points, cells)
-    has_material = material is not None
-    if material is None:
-        material = np.zeros(len(cells), dtype=np.int64)
-    return Mesh(
-        points=points,
-        cells=cells,
-        material=np.rint(material).astype(np.int64),
-        cell_data={k: np.asarray(v) for k, v in cell_data.items()},
-        material_names=names,
-        info={"source": str(p), "has_material": has_material},
-    )
-
-
-def _read_meshio(p: Path, suffix: str):
-    import meshio
-
-    fmt = {".vtu": "vtu", ".vtk": "vtk", ".xdmf": "xdmf", ".msh": "gmsh", ".inp": "abaqus"}[suffix]
-    if fmt == "xdmf":
-        require_h5py("read")
-    try:
-        m = meshio.read(p, file_format=fmt)
-    except (meshio.ReadError, KeyError, IndexError) as exc:
-        raise ValueError(f"cannot read {p} as a {suffix} mesh: {exc!r}") from exc
-    keep = [i for i, block in enumerate(m.cells) if block.type in ("triangle", "tetra")]
-    if not keep or len({m.cells[i].type for i in keep}) != 1:
-        raise ValueError(
-            f"{p} must hold triangles or tetrahedra (one kind); found "
-            f"{sorted({b.type for b in m.cells})}."
-        )
-    cells = np.concatenate([m.cells[i].data for i in keep]).astype(np.intp)
-    cell_data = {
-        key: np.concatenate([np.asarray(blocks[i]) for i in keep])
-        for key, blocks in m.cell_data.items()
-        if not key.startswith("gmsh:")
-    }
-    names: dict[int, str] = {}
-    material = cell_data.pop("material", None)
-    if fmt == "gmsh":
-        names, physical_material = gmsh_materials(m, keep)
-        if material is None:
-            material = physical_material
-    elif fmt == "abaqus" and m.cell_sets:
-        names, material = abaqus_materials(p, m, keep, len(cells))
-    return np.asarray(m.points, dtype=np.float64), cells, material, cell_data, names

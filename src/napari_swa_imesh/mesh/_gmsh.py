@@ -1,122 +1,197 @@
-"""Gmsh 4.1 ``.msh`` through meshio, with the two workarounds it needs.
+"""Gmsh 4.1 ``.msh``, binary (default) or ASCII, written by our own streaming writer.
 
-* Physical groups: one cell block, one entity and one named physical group per material
-  (tag = material id; material 0 gets ``max + 1``, Gmsh tags being positive). Gmsh 4 keeps
-  physical tags on entities and meshio writes an entity only if some node is classified
-  on it, so every material gets a node of its own by a maximum bipartite matching.
-* Element data: meshio 5.3 writes ASCII ``$ElementData`` with ``repr``, which numpy 2
-  turns into ``np.float64(...)``, so those sections are appended here.
+Layout (Gmsh reference manual, "MSH file format", version 4.1)
+----------------------------------------------------------------
+* ``$PhysicalNames`` (always text): one group of dimension d per material (tag = material
+  id; material 0 gets ``max + 1``, Gmsh tags being positive) named after it, and one
+  group of dimension d-1 per facet group written (tag = its id 1..K), named after it.
+* ``$Entities``: one entity per physical group, with the same dimension and tag (entity
+  and physical tags count per dimension), the mesh's bounding box and no bounding
+  entities.
+* ``$Nodes``: every node in one block (on the first material's entity): tags 1..N in the
+  mesh's point order, then the mid-edge nodes (second order). Elements of other
+  entities refer to them by tag, which the format allows.
+* ``$Elements``: the elements grouped by material (one block each, tags 1..M in that
+  order), then one block of facet elements per facet group (tags M+1..); types 2/4
+  (triangle, tetrahedron) with 1 (line) for facets, or at second order 9/11 with 8
+  (3-node line) and 9 (6-node triangle) for facets. Facets are oriented out of their
+  owner element.
+* ``$ElementData``: ``material`` and every per-cell array, one component, for every
+  element; a facet element carries the values of its owner (meshio reads element data
+  only when it covers every element).
 
-Element tags run 1..M through the material blocks in order; reading gives the cells back
-in that order (grouped by material).
+Binary sections hold the same numbers as native ``int`` (4 bytes), ``size_t`` (8) and
+``double``; the ``1`` after the format line tells readers the byte order. Everything is
+written in blocks of rows, so memory stays at a block beyond the mesh.
 """
 
 from __future__ import annotations
 
 import numpy as np
 
-from ._common import CELL_TYPE, material_names
-from ._triangle_tetgen import format_rows
+from ._triangle_tetgen import write_rows
 
-__all__ = ["write_gmsh", "gmsh_materials"]
+__all__ = ["write_gmsh", "gmsh_materials", "gmsh_tags", "GMSH_TYPE"]
+
+#: (nodes per element) -> Gmsh element type: line, triangle, tetrahedron; 3-node line,
+#: 6-node triangle, 10-node tetrahedron.
+GMSH_TYPE = {2: 1, 3: 2, 4: 4, 6: 9, 10: 11}
+_LINE3 = 8                          # 3 nodes: a line of order 2, not a triangle
+_ROWS = 1 << 16
+_SIZE_T, _INT = np.dtype(np.uint64), np.dtype(np.int32)
 
 
-def _gmsh_tags(materials: np.ndarray) -> dict[int, int]:
+def gmsh_tags(materials: np.ndarray) -> dict[int, int]:
     """Physical tag per material: its id, except 0 (Gmsh tags are positive) -> max+1."""
-    top = int(materials.max())
+    top = int(np.max(materials))
     return {int(m): (int(m) if m > 0 else top + 1) for m in materials}
 
 
-def _tagged_mesh(names: dict[int, str], m):
-    """One cell block, entity and named physical group per material.
+class _Out:
+    """Writes numbers as binary or as text lines to one open (binary) file."""
 
-    Returns the tagged meshio mesh and the per-cell arrays in its cell order.
-    """
-    import meshio
-    import scipy.sparse as sp
-    from scipy.sparse.csgraph import maximum_bipartite_matching
+    def __init__(self, fh, binary: bool):
+        self.fh, self.binary = fh, binary
 
-    cells = m.cells[0].data
-    dim = m.points.shape[1]
-    material = m.cell_data["material"][0]
-    materials = np.unique(material)
-    names = material_names(names, materials)
-    tags = _gmsh_tags(materials)
-    blocks = [material == mat for mat in materials]
+    def text(self, s: str) -> None:
+        self.fh.write(s.encode())
 
-    # one entity per material, tagged like its physical group
-    block_tags = [np.full(b.sum(), tags[int(mat)]) for mat, b in zip(materials, blocks)]
-    cell_data = {"gmsh:physical": block_tags, "gmsh:geometrical": block_tags}
-    field_data = {names[int(mat)]: np.array([tags[int(mat)], dim]) for mat in materials}
+    def row(self, *values, dtypes) -> None:
+        """One record of mixed types (e.g. int, int, int, size_t), one text line."""
+        if self.binary:
+            for v, dt in zip(values, dtypes):
+                self.fh.write(np.asarray(v, dtype=dt).tobytes())
+        else:
+            self.text(" ".join(_fmt(v) for v in values) + "\n")
 
-    # every material block needs a node of its own: a maximum bipartite matching
-    # (blocks x nodes) finds one for each
-    n_points = len(m.points)
-    block_of_cell = np.searchsorted(materials, material)  # (M,)
-    incidence = sp.csr_matrix(
-        (np.ones(cells.size, dtype=np.int8),
-         (np.repeat(block_of_cell, cells.shape[1]), cells.ravel())),
-        shape=(len(materials), n_points),
-    )
-    owner = maximum_bipartite_matching(incidence, perm_type="column")  # (K,) node or -1
-    if (owner < 0).any():
-        raise ValueError(
-            "cannot write Gmsh 4.1 physical groups: some materials have too few nodes of "
-            "their own to be told apart; write .vtu or .xdmf instead."
-        )
-    node_block = np.zeros(n_points, dtype=np.intp)
-    node_block[cells.ravel()] = np.repeat(block_of_cell, cells.shape[1])
-    node_block[owner] = np.arange(len(materials))
-    entity_of_block = np.array([tags[int(mat)] for mat in materials])
-    dim_tags = np.column_stack([np.full(n_points, dim), entity_of_block[node_block]])
+    def table(self, table: np.ndarray, dtype, floats: bool = False) -> None:
+        """Rows of one type: binary as they are, text one row a line."""
+        if self.binary:
+            for start in range(0, len(table), _ROWS):
+                self.fh.write(np.ascontiguousarray(table[start:start + _ROWS], dtype).tobytes())
+        elif floats:
+            write_rows(self.fh, np.zeros((len(table), 0), np.int64), table, encode=True)
+        else:
+            write_rows(self.fh, table, encode=True)
 
-    tagged = meshio.Mesh(
-        m.points,
-        [(CELL_TYPE[dim], cells[b]) for b in blocks],
-        cell_data=cell_data,
-        point_data={"gmsh:dim_tags": dim_tags},
-        field_data=field_data,
-    )
-    # element tags run 1..M through the blocks in order, so the data follow that order
-    order = np.concatenate([np.flatnonzero(b) for b in blocks])
-    element_data = {key: values[0][order] for key, values in m.cell_data.items()}
-    return tagged, element_data
+    def end(self, section: str) -> None:
+        self.text(f"\n$End{section}\n" if self.binary else f"$End{section}\n")
 
 
-def _append_element_data(path: str, element_data: dict[str, np.ndarray]) -> None:
-    """Append one ``$ElementData`` section per array (1 component, time step 0)."""
-    with open(path, "a") as fh:
-        for name, values in element_data.items():
-            values = np.asarray(values)
-            fh.write(f'$ElementData\n1\n"{name}"\n1\n0.0\n3\n0\n1\n{len(values)}\n')
-            tags = np.arange(1, len(values) + 1)[:, None]
-            if values.dtype.kind in "iu":
-                fh.write(format_rows(np.column_stack([tags, values])))
-            else:
-                fh.write(format_rows(tags, values[:, None]))
-            fh.write("$EndElementData\n")
+def _fmt(v) -> str:
+    if isinstance(v, (float, np.floating)):
+        return repr(float(v))
+    if np.ndim(v):
+        return " ".join(_fmt(x) for x in np.ravel(v))
+    return str(int(v))
 
 
-def write_gmsh(names: dict[int, str], m, path: str) -> None:
-    """Write `m` as ASCII Gmsh 4.1 (arguments: see ``_common``, "Format writers")."""
-    import meshio
+def write_gmsh(ex, path, *, binary: bool = True) -> None:
+    """Write `ex` (an ``_prepare.ExportMesh``) as Gmsh 4.1 to `path`."""
+    d = ex.ndim
+    materials = np.unique(ex.material)
+    tags = gmsh_tags(materials)
+    order = np.argsort(ex.material, kind="stable")                    # (M,) by material
+    bounds = np.searchsorted(ex.material[order], materials, side="left")
+    bounds = np.append(bounds, len(order))
+    lo, hi = ex.points.min(axis=0), ex.points.max(axis=0)
+    box = np.concatenate([np.pad(lo, (0, 3 - d)), np.pad(hi, (0, 3 - d))])
 
-    tagged, element_data = _tagged_mesh(names, m)
-    meshio.write(path, tagged, file_format="gmsh", binary=False)
-    _append_element_data(path, element_data)
+    with open(path, "wb") as fh:
+        out = _Out(fh, binary)
+        out.text(f"$MeshFormat\n4.1 {int(binary)} 8\n")
+        if binary:
+            fh.write(np.array([1], _INT).tobytes() + b"\n")
+        out.text("$EndMeshFormat\n")
+
+        names = [f'{d} {tags[int(m)]} "{ex.names[int(m)]}"' for m in materials]
+        names += [f'{d - 1} {g.id} "{name}"' for name, g in ex.groups.items()]
+        out.text(f"$PhysicalNames\n{len(names)}\n" + "".join(n + "\n" for n in names)
+                 + "$EndPhysicalNames\n")
+
+        out.text("$Entities\n")
+        counts = [0, 0, 0, 0]
+        counts[d], counts[d - 1] = len(materials), len(ex.groups)
+        out.row(*counts, dtypes=[_SIZE_T] * 4)
+        entities = sorted([(d - 1, g.id) for g in ex.groups.values()]
+                          + [(d, tags[int(m)]) for m in materials])
+        for _, tag in entities:                                        # by dimension
+            out.row(tag, box, 1, tag, 0, dtypes=[_INT, np.float64, _SIZE_T, _INT, _SIZE_T])
+        out.end("Entities")
+
+        n = len(ex.points)
+        out.text("$Nodes\n")
+        out.row(1, n, 1, n, dtypes=[_SIZE_T] * 4)
+        out.row(d, tags[int(materials[0])], 0, n, dtypes=[_INT, _INT, _INT, _SIZE_T])
+        for start in range(0, n, _ROWS):
+            out.table(np.arange(start + 1, min(n, start + _ROWS) + 1)[:, None], _SIZE_T)
+        for start in range(0, n, _ROWS):
+            block = ex.points[start:start + _ROWS]
+            out.table(np.pad(block, ((0, 0), (0, 3 - d))), np.float64, floats=True)
+        out.end("Nodes")
+
+        n_facets = sum(len(g.owner) for g in ex.groups.values())
+        total = ex.n_cells + n_facets
+        out.text("$Elements\n")
+        out.row(len(materials) + len(ex.groups), total, 1, total, dtypes=[_SIZE_T] * 4)
+        kind = GMSH_TYPE[ex.nodes_per_cell]
+        tag = 1
+        for k, m in enumerate(materials):
+            rows = order[bounds[k]:bounds[k + 1]]
+            out.row(d, tags[int(m)], kind, len(rows), dtypes=[_INT, _INT, _INT, _SIZE_T])
+            for start in range(0, len(rows), _ROWS):
+                cells = ex.cells(rows[start:start + _ROWS], "gmsh") + 1
+                out.table(np.column_stack([np.arange(tag, tag + len(cells)), cells]), _SIZE_T)
+                tag += len(cells)
+        for g in ex.groups.values():
+            facets = ex.facet_nodes(g) + 1
+            kind = _LINE3 if facets.shape[1] == 3 and d == 2 else GMSH_TYPE[facets.shape[1]]
+            out.row(d - 1, g.id, kind, len(facets), dtypes=[_INT, _INT, _INT, _SIZE_T])
+            out.table(np.column_stack([np.arange(tag, tag + len(facets)), facets]), _SIZE_T)
+            tag += len(facets)
+        out.end("Elements")
+
+        # element tag -> mesh row: elements by material, then each facet's owner
+        source = np.concatenate([order] + [g.owner for g in ex.groups.values()])
+        data = {"material": ex.material, **ex.mesh.cell_data}
+        for name, values in data.items():
+            _element_data(out, name, np.asarray(values), source)
+
+
+def _element_data(out: _Out, name: str, values: np.ndarray, order: np.ndarray) -> None:
+    """One ``$ElementData`` section (time step 0, one component) for every element tag,
+    ``values[order[tag - 1]]``."""
+    m = len(order)
+    out.text(f'$ElementData\n1\n"{name}"\n1\n0.0\n3\n0\n1\n{m}\n')
+    record = np.dtype([("tag", _INT), ("value", np.float64)])      # packed: 12 bytes
+    for start in range(0, m, _ROWS):
+        rows = order[start:start + _ROWS]
+        tags = np.arange(start + 1, start + len(rows) + 1)
+        if out.binary:
+            block = np.empty(len(rows), record)
+            block["tag"], block["value"] = tags, values[rows]
+            out.fh.write(block.tobytes())
+        elif values.dtype.kind in "biu":
+            write_rows(out.fh, np.column_stack([tags, values[rows]]), encode=True)
+        else:
+            write_rows(out.fh, tags[:, None], values[rows][:, None], encode=True)
+    out.end("ElementData")
 
 
 def gmsh_materials(m, keep: list[int]):
     """Material names and (from physical tags) material ids of a Gmsh file read by meshio.
 
-    Returns ``(names, material)``: ``material`` is None when the file has no physical
-    groups; names map material ids to group names.
+    Only physical groups of the cells' dimension name materials (those of one dimension
+    less are facet groups). Returns ``(names, material)``: ``material`` is None when the
+    file has no physical groups; names map material ids to group names.
     """
     if "gmsh:physical" not in m.cell_data:
         return {}, None
+    dim = 3 if m.cells[keep[0]].type.startswith("tetra") else 2
     physical = np.concatenate([m.cell_data["gmsh:physical"][i] for i in keep]).astype(np.int64)
     material_of_cell = m.cell_data.get("material")
-    tag_to_name = {int(tag): name for name, (tag, _dim) in m.field_data.items()}
+    tag_to_name = {int(tag): name for name, (tag, group_dim) in m.field_data.items()
+                   if int(group_dim) == dim}
     names: dict[int, str] = {}
     if material_of_cell is not None:
         material = np.concatenate([material_of_cell[i] for i in keep]).astype(np.int64)

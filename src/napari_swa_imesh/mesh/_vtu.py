@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import sys
 from pathlib import Path
+from xml.sax.saxutils import quoteattr
 
 import numpy as np
 
@@ -20,8 +21,9 @@ from ._quality import _corner_det
 
 __all__ = ["write_vtu"]
 
-#: VTK cell type ids of the simplices (VTK_TRIANGLE, VTK_TETRA).
-VTK_CELL_TYPE = {3: 5, 4: 10}
+#: VTK cell type id by nodes per cell: VTK_TRIANGLE, VTK_TETRA, VTK_QUADRATIC_TRIANGLE,
+#: VTK_QUADRATIC_TETRA (lines, VTK_LINE 3 and VTK_QUADRATIC_EDGE 21, are asked by name).
+VTK_CELL_TYPE = {3: 5, 4: 10, 6: 22, 10: 24}
 _VTK_TYPE = {"i1": "Int8", "u1": "UInt8", "i2": "Int16", "u2": "UInt16", "i4": "Int32",
              "u4": "UInt32", "i8": "Int64", "u8": "UInt64", "f4": "Float32", "f8": "Float64"}
 _ORDER = "LittleEndian" if sys.byteorder == "little" else "BigEndian"
@@ -64,11 +66,24 @@ def _connectivity(points: np.ndarray, cells: np.ndarray, dtype, orient: bool):
         yield chunk
 
 
+def _field_data(arrays: dict) -> str:
+    """``<FieldData>`` of small integer arrays, inline as text (names escaped)."""
+    if not arrays:
+        return ""
+    tags = "".join(
+        f'<DataArray type="Int64" Name={quoteattr(str(name))} '
+        f'NumberOfTuples="{np.size(v)}" format="ascii">'
+        f'{" ".join(str(int(x)) for x in np.ravel(v))}</DataArray>'
+        for name, v in arrays.items())
+    return f"<FieldData>{tags}</FieldData>"
+
+
 def write_vtu(path, points: np.ndarray, cells: np.ndarray, *,
               cell_data: dict[str, np.ndarray] | None = None,
               point_data: dict[str, np.ndarray] | None = None,
-              orient: bool = False) -> None:
-    """Write a triangle or tetrahedron mesh as a ``.vtu`` file.
+              field_data: dict[str, np.ndarray] | None = None,
+              cell_type: int | None = None, orient: bool = False) -> None:
+    """Write a mesh of one cell type (triangles or tetrahedra by default) as a ``.vtu`` file.
 
     Parameters
     ----------
@@ -79,9 +94,15 @@ def write_vtu(path, points: np.ndarray, cells: np.ndarray, *,
         Triangles or tetrahedra.
     cell_data, point_data : dict of str to (M,) / (N,) or (M, k) / (N, k) array_like
         Arrays per cell and per point (k components).
+    field_data : dict of str to (n,) array_like of int, optional
+        Small integer arrays of the whole grid (``<FieldData>``, written as text; VTK
+        and meshio read them).
+    cell_type : int, optional
+        VTK cell type id; by default from the nodes per cell (:data:`VTK_CELL_TYPE`).
     orient : bool
         Swap two corners of each cell with a negative volume in `points` (chunk by chunk,
-        without a copy of `cells`); otherwise cells are written as given.
+        without a copy of `cells`; linear simplices only); otherwise cells are written as
+        given.
     """
     points = np.asarray(points, dtype=np.float64)
     cells = np.asarray(cells)
@@ -96,7 +117,8 @@ def write_vtu(path, points: np.ndarray, cells: np.ndarray, *,
 
     def types():
         for start in range(0, n_cells, _CHUNK):
-            yield np.full(min(_CHUNK, n_cells - start), VTK_CELL_TYPE[corners], dtype=np.uint8)
+            yield np.full(min(_CHUNK, n_cells - start), cell_type or VTK_CELL_TYPE[corners],
+                          dtype=np.uint8)
 
     arrays: list[tuple[str, str, object]] = [
         ("Points", "", _vtk_array(np.column_stack([points, np.zeros(n_points)])
@@ -131,6 +153,7 @@ def write_vtu(path, points: np.ndarray, cells: np.ndarray, *,
     body = "".join(f"<{s}>{''.join(t)}</{s}>" for s, t in tags.items() if t)
     header = (f'<?xml version="1.0"?>\n<VTKFile type="UnstructuredGrid" version="1.0" '
               f'byte_order="{_ORDER}" header_type="UInt64"><UnstructuredGrid>'
+              f'{_field_data(field_data or {})}'
               f'<Piece NumberOfPoints="{n_points}" NumberOfCells="{n_cells}">{body}'
               f'</Piece></UnstructuredGrid><AppendedData encoding="raw">_')
     with open(Path(path), "wb") as fh:

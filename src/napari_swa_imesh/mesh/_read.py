@@ -1,0 +1,120 @@
+"""Reading a mesh file back into a ``Mesh``: every format ``write_mesh`` writes.
+
+Files of second order give their linear mesh (corners of each element; the mid-edge
+nodes are dropped); facet elements (Gmsh physical groups of dimension d-1) are skipped:
+only the elements of the mesh's own dimension are read.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+
+from ._abaqus import abaqus_materials
+from ._common import MESH_SUFFIXES, orient_positive
+from ._gmsh import gmsh_materials
+from ._triangle_tetgen import read_node_ele
+from ._types import Mesh
+from ._xdmf import require_h5py
+
+__all__ = ["read_mesh"]
+
+#: meshio cell types read, by dimension: linear and second order.
+_TYPES = {3: ("tetra", "tetra10"), 2: ("triangle", "triangle6")}
+
+
+def read_mesh(path) -> Mesh:
+    """Read a mesh written by `write_mesh` (or a compatible file) back into a `Mesh`.
+
+    Parameters
+    ----------
+    path : str or Path
+        Any suffix `write_mesh` writes; for Triangle/TetGen either ``.node`` or ``.ele``.
+
+    Returns
+    -------
+    Mesh
+        Points back in numpy axis order (plane, row, col), 2-D when the file holds
+        triangles with z = 0; cells positively oriented there; ``material`` from the
+        ``material`` array, Gmsh physical groups, Abaqus element sets or the
+        Triangle/TetGen region attribute (0 for every element when the file has none,
+        and then ``info["has_material"]`` is False); other per-cell arrays as stored. ``spacing``
+        and ``shape`` are unknown (empty). Cell order may differ from the written mesh
+        (Gmsh groups cells by material). A second-order file gives its corners only.
+    """
+    p = Path(path)
+    if not p.exists() and p.suffix.lower() not in (".node", ".ele"):
+        raise FileNotFoundError(f"no mesh file at {p}; check the path.")
+    suffix = p.suffix.lower()
+    if suffix not in MESH_SUFFIXES:
+        raise ValueError(
+            f"cannot read a mesh from {p.name!r}: unknown suffix {suffix!r}; use one of "
+            f"{', '.join(MESH_SUFFIXES)}."
+        )
+    names: dict[int, str] = {}
+    if suffix in (".node", ".ele"):
+        points, cells, attributes = read_node_ele(p)
+        material = attributes.pop("material", None)
+        cell_data = attributes
+    else:
+        points, cells, material, cell_data, names = _read_meshio(p, suffix)
+    used = np.zeros(len(points), dtype=bool)
+    used[cells.ravel()] = True
+    if not used.all():                             # mid-edge nodes of a second-order file
+        new_id = np.cumsum(used) - 1
+        points, cells = points[used], new_id[cells]
+    if points.shape[1] == 3 and cells.shape[1] == 3:
+        if np.any(points[:, 2] != 0):
+            raise ValueError(
+                f"{p} holds triangles in 3-D space; only flat 2-D meshes are supported."
+            )
+        points = points[:, :2]
+    points = np.ascontiguousarray(points[:, ::-1], dtype=np.float64)
+    cells = orient_positive(points, cells)
+    has_material = material is not None
+    if material is None:
+        material = np.zeros(len(cells), dtype=np.int64)
+    return Mesh(
+        points=points,
+        cells=cells,
+        material=np.rint(material).astype(np.int64),
+        cell_data={k: np.asarray(v) for k, v in cell_data.items()},
+        material_names=names,
+        info={"source": str(p), "has_material": has_material},
+    )
+
+
+def _read_meshio(p: Path, suffix: str):
+    import meshio
+
+    fmt = {".vtu": "vtu", ".vtk": "vtk", ".xdmf": "xdmf", ".msh": "gmsh", ".inp": "abaqus"}[suffix]
+    if fmt == "xdmf":
+        require_h5py("read")
+    try:
+        m = meshio.read(p, file_format=fmt)
+    except (meshio.ReadError, KeyError, IndexError) as exc:
+        raise ValueError(f"cannot read {p} as a {suffix} mesh: {exc!r}") from exc
+    types = {b.type for b in m.cells}
+    dim = 3 if types & set(_TYPES[3]) else 2      # facet triangles of a 3-D file are skipped
+    keep = [i for i, block in enumerate(m.cells) if block.type in _TYPES[dim]]
+    if not keep or len({m.cells[i].type for i in keep}) != 1:
+        raise ValueError(
+            f"{p} must hold triangles or tetrahedra (one kind, linear or of second "
+            f"order); found {sorted(types)}."
+        )
+    cells = np.concatenate([m.cells[i].data[:, :dim + 1] for i in keep]).astype(np.intp)
+    cell_data = {
+        key: np.concatenate([np.asarray(blocks[i]) for i in keep])
+        for key, blocks in m.cell_data.items()
+        if not key.startswith("gmsh:")
+    }
+    names: dict[int, str] = {}
+    material = cell_data.pop("material", None)
+    if fmt == "gmsh":
+        names, physical_material = gmsh_materials(m, keep)
+        if material is None:
+            material = physical_material
+    elif fmt == "abaqus" and m.cell_sets:
+        names, material = abaqus_materials(p, m, keep, len(cells))
+    return np.asarray(m.points, dtype=np.float64), cells, material, cell_data, names
