@@ -14,7 +14,7 @@ from dataclasses import asdict, dataclass
 
 import numpy as np
 
-from .._tree import RegionTree, _build_tree, leaf_finder
+from .._tree import RegionTree, _build_tree
 from .._validation import as_labels
 from ._facets import _blocks, _runs, _side_passes, _spread_bits
 from ._lattice import labels_on_lattice

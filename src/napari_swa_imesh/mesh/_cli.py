@@ -478,8 +478,8 @@ def _run_bounds(args: argparse.Namespace) -> int:
         return 0
     print(format_quality_table(rows))
     angle = "dihedral angles" if args.dim == 3 else "angles"
-    print(f"\nbounds on lattice cells of residual aspect A (max/min cell size): anisotropic "
-          f"voxels are cut into cells with A <= 1.2 unless --no-subdivide")
+    print("\nbounds on lattice cells of residual aspect A (max/min cell size): anisotropic "
+          "voxels are cut into cells with A <= 1.2 unless --no-subdivide")
     print(f"{'A':>6s} {'ratio <=':>9s} {angle + ' (deg)':>22s}")
     for row in aspects:
         print(f"{row['aspect']:6.2f} {row['worst_ratio']:9.4f} "
