@@ -12,8 +12,9 @@ from numbers import Real
 import numpy as np
 
 from ..mesh import Mesh, mesh_labels, signed_volumes
-from ._conductivity import axis_names, conductivity_tensors, is_isotropic
-from ._fe import cell_gradients, dissipation, fe_basis, stiffness_matrix, vertex_values
+from ._assembly import cell_gradients, dissipation, fe_space, stiffness_matrix
+from ._conductivity import axis_names, conductivity_tensors
+from ._fe import vertex_values
 from ._periodic import PeriodicProblem
 from ._protocols import check_within_bounds, mixed_boundary, voigt_reuss
 from ._solve import DEFAULT_TOLERANCE, SolverInfo, connected_parts
@@ -240,8 +241,9 @@ def simulate_steps(mesh_or_labels, conductivity: Mapping, *, spacing=None, order
     yield 1, total, f"assembling P{order} on {mesh.n_cells} elements"
 
     t0 = time.perf_counter()
-    basis = fe_basis(mesh, order)
-    matrix = stiffness_matrix(basis, tensors, cell_material, is_isotropic(tensors))
+    space = fe_space(mesh, order)
+    matrix = stiffness_matrix(space, tensors, cell_material)
+    doflocs = space.doflocs
     seconds["assemble"] = time.perf_counter() - t0
     lo, hi = mesh.image_box()
     volumes = signed_volumes(mesh.points, mesh.cells)
@@ -258,14 +260,14 @@ def simulate_steps(mesh_or_labels, conductivity: Mapping, *, spacing=None, order
     parts = connected_parts(matrix)
 
     def energy(u: np.ndarray) -> float:
-        return dissipation(basis, u, tensors, cell_material)
+        return dissipation(space, u, tensors, cell_material)
 
     k_eff, bounds, potential, flux, solver = {}, {}, {}, {}, {}
     seconds["solve"] = 0.0
     periodic = tensor = None
     if protocol == "periodic":
         t0 = time.perf_counter()
-        periodic = PeriodicProblem(matrix, basis.doflocs, lo, hi)
+        periodic = PeriodicProblem(matrix, doflocs, lo, hi, tol=tol)
         tensor = np.full((mesh.ndim, mesh.ndim), np.nan)
         seconds["solve"] += time.perf_counter() - t0
     for step, name in enumerate(names, start=2):
@@ -273,12 +275,12 @@ def simulate_steps(mesh_or_labels, conductivity: Mapping, *, spacing=None, order
         t0 = time.perf_counter()
         axis = image_axes[name]
         if periodic is None:
-            result = mixed_boundary(matrix, basis.doflocs, name, lo, hi, energy, tol=tol,
-                                    parts=parts, cell_dofs=basis.element_dofs.T,
+            result = mixed_boundary(matrix, doflocs, name, lo, hi, energy, tol=tol,
+                                    parts=parts, cell_dofs=space.element_dofs,
                                     cell_material=mesh.material)
             value, values, info = result.k_eff, result.values, result.info
         else:
-            tensor[:, axis], values, info = periodic.solve(axis, tol=tol)
+            tensor[:, axis], values, info = periodic.solve(axis)
             value = float(tensor[axis, axis])
         voigt, reuss = voigt_reuss(tensors, fractions, axis)
         check_within_bounds(value, voigt, reuss, name)
@@ -286,7 +288,7 @@ def simulate_steps(mesh_or_labels, conductivity: Mapping, *, spacing=None, order
         bounds[name] = (reuss, voigt)
         solver[name] = info
         potential[name] = vertex_values(values, len(mesh.points))
-        grad = cell_gradients(basis, values)                             # (M, d) axis order
+        grad = cell_gradients(space, values)                             # (M, d) axis order
         flux[name] = np.ascontiguousarray(_cell_flux(tensors, cell_material, grad)[:, ::-1])
         seconds["solve"] += time.perf_counter() - t0
     if tensor is not None:

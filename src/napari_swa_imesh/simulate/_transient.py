@@ -19,8 +19,9 @@ from numbers import Real
 import numpy as np
 
 from ..mesh import Mesh
-from ._conductivity import conductivity_tensors, is_isotropic, material_label
-from ._fe import fe_basis, mass_basis, mass_matrix, stiffness_matrix, vertex_values
+from ._assembly import fe_space, stiffness_matrix
+from ._conductivity import conductivity_tensors, material_label
+from ._fe import fe_basis, mass_basis, mass_matrix, vertex_values
 from ._protocols import face_dofs, face_names
 from ._simulate import check_tolerance, prepare_mesh
 from ._solve import DEFAULT_TOLERANCE, SPDSolver, solve_spd, split_fixed
@@ -153,8 +154,8 @@ order, exclude, save_every, material_names, tol
     start = _per_material(initial, materials, mesh.material_names, "initial value", 0.0)
     yield 1, steps + 2, f"assembling P{order} on {mesh.n_cells} elements"
 
-    basis = fe_basis(mesh, order)
-    stiffness = stiffness_matrix(basis, tensors, cell_material, is_isotropic(tensors))
+    basis = fe_basis(mesh, order)                # mass and loads; same dof numbering
+    stiffness = stiffness_matrix(fe_space(mesh, order), tensors, cell_material)
     exact = mass_basis(basis)                  # mass, start and amounts share it
     mass = mass_matrix(exact, cap[cell_material])
     dt = duration / steps
