@@ -13,8 +13,11 @@ from skfem.helpers import dot, grad, mul
 
 from napari_swa_imesh.mesh import Mesh, mesh_labels
 from napari_swa_imesh.simulate import _assembly
+from napari_swa_imesh.mesh import signed_volumes
 from napari_swa_imesh.simulate._assembly import (
+    cell_fluxes,
     cell_gradients,
+    cell_volumes,
     dissipation,
     fe_space,
     stiffness_matrix,
@@ -103,6 +106,13 @@ def test_energy_and_gradients_equal_scikit_fem(shape, order, monkeypatch):
     mean = (np.einsum("imq,mq->mi", g, exact.dx) / exact.dx.sum(axis=1)[:, None])
     np.testing.assert_allclose(cell_gradients(space, u), mean, rtol=0,
                                atol=1e-10 * np.abs(mean).max())
+    # the one-pass flux and energy: -C times the mean gradient, the same energy
+    flux, energy_again = cell_fluxes(space, u, tensors, cell_material)
+    expected = -np.einsum("mij,mj->mi", tensors[cell_material], mean)
+    np.testing.assert_allclose(flux, expected, rtol=0, atol=1e-10 * np.abs(expected).max())
+    assert energy_again == pytest.approx(energy, rel=1e-12)
+    np.testing.assert_allclose(cell_volumes(space), signed_volumes(mesh.points, mesh.cells),
+                               rtol=1e-12)
 
 
 @pytest.mark.parametrize("order", [1, 2])

@@ -15,15 +15,15 @@ computed once from an exact quadrature of degree two.
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 
 import numpy as np
 from scipy import sparse
 
 from ..mesh import Mesh
 
-__all__ = ["Space", "assemble_pairs", "barycentric_gradients", "cell_gradients",
-           "dissipation", "fe_space", "stiffness_matrix"]
+__all__ = ["Space", "assemble_pairs", "barycentric_gradients", "cell_fluxes",
+           "cell_gradients", "cell_volumes", "dissipation", "fe_space", "stiffness_matrix"]
 
 CHUNK = 1 << 16          # elements per chunk of arithmetic: temporaries of a few MB
 BATCH = 1 << 21          # elements per sparse conversion: a list of some 10^7 entries
@@ -56,11 +56,6 @@ class Space:
     order: int
     element_dofs: np.ndarray
     edges: np.ndarray | None = None
-    points_t: np.ndarray = field(init=False, repr=False)
-
-    def __post_init__(self):
-        # (d, N): the gathers below read one coordinate of many vertices at a time
-        object.__setattr__(self, "points_t", np.ascontiguousarray(self.points.T))
 
     @property
     def ndim(self) -> int:
@@ -125,22 +120,27 @@ def _shape_coefficients(d: int, order: int, lam: np.ndarray) -> np.ndarray:
 
 
 def _pair_table(d: int, order: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Local pairs ``a <= b`` and the (K, (d+1)^2) table from ``G`` to their entries."""
+    """Local pairs ``a <= b`` and the (K, P) table from the products ``G_pq`` of the
+    barycentric gradients, pairs ``p <= q`` (off-diagonal ones counted twice), to their
+    entries."""
     lam, w = _quadrature(d, order)
     c = _shape_coefficients(d, order, lam)
     a, b = np.triu_indices(c.shape[1])
     q = np.einsum("x,xkp,xkr->kpr", w, c[:, a], c[:, b])       # (K, d+1, d+1)
-    return a, b, q.reshape(len(a), -1)
+    p, r = np.triu_indices(d + 1)
+    table = q[:, p, r] + np.where(p != r, q[:, r, p], 0.0)
+    return a, b, table
 
 
-def barycentric_gradients(points_t: np.ndarray, cells: np.ndarray
+def barycentric_gradients(points: np.ndarray, cells: np.ndarray
                           ) -> tuple[np.ndarray, np.ndarray]:
-    """Gradients of the barycentric coordinates, (d + 1, d, m), and volumes, (m,).
+    """Gradients of the barycentric coordinates, (d + 1, d, m), and signed volumes, (m,).
 
-    Component-major (`points_t` is the (d, N) transposed points): every operation below
-    runs on contiguous rows of m numbers, several times faster than (m, 4, 3) blocks.
+    Component-major: every operation below runs on contiguous rows of m numbers, several
+    times faster than on (m, 4, 3) blocks; ``np.take`` gathers the vertices (a third of
+    the time of fancy indexing on cells that jump around the point list).
     """
-    x = points_t[:, cells.T]                                      # (d, d + 1, m)
+    x = np.take(points, cells, axis=0).transpose(2, 1, 0)        # (d, d + 1, m) view
     e = x[:, 1:] - x[:, :1]                                       # (component, edge, m)
     d, m = e.shape[0], e.shape[2]
     g = np.empty((d + 1, d, m))
@@ -164,7 +164,7 @@ def barycentric_gradients(points_t: np.ndarray, cells: np.ndarray
     for k in range(3, d + 1):
         g[0] += g[k]
     np.negative(g[0], out=g[0])
-    return g, np.abs(det) / (6.0 if d == 3 else 2.0)
+    return g, det / (6.0 if d == 3 else 2.0)
 
 
 def _chunks(m: int, size: int = CHUNK):
@@ -172,27 +172,42 @@ def _chunks(m: int, size: int = CHUNK):
         yield slice(start, min(start + size, m))
 
 
-def _weighted_products(space: Space, part: slice, tensors: np.ndarray,
+def _apply(tensor_rows: np.ndarray, vectors: np.ndarray) -> np.ndarray:
+    """``C v`` for (d * d, m) tensor rows and (..., d, m) vectors, row by row."""
+    d = vectors.shape[-2]
+    out = np.empty_like(vectors)
+    for i in range(d):
+        np.multiply(tensor_rows[i * d], vectors[..., 0, :], out=out[..., i, :])
+        for j in range(1, d):
+            out[..., i, :] += tensor_rows[i * d + j] * vectors[..., j, :]
+    return out
+
+
+def _dot(u: np.ndarray, v: np.ndarray) -> np.ndarray:
+    """Component sum of (..., d, m) vectors: (..., m)."""
+    out = u[..., 0, :] * v[..., 0, :]
+    for i in range(1, u.shape[-2]):
+        out += u[..., i, :] * v[..., i, :]
+    return out
+
+
+def _tensor_rows(tensors: np.ndarray, cell_material: np.ndarray) -> np.ndarray:
+    """(d * d, m) the conductivity of each element, one component per row."""
+    return tensors.reshape(len(tensors), -1).T[:, cell_material]
+
+
+def _gradient_products(space: Space, part: slice, tensors: np.ndarray,
                        cell_material: np.ndarray) -> np.ndarray:
-    """(m, (d+1)^2) ``vol * grad lambda_p . C grad lambda_q`` of the elements in `part`."""
-    g, vol = barycentric_gradients(space.points_t, space.cells[part])
-    d, m = g.shape[1], g.shape[2]
-    c = tensors.reshape(len(tensors), -1).T[:, cell_material[part]]   # (d * d, m)
-    c *= vol
-    cg = np.empty_like(g)                                              # C grad lambda
-    for q in range(d + 1):
-        for i in range(d):
-            np.multiply(c[i * d], g[q, 0], out=cg[q, i])
-            for j in range(1, d):
-                cg[q, i] += c[i * d + j] * g[q, j]
-    products = np.empty((m, d + 1, d + 1))
-    for p in range(d + 1):
-        for q in range(p, d + 1):
-            dot = g[p, 0] * cg[q, 0]
-            for i in range(1, d):
-                dot += g[p, i] * cg[q, i]
-            products[:, p, q] = products[:, q, p] = dot
-    return products.reshape(m, -1)
+    """(P, m) ``vol * grad lambda_p . C grad lambda_q`` for the pairs ``p <= q``."""
+    g, vol = barycentric_gradients(space.points, space.cells[part])
+    c = _tensor_rows(tensors, cell_material[part])
+    c *= np.abs(vol)
+    cg = _apply(c, g)                                                  # C grad lambda
+    p, q = np.triu_indices(g.shape[0])
+    out = np.empty((len(p), g.shape[2]))
+    for k, (i, j) in enumerate(zip(p, q)):
+        out[k] = _dot(g[i], cg[j])
+    return out
 
 
 def stiffness_matrix(space: Space, tensors: np.ndarray, cell_material: np.ndarray
@@ -209,9 +224,11 @@ def stiffness_matrix(space: Space, tensors: np.ndarray, cell_material: np.ndarra
     """
     a, b, table = _pair_table(space.ndim, space.order)
     tensors = np.asarray(tensors, dtype=np.float64)
+    p1 = space.order == 1                       # the table is the identity: skip it
 
     def values(part: slice) -> np.ndarray:
-        return _weighted_products(space, part, tensors, cell_material) @ table.T
+        products = _gradient_products(space, part, tensors, cell_material)
+        return products if p1 else table @ products
 
     return assemble_pairs(space.element_dofs, space.n_dofs, a, b, values)
 
@@ -228,10 +245,10 @@ def assemble_pairs(element_dofs: np.ndarray, n: int, a: np.ndarray, b: np.ndarra
     a, b : (K,) ndarray of int
         Local pairs, ``a <= b``.
     values : callable
-        ``slice -> (m, K)`` the element entries of those pairs for a chunk of elements.
+        ``slice -> (K, m)`` the element entries of those pairs for a chunk of elements.
 
     Only the upper triangle is gathered (in batches, so the list of element entries never
-    holds more than a few million), then mirrored.
+    holds more than some 10^7), then mirrored.
     """
     diagonal = np.zeros(n)
     off = a != b
@@ -239,19 +256,19 @@ def assemble_pairs(element_dofs: np.ndarray, n: int, a: np.ndarray, b: np.ndarra
     upper = sparse.csr_matrix((n, n))
     for batch in _chunks(len(element_dofs), BATCH):
         m = batch.stop - batch.start
-        rows = np.empty((m, k), dtype=np.int32)
-        cols = np.empty((m, k), dtype=np.int32)
-        data = np.empty((m, k))
+        rows = np.empty((k, m), dtype=np.int32)
+        cols = np.empty((k, m), dtype=np.int32)
+        data = np.empty((k, m))
         for part in _chunks(m):
             chunk = slice(batch.start + part.start, batch.start + part.stop)
             v = values(chunk)
-            dofs = element_dofs[chunk]
-            diagonal += np.bincount(dofs[:, a[~off]].ravel(), weights=v[:, ~off].ravel(),
+            dofs = element_dofs[chunk].T                                  # (n_local, m)
+            diagonal += np.bincount(dofs[a[~off]].ravel(), weights=v[~off].ravel(),
                                     minlength=n)
-            i, j = dofs[:, a[off]], dofs[:, b[off]]
-            np.minimum(i, j, out=rows[part], casting="unsafe")
-            np.maximum(i, j, out=cols[part], casting="unsafe")
-            data[part] = v[:, off]
+            i, j = dofs[a[off]], dofs[b[off]]
+            np.minimum(i, j, out=rows[:, part], casting="unsafe")
+            np.maximum(i, j, out=cols[:, part], casting="unsafe")
+            data[:, part] = v[off]
         upper = upper + sparse.csr_matrix((data.ravel(), (rows.ravel(), cols.ravel())),
                                           shape=(n, n))
         del rows, cols, data
@@ -265,24 +282,50 @@ def assemble_pairs(element_dofs: np.ndarray, n: int, a: np.ndarray, b: np.ndarra
 def _field_gradients(space: Space, values: np.ndarray, part: slice, lam: np.ndarray
                      ) -> tuple[np.ndarray, np.ndarray]:
     """(nq, d, m) gradient of the field at barycentric points `lam`, and (m,) volumes."""
-    g, vol = barycentric_gradients(space.points_t, space.cells[part])
-    c = _shape_coefficients(space.ndim, space.order, lam)            # (nq, k, d + 1)
-    s = values[space.element_dofs[part]] @ c.transpose(1, 0, 2).reshape(c.shape[1], -1)
-    s = s.reshape(-1, len(lam), g.shape[0])                          # (m, nq, d + 1)
-    grad = np.zeros((len(lam),) + g.shape[1:])
+    g, vol = barycentric_gradients(space.points, space.cells[part])
+    local = np.take(values, space.element_dofs[part].T)                # (k, m)
+    if space.order == 1:                        # the same gradient everywhere
+        coefficients = local[None]                                     # (1, d + 1, m)
+    else:
+        c = _shape_coefficients(space.ndim, space.order, lam)          # (nq, k, d + 1)
+        coefficients = np.einsum("xkp,km->xpm", c, local)
+    grad = np.zeros((coefficients.shape[0], g.shape[1], g.shape[2]))
     for p in range(g.shape[0]):
-        grad += s[:, :, p].T[:, None, :] * g[p][None]
-    return grad, vol
+        grad += coefficients[:, p, None, :] * g[p]
+    if len(lam) > grad.shape[0]:
+        grad = np.broadcast_to(grad, (len(lam),) + grad.shape[1:])
+    return grad, np.abs(vol)
 
 
 def cell_gradients(space: Space, values: np.ndarray) -> np.ndarray:
     """(M, d) gradient of the field `values` at each element's centroid (its mean)."""
     d = space.ndim
     centroid = np.full((1, d + 1), 1.0 / (d + 1))
-    out = np.empty((len(space.cells), d))
+    out = np.empty((d, len(space.cells)))
     for part in _chunks(len(space.cells)):
-        out[part] = _field_gradients(space, values, part, centroid)[0][0].T
-    return out
+        out[:, part] = _field_gradients(space, values, part, centroid)[0][0]
+    return out.T
+
+
+def cell_fluxes(space: Space, values: np.ndarray, tensors: np.ndarray,
+                cell_material: np.ndarray) -> tuple[np.ndarray, float]:
+    """(M, d) flux ``-C grad u`` at each element's centroid (its mean), and the energy
+    :func:`dissipation`, in one pass over the elements."""
+    d = space.ndim
+    lam, w = _quadrature(d, space.order)
+    centroid = np.full((1, d + 1), 1.0 / (d + 1))
+    points = lam if space.order == 1 else np.concatenate([centroid, lam])
+    tensors = np.asarray(tensors, dtype=np.float64)
+    out = np.empty((d, len(space.cells)))
+    total = 0.0
+    for part in _chunks(len(space.cells)):
+        grad, vol = _field_gradients(space, values, part, points)     # (nq, d, m)
+        flux = _apply(_tensor_rows(tensors, cell_material[part]), grad)
+        out[:, part] = -flux[0]
+        quadrature = grad if space.order == 1 else grad[1:]
+        density = w @ _dot(quadrature, flux if space.order == 1 else flux[1:])
+        total += float(density @ vol)
+    return out.T, total
 
 
 def dissipation(space: Space, values: np.ndarray, tensors: np.ndarray,
@@ -299,8 +342,14 @@ def dissipation(space: Space, values: np.ndarray, tensors: np.ndarray,
     total = 0.0
     for part in _chunks(len(space.cells)):
         grad, vol = _field_gradients(space, values, part, lam)      # (nq, d, m)
-        c = tensors[cell_material[part]]                            # (m, d, d)
-        flux = np.einsum("mij,xjm->xim", c, grad)
-        density = np.einsum("xim,xim,x->m", grad, flux, w)
-        total += float(density @ vol)
+        flux = _apply(_tensor_rows(tensors, cell_material[part]), grad)
+        total += float((w @ _dot(grad, flux)) @ vol)
     return total
+
+
+def cell_volumes(space: Space) -> np.ndarray:
+    """(M,) signed volume (area in 2-D) of each element."""
+    out = np.empty(len(space.cells))
+    for part in _chunks(len(space.cells)):
+        out[part] = barycentric_gradients(space.points, space.cells[part])[1]
+    return out

@@ -23,7 +23,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from ..mesh import Mesh
-from ._assembly import cell_gradients, fe_space, stiffness_matrix
+from ._assembly import cell_fluxes, fe_space, stiffness_matrix
 from ._conductivity import conductivity_tensors, material_label
 from ._fe import _skfem, fe_basis, vertex_values
 from ._solve import SolverInfo, check_constrained, connected_parts, solve_dirichlet
@@ -274,11 +274,7 @@ def solve_boundary_value(mesh: Mesh, conductivity: Mapping, *, dirichlet=None,
         raise ValueError(f"sources ({total_source:.6g}) and inflow through the groups "
                          f"({sum(inflow.values()):.6g}) do not balance: the solve did not "
                          "converge far enough; lower --tol or the conductivity contrast.")
-    grad = cell_gradients(space, u)
-    flux = np.empty_like(grad)
-    for i, tensor in enumerate(tensors):
-        cells = cell_material == i
-        flux[cells] = -grad[cells] @ tensor.T
+    flux = cell_fluxes(space, u, tensors, cell_material)[0]
     return BoundaryResult(vertex_values(u, len(mesh.points)),
                           np.ascontiguousarray(flux[:, ::-1]), inflow, total_source, info,
                           mesh, order, n, seconds)

@@ -11,8 +11,8 @@ from numbers import Real
 
 import numpy as np
 
-from ..mesh import Mesh, mesh_labels, signed_volumes
-from ._assembly import cell_gradients, dissipation, fe_space, stiffness_matrix
+from ..mesh import Mesh, mesh_labels
+from ._assembly import cell_fluxes, cell_volumes, fe_space, stiffness_matrix
 from ._conductivity import axis_names, conductivity_tensors
 from ._fe import vertex_values
 from ._periodic import PeriodicProblem
@@ -190,16 +190,6 @@ def check_tolerance(tol) -> None:
         raise ValueError(f"tol must be a relative residual between 0 and 1, not {tol!r}.")
 
 
-def _cell_flux(tensors: np.ndarray, cell_material: np.ndarray, grad: np.ndarray
-               ) -> np.ndarray:
-    """(M, d) ``-C grad u`` per element, looping over materials (a handful)."""
-    flux = np.empty_like(grad)
-    for i, tensor in enumerate(tensors):
-        cells = cell_material == i
-        flux[cells] = -grad[cells] @ tensor.T
-    return flux
-
-
 def simulate_steps(mesh_or_labels, conductivity: Mapping, *, spacing=None, order: int = 1,
                    axes=None, tol: float = DEFAULT_TOLERANCE, exclude=(),
                    material_names: Mapping[int, str] | None = None, refine: int = 0,
@@ -246,7 +236,7 @@ def simulate_steps(mesh_or_labels, conductivity: Mapping, *, spacing=None, order
     doflocs = space.doflocs
     seconds["assemble"] = time.perf_counter() - t0
     lo, hi = mesh.image_box()
-    volumes = signed_volumes(mesh.points, mesh.cells)
+    volumes = cell_volumes(space)
     per_material = np.bincount(cell_material, weights=volumes, minlength=materials.size)
     fractions = per_material / float(np.prod(hi - lo))
     if not mesh.records_box:
@@ -259,8 +249,11 @@ def simulate_steps(mesh_or_labels, conductivity: Mapping, *, spacing=None, order
     image_axes = {n: i for i, n in enumerate(axis_names(mesh.ndim))}
     parts = connected_parts(matrix)
 
+    last: dict = {}           # the energy's pass over the elements also gives the flux
+
     def energy(u: np.ndarray) -> float:
-        return dissipation(space, u, tensors, cell_material)
+        last["u"], (last["flux"], total) = u, cell_fluxes(space, u, tensors, cell_material)
+        return total
 
     k_eff, bounds, potential, flux, solver = {}, {}, {}, {}, {}
     seconds["solve"] = 0.0
@@ -288,8 +281,10 @@ def simulate_steps(mesh_or_labels, conductivity: Mapping, *, spacing=None, order
         bounds[name] = (reuss, voigt)
         solver[name] = info
         potential[name] = vertex_values(values, len(mesh.points))
-        grad = cell_gradients(space, values)                             # (M, d) axis order
-        flux[name] = np.ascontiguousarray(_cell_flux(tensors, cell_material, grad)[:, ::-1])
+        cells_flux = last["flux"] if last.get("u") is values else cell_fluxes(
+            space, values, tensors, cell_material)[0]                   # (M, d) axis order
+        flux[name] = np.ascontiguousarray(cells_flux[:, ::-1])
+        last.clear()
         seconds["solve"] += time.perf_counter() - t0
     if tensor is not None:
         check_symmetric(tensor)
