@@ -15,6 +15,9 @@ computed once from an exact quadrature of degree two.
 
 from __future__ import annotations
 
+import os
+from collections import deque
+from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
 
 import numpy as np
@@ -27,6 +30,7 @@ __all__ = ["Space", "assemble_pairs", "barycentric_gradients", "cell_fluxes",
 
 CHUNK = 1 << 16          # elements per chunk of arithmetic: temporaries of a few MB
 BATCH = 1 << 21          # elements per sparse conversion: a list of some 10^7 entries
+WORKERS = min(2, os.cpu_count() or 1)   # numpy releases the GIL in these array loops
 
 # local edges in scikit-fem's reference order (the P2 dofs 3.. or 4.. follow it)
 _EDGES = {2: ((0, 1), (1, 2), (0, 2)),
@@ -167,9 +171,30 @@ def barycentric_gradients(points: np.ndarray, cells: np.ndarray
     return g, det / (6.0 if d == 3 else 2.0)
 
 
-def _chunks(m: int, size: int = CHUNK):
-    for start in range(0, m, size):
-        yield slice(start, min(start + size, m))
+def _chunks(m: int, size: int = CHUNK, start: int = 0):
+    for first in range(start, start + m, size):
+        yield slice(first, min(first + size, start + m))
+
+
+def _map(fn, m: int, start: int = 0):
+    """``fn(chunk)`` over the chunks of elements ``start .. start + m``, results in order.
+
+    Chunks run on `WORKERS` threads, at most two per thread ahead of the consumer, so
+    memory stays that of a few chunks and every sum is taken in the same order as on
+    one thread (the results do not depend on the scheduling).
+    """
+    parts = _chunks(m, CHUNK, start)
+    if WORKERS < 2 or m <= CHUNK:
+        yield from map(fn, parts)
+        return
+    with ThreadPoolExecutor(WORKERS) as pool:
+        pending: deque = deque()
+        for part in parts:
+            pending.append(pool.submit(fn, part))
+            if len(pending) > 2 * WORKERS:
+                yield pending.popleft().result()
+        while pending:
+            yield pending.popleft().result()
 
 
 def _apply(tensor_rows: np.ndarray, vectors: np.ndarray) -> np.ndarray:
@@ -259,19 +284,26 @@ def assemble_pairs(element_dofs: np.ndarray, n: int, a: np.ndarray, b: np.ndarra
         rows = np.empty((k, m), dtype=np.int32)
         cols = np.empty((k, m), dtype=np.int32)
         data = np.empty((k, m))
-        for part in _chunks(m):
-            chunk = slice(batch.start + part.start, batch.start + part.stop)
+        diagonal_values = np.empty((int((~off).sum()), m))
+
+        def fill(chunk: slice, batch=batch, rows=rows, cols=cols, data=data,
+                 diagonal_values=diagonal_values) -> None:
+            part = slice(chunk.start - batch.start, chunk.stop - batch.start)
             v = values(chunk)
             dofs = element_dofs[chunk].T                                  # (n_local, m)
-            diagonal += np.bincount(dofs[a[~off]].ravel(), weights=v[~off].ravel(),
-                                    minlength=n)
             i, j = dofs[a[off]], dofs[b[off]]
             np.minimum(i, j, out=rows[:, part], casting="unsafe")
             np.maximum(i, j, out=cols[:, part], casting="unsafe")
             data[:, part] = v[off]
+            diagonal_values[:, part] = v[~off]
+
+        for _ in _map(fill, m, batch.start):
+            pass
+        diagonal += np.bincount(element_dofs[batch][:, a[~off]].T.ravel(),
+                                weights=diagonal_values.ravel(), minlength=n)
         upper = upper + sparse.csr_matrix((data.ravel(), (rows.ravel(), cols.ravel())),
                                           shape=(n, n))
-        del rows, cols, data
+        del rows, cols, data, diagonal_values
     full = upper + upper.T.tocsr()
     del upper
     full = full + sparse.diags(diagonal, format="csr")
@@ -302,8 +334,12 @@ def cell_gradients(space: Space, values: np.ndarray) -> np.ndarray:
     d = space.ndim
     centroid = np.full((1, d + 1), 1.0 / (d + 1))
     out = np.empty((d, len(space.cells)))
-    for part in _chunks(len(space.cells)):
+
+    def fill(part: slice) -> None:
         out[:, part] = _field_gradients(space, values, part, centroid)[0][0]
+
+    for _ in _map(fill, len(space.cells)):
+        pass
     return out.T
 
 
@@ -317,15 +353,16 @@ def cell_fluxes(space: Space, values: np.ndarray, tensors: np.ndarray,
     points = lam if space.order == 1 else np.concatenate([centroid, lam])
     tensors = np.asarray(tensors, dtype=np.float64)
     out = np.empty((d, len(space.cells)))
-    total = 0.0
-    for part in _chunks(len(space.cells)):
+
+    def fill(part: slice) -> float:
         grad, vol = _field_gradients(space, values, part, points)     # (nq, d, m)
         flux = _apply(_tensor_rows(tensors, cell_material[part]), grad)
         out[:, part] = -flux[0]
         quadrature = grad if space.order == 1 else grad[1:]
         density = w @ _dot(quadrature, flux if space.order == 1 else flux[1:])
-        total += float(density @ vol)
-    return out.T, total
+        return float(density @ vol)
+
+    return out.T, sum(_map(fill, len(space.cells)))
 
 
 def dissipation(space: Space, values: np.ndarray, tensors: np.ndarray,
@@ -339,17 +376,22 @@ def dissipation(space: Space, values: np.ndarray, tensors: np.ndarray,
     """
     lam, w = _quadrature(space.ndim, space.order)
     tensors = np.asarray(tensors, dtype=np.float64)
-    total = 0.0
-    for part in _chunks(len(space.cells)):
+
+    def energy(part: slice) -> float:
         grad, vol = _field_gradients(space, values, part, lam)      # (nq, d, m)
         flux = _apply(_tensor_rows(tensors, cell_material[part]), grad)
-        total += float((w @ _dot(grad, flux)) @ vol)
-    return total
+        return float((w @ _dot(grad, flux)) @ vol)
+
+    return sum(_map(energy, len(space.cells)))
 
 
 def cell_volumes(space: Space) -> np.ndarray:
     """(M,) signed volume (area in 2-D) of each element."""
     out = np.empty(len(space.cells))
-    for part in _chunks(len(space.cells)):
+
+    def fill(part: slice) -> None:
         out[part] = barycentric_gradients(space.points, space.cells[part])[1]
+
+    for _ in _map(fill, len(space.cells)):
+        pass
     return out
