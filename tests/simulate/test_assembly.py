@@ -20,11 +20,12 @@ from napari_swa_imesh.simulate._assembly import (
     cell_volumes,
     dissipation,
     fe_space,
+    p1_embedding,
     stiffness_matrix,
 )
 from napari_swa_imesh.simulate._fe import fe_basis
 from napari_swa_imesh.simulate._periodic import PeriodicProblem
-from napari_swa_imesh.simulate._solve import SPDSolver, solve_dirichlet
+from napari_swa_imesh.simulate._solve import DirichletSolver, SPDSolver, solve_dirichlet
 
 
 def _skfem_stiffness(basis, tensors, cell_material):
@@ -178,3 +179,38 @@ def test_periodic_problem_builds_one_hierarchy_for_every_axis(monkeypatch):
     assert infos[0].setup > 0
     assert [i.setup for i in infos[1:]] == [0.0, 0.0]
     assert all(i.residual <= 1e-9 for i in infos)
+
+
+def test_p2_multigrid_starts_from_the_p1_functions(monkeypatch):
+    """P2: the first coarse level is the P1 space on the free vertices (its Galerkin
+    matrix is the P1 stiffness there), and the solve still equals a direct one."""
+    from napari_swa_imesh.simulate import _amg
+
+    monkeypatch.setattr(_amg, "MAX_COARSE", 20)
+    rng = np.random.default_rng(11)
+    mesh = _random_mesh(rng, (3, 4, 5), jitter=True)
+    _, cell_material = np.unique(mesh.material, return_inverse=True)
+    tensors = _random_tensors(rng, 3)
+    space = fe_space(mesh, 2)
+    matrix = stiffness_matrix(space, tensors, cell_material)
+    embedding = p1_embedding(space)
+    assert embedding.shape == (space.n_dofs, len(mesh.points))
+    # a P1 function is reproduced exactly: x + 2y - z at every P2 dof
+    linear = mesh.points @ np.array([1.0, 2.0, -1.0])
+    np.testing.assert_allclose(embedding @ linear,
+                               space.doflocs.T @ np.array([1.0, 2.0, -1.0]), atol=1e-12)
+    fixed = np.flatnonzero(space.doflocs[0] <= space.doflocs[0].min() + 1e-9)
+    problem = DirichletSolver(matrix, fixed, tol=1e-10, coarse=embedding)
+    free_vertices = np.setdiff1d(np.arange(len(mesh.points)), fixed)
+    assert problem.solver.hierarchy.sizes[:2] == [space.n_dofs - fixed.size,
+                                                  free_vertices.size]
+    p1 = stiffness_matrix(fe_space(mesh, 1), tensors, cell_material)
+    assert len(problem.solver.hierarchy.matrices) > 2        # aggregation below P1
+    galerkin = problem.solver.hierarchy.matrices[1]           # float32: P1's free block
+    expected = p1[free_vertices][:, free_vertices]
+    assert abs(galerkin - expected).max() <= 1e-5 * abs(expected).max()
+    rhs = rng.standard_normal(space.n_dofs)
+    u, info = problem.solve(np.zeros(fixed.size), rhs)
+    free = np.setdiff1d(np.arange(space.n_dofs), fixed)
+    direct = spsolve(matrix[free][:, free].tocsc(), rhs[free])
+    np.testing.assert_allclose(u[free], direct, rtol=0, atol=1e-6 * np.abs(direct).max())

@@ -35,9 +35,13 @@ class Hierarchy:
     ----------
     matrix : (n, n) csr_matrix
         Symmetric positive definite, scaled to a unit diagonal for the best smoothing.
+    prolongator : (n, n_coarse) sparse matrix, optional
+        A first coarse level given by the caller (P2: the P1 functions, whose Galerkin
+        matrix is the P1 stiffness); aggregation takes over below it.
     """
 
-    def __init__(self, matrix: sparse.csr_matrix):
+    def __init__(self, matrix: sparse.csr_matrix,
+                 prolongator: sparse.csr_matrix | None = None):
         from pyamg.aggregation import (
             fit_candidates,
             jacobi_prolongation_smoother,
@@ -47,14 +51,22 @@ class Hierarchy:
         from pyamg.strength import symmetric_strength_of_connection
 
         a = matrix.tocsr()
+        self.matrices: list[sparse.csr_matrix] = []
+        self.prolongators: list[sparse.csr_matrix] = []
+        self.restrictors: list[sparse.csr_matrix] = []
+        if prolongator is not None and a.shape[0] > MAX_COARSE:
+            p = prolongator.tocsr()
+            r = p.T.tocsr()
+            coarse = (r @ (a @ p)).tocsr()
+            self.matrices.append(_single(a))
+            self.prolongators.append(_single(p))
+            self.restrictors.append(_single(r))
+            a = coarse
         near_null = np.ones((a.shape[0], 1))
         zero = np.zeros((a.shape[0], 1))
         for _ in range(IMPROVE_SWEEPS):
             gauss_seidel(a, near_null, zero, sweep="forward")
             gauss_seidel(a, near_null, zero, sweep="backward")
-        self.matrices: list[sparse.csr_matrix] = []
-        self.prolongators: list[sparse.csr_matrix] = []
-        self.restrictors: list[sparse.csr_matrix] = []
         while a.shape[0] > MAX_COARSE:
             strength = symmetric_strength_of_connection(a, theta=0.0)
             aggregates = standard_aggregation(strength)[0]

@@ -26,10 +26,11 @@ from scipy import sparse
 from ..mesh import Mesh
 
 __all__ = ["Space", "assemble_pairs", "barycentric_gradients", "cell_fluxes",
-           "cell_gradients", "cell_volumes", "dissipation", "fe_space", "stiffness_matrix"]
+           "cell_gradients", "cell_volumes", "dissipation", "fe_space", "p1_embedding",
+           "stiffness_matrix"]
 
 CHUNK = 1 << 16          # elements per chunk of arithmetic: temporaries of a few MB
-BATCH = 1 << 21          # elements per sparse conversion: a list of some 10^7 entries
+BATCH = 1 << 23          # entries per sparse conversion: lists of some 100 MB
 WORKERS = min(2, os.cpu_count() or 1)   # numpy releases the GIL in these array loops
 
 # local edges in scikit-fem's reference order (the P2 dofs 3.. or 4.. follow it)
@@ -279,7 +280,7 @@ def assemble_pairs(element_dofs: np.ndarray, n: int, a: np.ndarray, b: np.ndarra
     off = a != b
     k = int(off.sum())
     upper = sparse.csr_matrix((n, n))
-    for batch in _chunks(len(element_dofs), BATCH):
+    for batch in _chunks(len(element_dofs), max(CHUNK, BATCH // max(k, 1))):
         m = batch.stop - batch.start
         rows = np.empty((k, m), dtype=np.int32)
         cols = np.empty((k, m), dtype=np.int32)
@@ -383,6 +384,18 @@ def dissipation(space: Space, values: np.ndarray, tensors: np.ndarray,
         return float((w @ _dot(grad, flux)) @ vol)
 
     return sum(_map(energy, len(space.cells)))
+
+
+def p1_embedding(space: Space) -> sparse.csr_matrix | None:
+    """(n_dofs, N) the P1 functions among the space's: a vertex keeps its value, an edge
+    dof takes the mean of its two ends. None for P1 (nothing coarser to give)."""
+    if space.edges is None:
+        return None
+    n, e = len(space.points), len(space.edges)
+    rows = np.concatenate([np.arange(n), np.repeat(n + np.arange(e), 2)])
+    cols = np.concatenate([np.arange(n), space.edges.ravel()])
+    weights = np.concatenate([np.ones(n), np.full(2 * e, 0.5)])
+    return sparse.csr_matrix((weights, (rows, cols)), shape=(n + e, n))
 
 
 def cell_volumes(space: Space) -> np.ndarray:

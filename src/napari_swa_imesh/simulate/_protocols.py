@@ -86,7 +86,8 @@ def mixed_boundary(matrix, dof_coordinates: np.ndarray, name: str, lo: np.ndarra
                    hi: np.ndarray, energy: Callable[[np.ndarray], float], *, tol: float,
                    parts: np.ndarray | None = None,
                    cell_dofs: np.ndarray | None = None,
-                   cell_material: np.ndarray | None = None) -> MixedResult:
+                   cell_material: np.ndarray | None = None,
+                   coarse=None) -> MixedResult:
     """Solve the mixed-boundary protocol along `axis` and return k_eff.
 
     Parameters
@@ -105,6 +106,9 @@ def mixed_boundary(matrix, dof_coordinates: np.ndarray, name: str, lo: np.ndarra
     parts, cell_dofs, cell_material : ndarray, optional
         Connected parts of the dofs (:func:`connected_parts`) to refuse a part that
         touches neither face, and the element tables that name its materials.
+    coarse : (n, n_vertices) sparse matrix, optional
+        P2: the P1 functions (:func:`~._assembly.p1_embedding`), the multigrid's first
+        coarse level.
 
     Raises
     ------
@@ -126,7 +130,7 @@ def mixed_boundary(matrix, dof_coordinates: np.ndarray, name: str, lo: np.ndarra
     if parts is not None:
         check_constrained(parts, fixed, f"the {name} faces", cell_dofs, cell_material)
     values = np.concatenate([np.zeros(low.size), np.ones(high.size)])
-    problem = DirichletSolver(matrix, fixed, tol=tol)
+    problem = DirichletSolver(matrix, fixed, tol=tol, coarse=coarse)
     u, info = problem.solve(values)
     flux_in, flux_out, flux, agreement = _face_fluxes(matrix, u, low, high, energy)
     if not agreement <= FLUX_AGREEMENT:

@@ -12,7 +12,7 @@ from numbers import Real
 import numpy as np
 
 from ..mesh import Mesh, mesh_labels
-from ._assembly import cell_fluxes, cell_volumes, fe_space, stiffness_matrix
+from ._assembly import cell_fluxes, cell_volumes, fe_space, p1_embedding, stiffness_matrix
 from ._conductivity import axis_names, conductivity_tensors
 from ._fe import vertex_values
 from ._periodic import PeriodicProblem
@@ -234,6 +234,7 @@ def simulate_steps(mesh_or_labels, conductivity: Mapping, *, spacing=None, order
     space = fe_space(mesh, order)
     matrix = stiffness_matrix(space, tensors, cell_material)
     doflocs = space.doflocs
+    coarse = p1_embedding(space)
     seconds["assemble"] = time.perf_counter() - t0
     lo, hi = mesh.image_box()
     volumes = cell_volumes(space)
@@ -270,7 +271,7 @@ def simulate_steps(mesh_or_labels, conductivity: Mapping, *, spacing=None, order
         if periodic is None:
             result = mixed_boundary(matrix, doflocs, name, lo, hi, energy, tol=tol,
                                     parts=parts, cell_dofs=space.element_dofs,
-                                    cell_material=mesh.material)
+                                    cell_material=mesh.material, coarse=coarse)
             value, values, info = result.k_eff, result.values, result.info
         else:
             tensor[:, axis], values, info = periodic.solve(axis)

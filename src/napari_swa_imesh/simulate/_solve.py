@@ -102,10 +102,13 @@ class SPDSolver:
         Relative residual of each solve.
     overwrite : bool
         Scale `matrix` in place instead of a copy (for a matrix the caller drops).
+    coarse : (n, n_coarse) sparse matrix, optional
+        The first coarse space of the multigrid, as its functions' values at the
+        unknowns (P2: the P1 functions, :func:`~._assembly.p1_embedding`).
     """
 
     def __init__(self, matrix: sparse.csr_matrix, *, tol: float = DEFAULT_TOLERANCE,
-                 overwrite: bool = False):
+                 overwrite: bool = False, coarse: sparse.spmatrix | None = None):
         from ._amg import Hierarchy
 
         t0 = time.perf_counter()
@@ -115,7 +118,9 @@ class SPDSolver:
         scaled.data *= self.scale[scaled.indices]
         self.matrix = scaled
         self.tol = tol
-        self.hierarchy = Hierarchy(scaled)
+        # in the scaled unknowns y = D^1/2 x a coarse function is D^1/2 times its values
+        self.hierarchy = Hierarchy(scaled, None if coarse is None else
+                                   sparse.diags(1.0 / self.scale) @ coarse)
         self.setup_seconds = time.perf_counter() - t0
 
     def solve(self, rhs: np.ndarray, x0: np.ndarray | None = None
@@ -151,11 +156,11 @@ class SPDSolver:
 
 
 def solve_spd(matrix: sparse.csr_matrix, rhs: np.ndarray, *, x0: np.ndarray | None = None,
-              tol: float = DEFAULT_TOLERANCE, overwrite: bool = False
-              ) -> tuple[np.ndarray, SolverInfo]:
+              tol: float = DEFAULT_TOLERANCE, overwrite: bool = False,
+              coarse: sparse.spmatrix | None = None) -> tuple[np.ndarray, SolverInfo]:
     """Solve ``matrix @ x = rhs`` for a symmetric positive definite `matrix` (one shot;
-    `overwrite` lets the solver scale `matrix` in place)."""
-    solver = SPDSolver(matrix, tol=tol, overwrite=overwrite)
+    `overwrite` and `coarse` as for :class:`SPDSolver`)."""
+    solver = SPDSolver(matrix, tol=tol, overwrite=overwrite, coarse=coarse)
     x, info = solver.solve(rhs, x0)
     return x, SolverInfo(info.unknowns, info.iterations, info.residual,
                          info.seconds + solver.setup_seconds, solver.setup_seconds)
@@ -177,14 +182,22 @@ def split_fixed(matrix: sparse.csr_matrix, fixed: np.ndarray
 class DirichletSolver:
     """``matrix @ u = rhs`` with ``u[fixed] = values``, condensed (stays SPD): the split
     and the multigrid hierarchy are made once, then solved for any values, right-hand
-    side, initial guess or tolerance (a solve continued to a tighter one reuses them)."""
+    side, initial guess or tolerance (a solve continued to a tighter one reuses them).
+
+    `coarse` (n, n_coarse), optional: the first coarse space of the multigrid (see
+    :class:`SPDSolver`), restricted here to the free unknowns and the coarse functions
+    that vanish on the fixed ones (columns are coarse dofs numbered as the first
+    ``n_coarse`` unknowns, as P1 vertices are among P2 dofs).
+    """
 
     def __init__(self, matrix: sparse.csr_matrix, fixed: np.ndarray, *,
-                 tol: float = DEFAULT_TOLERANCE):
+                 tol: float = DEFAULT_TOLERANCE, coarse: sparse.spmatrix | None = None):
         self.n = matrix.shape[0]
         self.fixed = fixed
         self.free, reduced, self.coupling = split_fixed(matrix, fixed)
-        self.solver = SPDSolver(reduced, tol=tol, overwrite=True)
+        if coarse is not None:
+            coarse = coarse.tocsr()[self.free][:, self.free[:coarse.shape[1]]]
+        self.solver = SPDSolver(reduced, tol=tol, overwrite=True, coarse=coarse)
         self._setup = self.solver.setup_seconds          # reported with the first solve
 
     def solve(self, values: np.ndarray, rhs: np.ndarray | None = None, *,
@@ -208,10 +221,11 @@ class DirichletSolver:
 
 def solve_dirichlet(matrix: sparse.csr_matrix, fixed: np.ndarray, values: np.ndarray,
                     rhs: np.ndarray | None = None, *, tol: float = DEFAULT_TOLERANCE,
-                    x0: np.ndarray | None = None) -> tuple[np.ndarray, SolverInfo]:
+                    x0: np.ndarray | None = None, coarse: sparse.spmatrix | None = None
+                    ) -> tuple[np.ndarray, SolverInfo]:
     """Solve ``matrix @ u = rhs`` with ``u[fixed] = values`` (condensed, stays SPD).
 
-    `x0` (full length) is an initial guess for the free entries. Returns the full
-    vector `u` (fixed entries included).
+    `x0` (full length) is an initial guess for the free entries; `coarse` as for
+    :class:`DirichletSolver`. Returns the full vector `u` (fixed entries included).
     """
-    return DirichletSolver(matrix, fixed, tol=tol).solve(values, rhs, x0=x0)
+    return DirichletSolver(matrix, fixed, tol=tol, coarse=coarse).solve(values, rhs, x0=x0)
