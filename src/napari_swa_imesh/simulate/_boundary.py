@@ -23,7 +23,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from ..mesh import Mesh
-from ._assembly import cell_fluxes, fe_space, stiffness_matrix
+from ._assembly import cell_fluxes, fe_space, p1_embedding, stiffness_matrix
 from ._conductivity import conductivity_tensors, material_label
 from ._fe import _skfem, fe_basis, vertex_values
 from ._solve import SolverInfo, check_constrained, connected_parts, solve_dirichlet
@@ -251,7 +251,8 @@ def solve_boundary_value(mesh: Mesh, conductivity: Mapping, *, dirichlet=None,
     seconds["assemble"] = time.perf_counter() - t0
 
     t0 = time.perf_counter()
-    u, info = solve_dirichlet(system, fixed, values, rhs, tol=tol)
+    u, info = solve_dirichlet(system, fixed, values, rhs, tol=tol,
+                              coarse=p1_embedding(space))
     seconds["solve"] = time.perf_counter() - t0
 
     # what enters through each group: the residual of the balance on its dofs

@@ -19,7 +19,7 @@ from numbers import Real
 import numpy as np
 
 from ..mesh import Mesh
-from ._assembly import fe_space, stiffness_matrix
+from ._assembly import fe_space, p1_embedding, stiffness_matrix
 from ._conductivity import conductivity_tensors, material_label
 from ._fe import fe_basis, mass_basis, mass_matrix, vertex_values
 from ._protocols import face_dofs, face_names
@@ -155,7 +155,8 @@ order, exclude, save_every, material_names, tol
     yield 1, steps + 2, f"assembling P{order} on {mesh.n_cells} elements"
 
     basis = fe_basis(mesh, order)                # mass and loads; same dof numbering
-    stiffness = stiffness_matrix(fe_space(mesh, order), tensors, cell_material)
+    space = fe_space(mesh, order)
+    stiffness = stiffness_matrix(space, tensors, cell_material)
     exact = mass_basis(basis)                  # mass, start and amounts share it
     mass = mass_matrix(exact, cap[cell_material])
     dt = duration / steps
@@ -174,7 +175,10 @@ order, exclude, save_every, material_names, tol
     values = np.concatenate([np.full(d.size, float(fixed[f]))
                              for f, d in zip(fixed, fixed_dofs)]) if fixed_dofs else np.zeros(0)
     free, reduced, coupling = split_fixed(system, dofs)
-    solver = SPDSolver(reduced, tol=tol)
+    coarse = p1_embedding(space)             # P2: the P1 functions, first coarse level
+    if coarse is not None:
+        coarse = coarse[free][:, free[:coarse.shape[1]]]
+    solver = SPDSolver(reduced, tol=tol, overwrite=True, coarse=coarse)
     seconds = {"mesh_and_assembly": time.perf_counter() - t0}
 
     u = _initial_field(exact, order, mass, (cap * start)[cell_material])
