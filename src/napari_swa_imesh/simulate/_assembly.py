@@ -223,9 +223,13 @@ def _tensor_rows(tensors: np.ndarray, cell_material: np.ndarray) -> np.ndarray:
 
 
 def _gradient_products(space: Space, part: slice, tensors: np.ndarray,
-                       cell_material: np.ndarray) -> np.ndarray:
-    """(P, m) ``vol * grad lambda_p . C grad lambda_q`` for the pairs ``p <= q``."""
+                       cell_material: np.ndarray, volumes: np.ndarray | None = None
+                       ) -> np.ndarray:
+    """(P, m) ``vol * grad lambda_p . C grad lambda_q`` for the pairs ``p <= q``; the
+    signed volumes go to ``volumes[part]`` if given."""
     g, vol = barycentric_gradients(space.points, space.cells[part])
+    if volumes is not None:
+        volumes[part] = vol
     c = _tensor_rows(tensors, cell_material[part])
     c *= np.abs(vol)
     cg = _apply(c, g)                                                  # C grad lambda
@@ -236,8 +240,8 @@ def _gradient_products(space: Space, part: slice, tensors: np.ndarray,
     return out
 
 
-def stiffness_matrix(space: Space, tensors: np.ndarray, cell_material: np.ndarray
-                     ) -> sparse.csr_matrix:
+def stiffness_matrix(space: Space, tensors: np.ndarray, cell_material: np.ndarray,
+                     volumes: np.ndarray | None = None) -> sparse.csr_matrix:
     """Assemble ``K[i, j] = sum_e int_e (C_e grad phi_j) . grad phi_i`` (CSR, symmetric).
 
     Parameters
@@ -247,13 +251,16 @@ def stiffness_matrix(space: Space, tensors: np.ndarray, cell_material: np.ndarra
         Conductivity tensors in the mesh's axis order.
     cell_material : (M,) ndarray of int
         Row of `tensors` for each element.
+    volumes : (M,) ndarray, optional
+        Filled with the signed element volumes on the way (saves
+        :func:`cell_volumes` its pass over the elements).
     """
     a, b, table = _pair_table(space.ndim, space.order)
     tensors = np.asarray(tensors, dtype=np.float64)
     p1 = space.order == 1                       # the table is the identity: skip it
 
     def values(part: slice) -> np.ndarray:
-        products = _gradient_products(space, part, tensors, cell_material)
+        products = _gradient_products(space, part, tensors, cell_material, volumes)
         return products if p1 else table @ products
 
     return assemble_pairs(space.element_dofs, space.n_dofs, a, b, values)

@@ -12,7 +12,7 @@ from numbers import Real
 import numpy as np
 
 from ..mesh import Mesh, mesh_labels
-from ._assembly import cell_fluxes, cell_volumes, fe_space, p1_embedding, stiffness_matrix
+from ._assembly import cell_fluxes, fe_space, p1_embedding, stiffness_matrix
 from ._conductivity import axis_names, conductivity_tensors
 from ._fe import vertex_values
 from ._periodic import PeriodicProblem
@@ -233,12 +233,12 @@ def simulate_steps(mesh_or_labels, conductivity: Mapping, *, spacing=None, order
 
     t0 = time.perf_counter()
     space = fe_space(mesh, order)
-    matrix = stiffness_matrix(space, tensors, cell_material)
+    volumes = np.empty(mesh.n_cells)
+    matrix = stiffness_matrix(space, tensors, cell_material, volumes)
     doflocs = space.doflocs
     coarse = p1_embedding(space)
     seconds["assemble"] = time.perf_counter() - t0
     lo, hi = mesh.image_box()
-    volumes = cell_volumes(space)
     per_material = np.bincount(cell_material, weights=volumes, minlength=materials.size)
     fractions = per_material / float(np.prod(hi - lo))
     if not mesh.records_box:
