@@ -216,3 +216,18 @@ def test_p2_multigrid_starts_from_the_p1_functions(monkeypatch):
     free = np.setdiff1d(np.arange(space.n_dofs), fixed)
     direct = spsolve(matrix[free][:, free].tocsc(), rhs[free])
     np.testing.assert_allclose(u[free], direct, rtol=0, atol=1e-6 * np.abs(direct).max())
+
+
+def test_multigrid_without_connections_still_solves():
+    """Unknowns that aggregation cannot group (a diagonal matrix, and pieces of two
+    unknowns) leave a large bottom level: it is factorised, the solve is exact."""
+    rng = np.random.default_rng(2)
+    diagonal = sparse.diags(rng.uniform(1.0, 10.0, 3000), format="csr")
+    solver = SPDSolver(diagonal, tol=1e-12)
+    assert solver.hierarchy.sizes == [3000]                 # no level could be built
+    x, info = solver.solve(np.ones(3000))
+    np.testing.assert_allclose(x, 1.0 / diagonal.diagonal(), rtol=1e-10)
+    pairs = sparse.block_diag([np.array([[2.0, -1.0], [-1.0, 2.0]])] * 1500, format="csr")
+    x, info = SPDSolver(pairs, tol=1e-12).solve(np.ones(3000))
+    np.testing.assert_allclose(x, 1.0, rtol=1e-10)
+    assert info.iterations <= 3

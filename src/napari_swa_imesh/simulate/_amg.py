@@ -22,6 +22,7 @@ from scipy import sparse
 __all__ = ["Hierarchy", "pcg"]
 
 MAX_COARSE = 500           # unknowns solved directly at the bottom of the V-cycle
+MAX_DENSE = 2000           # above this a stalled bottom level is factorised sparsely
 IMPROVE_SWEEPS = 4         # symmetric Gauss-Seidel sweeps on the near-null vector
 PRECONDITIONER_DTYPE = np.float32
 RECOMPUTE = 8              # conjugate-gradient steps between true residuals
@@ -70,7 +71,7 @@ class Hierarchy:
         while a.shape[0] > MAX_COARSE:
             strength = symmetric_strength_of_connection(a, theta=0.0)
             aggregates = standard_aggregation(strength)[0]
-            if aggregates.shape[1] >= a.shape[0]:       # no coarsening left: stop here
+            if not 0 < aggregates.shape[1] < a.shape[0]:   # nothing left to coarsen
                 break
             tentative, near_null = fit_candidates(aggregates, near_null)
             p = jacobi_prolongation_smoother(a, tentative.tocsr(), strength, near_null,
@@ -82,14 +83,8 @@ class Hierarchy:
             self.prolongators.append(_single(p))
             self.restrictors.append(_single(r))
             a = coarse
-        dense = a.toarray()
-        self.coarse_inverse = np.linalg.pinv(0.5 * (dense + dense.T)).astype(
-            PRECONDITIONER_DTYPE)
+        self.coarse_solve = _coarse_solver(a)
         self.sizes = [m.shape[0] for m in self.matrices] + [a.shape[0]]
-
-    def operator_complexity(self, fine_nnz: int | None = None) -> float:
-        nnz = [m.nnz for m in self.matrices]
-        return (sum(nnz) + self.coarse_inverse.size) / float(fine_nnz or nnz[0])
 
     def precondition(self, residual: np.ndarray) -> np.ndarray:
         """One V-cycle for ``A z = residual`` from ``z = 0`` (symmetric: forward
@@ -100,7 +95,7 @@ class Hierarchy:
         from pyamg.relaxation.relaxation import gauss_seidel
 
         if level == len(self.matrices):
-            return self.coarse_inverse @ b
+            return self.coarse_solve(b)
         a = self.matrices[level]
         x = np.zeros_like(b)
         gauss_seidel(a, x, b, sweep=SWEEP)
@@ -108,6 +103,19 @@ class Hierarchy:
                                                     self.restrictors[level] @ (b - a @ x))
         gauss_seidel(a, x, b, sweep=SWEEP)
         return x
+
+
+def _coarse_solver(a: sparse.csr_matrix):
+    """The bottom of the V-cycle: a dense pseudo-inverse when small, else (aggregation
+    stalled, e.g. on unconnected unknowns) a sparse LU, never a huge dense matrix."""
+    if a.shape[0] <= MAX_DENSE:
+        dense = a.toarray()
+        inverse = np.linalg.pinv(0.5 * (dense + dense.T)).astype(PRECONDITIONER_DTYPE)
+        return lambda b: inverse @ b
+    from scipy.sparse.linalg import splu
+
+    lu = splu(a.astype(np.float64).tocsc())
+    return lambda b: lu.solve(b.astype(np.float64)).astype(b.dtype)
 
 
 def _single(m: sparse.csr_matrix) -> sparse.csr_matrix:
