@@ -218,16 +218,37 @@ def test_p2_multigrid_starts_from_the_p1_functions(monkeypatch):
     np.testing.assert_allclose(u[free], direct, rtol=0, atol=1e-6 * np.abs(direct).max())
 
 
-def test_multigrid_without_connections_still_solves():
-    """Unknowns that aggregation cannot group (a diagonal matrix, and pieces of two
-    unknowns) leave a large bottom level: it is factorised, the solve is exact."""
+def test_multigrid_bottom_level_and_unconnected_unknowns(monkeypatch):
+    """Unknowns that aggregation cannot group (a diagonal matrix, pieces of two) are
+    solved exactly; a bottom level above MAX_DENSE is factorised by a sparse LU."""
+    from napari_swa_imesh.simulate import _amg
+
     rng = np.random.default_rng(2)
     diagonal = sparse.diags(rng.uniform(1.0, 10.0, 3000), format="csr")
-    solver = SPDSolver(diagonal, tol=1e-12)
-    assert solver.hierarchy.sizes == [3000]                 # no level could be built
-    x, info = solver.solve(np.ones(3000))
+    x, _ = SPDSolver(diagonal, tol=1e-12).solve(np.ones(3000))
     np.testing.assert_allclose(x, 1.0 / diagonal.diagonal(), rtol=1e-10)
     pairs = sparse.block_diag([np.array([[2.0, -1.0], [-1.0, 2.0]])] * 1500, format="csr")
-    x, info = SPDSolver(pairs, tol=1e-12).solve(np.ones(3000))
+    x, _ = SPDSolver(pairs, tol=1e-12).solve(np.ones(3000))
     np.testing.assert_allclose(x, 1.0, rtol=1e-10)
-    assert info.iterations <= 3
+
+    factorised = []
+    original = _amg._coarse_solver
+
+    def spy(a):
+        factorised.append(a.shape[0] > _amg.MAX_DENSE)
+        return original(a)
+
+    monkeypatch.setattr(_amg, "MAX_DENSE", 10)
+    monkeypatch.setattr(_amg, "_coarse_solver", spy)
+    mesh = _random_mesh(rng, (6, 7, 8), jitter=False)
+    _, cell_material = np.unique(mesh.material, return_inverse=True)
+    space = fe_space(mesh, 1)
+    matrix = stiffness_matrix(space, np.array([1.0, 3.0, 9.0])[:, None, None] * np.eye(3),
+                              cell_material)
+    fixed = np.flatnonzero(space.doflocs[1] <= space.doflocs[1].min() + 1e-9)
+    rhs = rng.standard_normal(space.n_dofs)
+    u, _ = solve_dirichlet(matrix, fixed, np.zeros(fixed.size), rhs, tol=1e-11)
+    assert factorised == [True]
+    free = np.setdiff1d(np.arange(space.n_dofs), fixed)
+    direct = spsolve(matrix[free][:, free].tocsc(), rhs[free])
+    np.testing.assert_allclose(u[free], direct, rtol=0, atol=1e-7 * np.abs(direct).max())
