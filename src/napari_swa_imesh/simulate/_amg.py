@@ -161,8 +161,8 @@ def pcg(matrix: sparse.csr_matrix, rhs: np.ndarray,
             return x, it
         z = precondition(r)
         rz_new = _dot(r, z)
-        # Polak-Ribiere: stays conjugate when the preconditioner is not exactly linear
-        # (a float32 V-cycle): Fletcher-Reeves would stall near 1e-11
+        # Polak-Ribiere (flexible CG): tolerant of a preconditioner that is not exactly
+        # linear, as a float32 V-cycle is not
         p *= (rz_new - _dot(r_old, z)) / rz
         p += z
         rz = rz_new

@@ -1,10 +1,11 @@
-"""Our own P1/P2 Lagrange assembly on simplices: stiffness, energy, element gradients.
+"""Our own P1/P2 Lagrange assembly on simplices: stiffness, energy, element fluxes.
 
 scikit-fem is the reference (the tests require our stiffness to equal its matrix to
 1e-12, with its numbering of the degrees of freedom); this module exists for the sizes a
 128^3 image gives, ten million tetrahedra: scikit-fem keeps every element's basis
-gradients and a 16-entries-per-element COO list (10 GB there), whereas here elements are
-taken in chunks and only their few pair values reach a compressed matrix.
+gradients and a 16-entries-per-element COO list (the whole command peaked at 9.8 GB
+there), whereas here elements are taken in chunks and only the upper-triangle pair values
+reach a compressed matrix.
 
 With affine simplices and a conductivity constant per element, every gradient of a P1 or
 P2 basis function is ``grad phi_a = sum_p c_ap(lambda) grad lambda_p`` (``c`` constant for
