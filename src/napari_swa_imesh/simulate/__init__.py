@@ -2,7 +2,8 @@
 
 * :func:`simulate` (and :func:`simulate_steps` for progress): steady diffusion with one
   conductivity per material (number, diagonal or tensor), P1 or P2 elements assembled by
-  scikit-fem, solved by conjugate gradients with pyamg's algebraic multigrid; the
+  our vectorised code (:mod:`._assembly`, checked against scikit-fem), solved by
+  conjugate gradients with smoothed-aggregation multigrid (:mod:`._amg`); the
   mixed-boundary effective conductivity per axis, or the full tensor by the periodic
   protocol, checked against its Voigt-Reuss bounds;
 * :func:`solve_boundary_value`: one steady problem with Dirichlet, Neumann and Robin

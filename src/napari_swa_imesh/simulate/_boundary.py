@@ -23,8 +23,9 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from ..mesh import Mesh
-from ._conductivity import conductivity_tensors, is_isotropic, material_label
-from ._fe import _skfem, cell_gradients, fe_basis, stiffness_matrix, vertex_values
+from ._assembly import cell_fluxes, fe_space, p1_embedding, stiffness_matrix
+from ._conductivity import conductivity_tensors, material_label
+from ._fe import _skfem, fe_basis, vertex_values
 from ._solve import SolverInfo, check_constrained, connected_parts, solve_dirichlet
 
 __all__ = ["BoundaryResult", "solve_boundary_value"]
@@ -183,8 +184,9 @@ def solve_boundary_value(mesh: Mesh, conductivity: Mapping, *, dirichlet=None,
                          "group one.")
     materials, cell_material = np.unique(mesh.material, return_inverse=True)
     tensors = conductivity_tensors(conductivity, materials, mesh.ndim, mesh.material_names)
-    basis = fe_basis(mesh, order)
-    matrix = stiffness_matrix(basis, tensors, cell_material, is_isotropic(tensors))
+    basis = fe_basis(mesh, order)                # facets and loads; same dof numbering
+    space = fe_space(mesh, order)
+    matrix = stiffness_matrix(space, tensors, cell_material)
     n = matrix.shape[0]
     rhs = np.zeros(n)
     total_source = 0.0
@@ -245,11 +247,12 @@ def solve_boundary_value(mesh: Mesh, conductivity: Mapping, *, dirichlet=None,
                          "undetermined; fix a value (--dirichlet) or add an exchange "
                          "(--robin) on some group.")
     check_constrained(connected_parts(matrix), anchors, "the Dirichlet and Robin groups",
-                      basis.element_dofs.T, mesh.material)
+                      space.element_dofs, mesh.material)
     seconds["assemble"] = time.perf_counter() - t0
 
     t0 = time.perf_counter()
-    u, info = solve_dirichlet(system, fixed, values, rhs, tol=tol)
+    u, info = solve_dirichlet(system, fixed, values, rhs, tol=tol,
+                              coarse=p1_embedding(space))
     seconds["solve"] = time.perf_counter() - t0
 
     # what enters through each group: the residual of the balance on its dofs
@@ -272,11 +275,7 @@ def solve_boundary_value(mesh: Mesh, conductivity: Mapping, *, dirichlet=None,
         raise ValueError(f"sources ({total_source:.6g}) and inflow through the groups "
                          f"({sum(inflow.values()):.6g}) do not balance: the solve did not "
                          "converge far enough; lower --tol or the conductivity contrast.")
-    grad = cell_gradients(basis, u)
-    flux = np.empty_like(grad)
-    for i, tensor in enumerate(tensors):
-        cells = cell_material == i
-        flux[cells] = -grad[cells] @ tensor.T
+    flux = cell_fluxes(space, u, tensors, cell_material)[0]
     return BoundaryResult(vertex_values(u, len(mesh.points)),
                           np.ascontiguousarray(flux[:, ::-1]), inflow, total_source, info,
                           mesh, order, n, seconds)

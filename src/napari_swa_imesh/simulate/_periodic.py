@@ -20,7 +20,7 @@ from dataclasses import dataclass
 import numpy as np
 from scipy import sparse
 
-from ._solve import SolverInfo, connected_parts, solve_dirichlet
+from ._solve import DEFAULT_TOLERANCE, SolverInfo, SPDSolver, connected_parts, split_fixed
 
 __all__ = ["PeriodicProblem", "PeriodicResult", "periodic_map", "periodic_tensor"]
 
@@ -86,6 +86,9 @@ def periodic_map(dof_coordinates: np.ndarray, lo: np.ndarray, hi: np.ndarray
 class PeriodicProblem:
     """The folded system of one mesh, solved for one mean gradient at a time.
 
+    The folded matrix and its pinned dofs do not depend on the axis, so one multigrid
+    hierarchy, built here, serves every axis.
+
     Parameters
     ----------
     matrix : (n, n) sparse matrix
@@ -94,10 +97,12 @@ class PeriodicProblem:
         Coordinates of the dofs in image axis order (scikit-fem's ``doflocs``).
     lo, hi : (d,) ndarray
         Box corners.
+    tol : float
+        Relative residual of each solve.
     """
 
     def __init__(self, matrix: sparse.csr_matrix, dof_coordinates: np.ndarray,
-                 lo: np.ndarray, hi: np.ndarray):
+                 lo: np.ndarray, hi: np.ndarray, *, tol: float = DEFAULT_TOLERANCE):
         n = matrix.shape[0]
         reduced, n_reduced = periodic_map(dof_coordinates, lo, hi)
         self.matrix, self.coordinates = matrix, dof_coordinates
@@ -107,17 +112,27 @@ class PeriodicProblem:
         # the fluctuation is free up to a constant per connected part: pin one dof each
         _, self.pins = np.unique(connected_parts(self.folded), return_index=True)
         self.volume = float(np.prod(hi - lo))
+        # the pins hold 0: no coupling term, only the free block is solved
+        self.free, reduced, _ = split_fixed(self.folded, self.pins)
+        self.solver = SPDSolver(reduced, tol=tol, overwrite=True)
+        self._setup = self.solver.setup_seconds          # reported with the first solve
 
-    def solve(self, axis: int, *, tol: float) -> tuple[np.ndarray, np.ndarray, SolverInfo]:
+    def solve(self, axis: int, *, tol: float | None = None
+              ) -> tuple[np.ndarray, np.ndarray, SolverInfo]:
         """Column `axis` of the tensor (image axis order), the potential, the solve's report.
 
         ``K[j, axis] = (1/V) x_j . A u`` with ``u = x_axis + P w``: the mean flux under a
-        unit mean gradient, as a conductivity.
+        unit mean gradient, as a conductivity. `tol` overrides the constructor's.
         """
+        if tol is not None:
+            self.solver.tol = tol
         x = self.coordinates[axis]
         rhs = -(self.copy.T @ (self.matrix @ x))
-        w, info = solve_dirichlet(self.folded, self.pins, np.zeros(self.pins.size), rhs,
-                                  tol=tol)
+        w = np.zeros(self.folded.shape[0])
+        w[self.free], info = self.solver.solve(rhs[self.free])
+        info = SolverInfo(info.unknowns, info.iterations, info.residual,
+                          info.seconds + self._setup, self._setup)
+        self._setup = 0.0
         u = x + self.copy @ w
         column = self.coordinates @ (self.matrix @ u) / self.volume
         return column, u, info
@@ -142,11 +157,11 @@ def periodic_tensor(matrix: sparse.csr_matrix, dof_coordinates: np.ndarray,
     PeriodicResult
         ``tensor`` (d, d) in image axis order.
     """
-    problem = PeriodicProblem(matrix, dof_coordinates, lo, hi)
+    problem = PeriodicProblem(matrix, dof_coordinates, lo, hi, tol=tol)
     tensor = np.full((lo.size, lo.size), np.nan)
     potentials, infos = [], []
     for i in axes:
-        tensor[:, i], u, info = problem.solve(i, tol=tol)
+        tensor[:, i], u, info = problem.solve(i)
         potentials.append(u)
         infos.append(info)
     return PeriodicResult(tensor, potentials, infos)

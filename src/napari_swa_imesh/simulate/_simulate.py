@@ -11,9 +11,10 @@ from numbers import Real
 
 import numpy as np
 
-from ..mesh import Mesh, mesh_labels, signed_volumes
-from ._conductivity import axis_names, conductivity_tensors, is_isotropic
-from ._fe import cell_gradients, dissipation, fe_basis, stiffness_matrix, vertex_values
+from ..mesh import Mesh, mesh_labels
+from ._assembly import cell_fluxes, fe_space, p1_embedding, stiffness_matrix
+from ._conductivity import axis_names, conductivity_tensors
+from ._fe import vertex_values
 from ._periodic import PeriodicProblem
 from ._protocols import check_within_bounds, mixed_boundary, voigt_reuss
 from ._solve import DEFAULT_TOLERANCE, SolverInfo, connected_parts
@@ -49,7 +50,8 @@ class SimulationResult:
     dofs : int
         Degrees of freedom of one solve.
     seconds : dict of str to float
-        Per step: ``mesh``, ``assemble``, ``solve``.
+        Per step: ``mesh``, ``assemble``, ``solve``; ``setup``: of ``solve``, the
+        multigrid set-up (``solve`` minus ``setup`` is the iterations and the fluxes).
     protocol : {"mixed", "periodic"}
         How k_eff was found (see :func:`simulate`).
     tensor : (d, d) ndarray or None
@@ -189,16 +191,6 @@ def check_tolerance(tol) -> None:
         raise ValueError(f"tol must be a relative residual between 0 and 1, not {tol!r}.")
 
 
-def _cell_flux(tensors: np.ndarray, cell_material: np.ndarray, grad: np.ndarray
-               ) -> np.ndarray:
-    """(M, d) ``-C grad u`` per element, looping over materials (a handful)."""
-    flux = np.empty_like(grad)
-    for i, tensor in enumerate(tensors):
-        cells = cell_material == i
-        flux[cells] = -grad[cells] @ tensor.T
-    return flux
-
-
 def simulate_steps(mesh_or_labels, conductivity: Mapping, *, spacing=None, order: int = 1,
                    axes=None, tol: float = DEFAULT_TOLERANCE, exclude=(),
                    material_names: Mapping[int, str] | None = None, refine: int = 0,
@@ -240,11 +232,13 @@ def simulate_steps(mesh_or_labels, conductivity: Mapping, *, spacing=None, order
     yield 1, total, f"assembling P{order} on {mesh.n_cells} elements"
 
     t0 = time.perf_counter()
-    basis = fe_basis(mesh, order)
-    matrix = stiffness_matrix(basis, tensors, cell_material, is_isotropic(tensors))
+    space = fe_space(mesh, order)
+    volumes = np.empty(mesh.n_cells)
+    matrix = stiffness_matrix(space, tensors, cell_material, volumes)
+    doflocs = space.doflocs
+    coarse = p1_embedding(space)
     seconds["assemble"] = time.perf_counter() - t0
     lo, hi = mesh.image_box()
-    volumes = signed_volumes(mesh.points, mesh.cells)
     per_material = np.bincount(cell_material, weights=volumes, minlength=materials.size)
     fractions = per_material / float(np.prod(hi - lo))
     if not mesh.records_box:
@@ -257,15 +251,18 @@ def simulate_steps(mesh_or_labels, conductivity: Mapping, *, spacing=None, order
     image_axes = {n: i for i, n in enumerate(axis_names(mesh.ndim))}
     parts = connected_parts(matrix)
 
+    last: dict = {}           # the energy's pass over the elements also gives the flux
+
     def energy(u: np.ndarray) -> float:
-        return dissipation(basis, u, tensors, cell_material)
+        last["u"], (last["flux"], total) = u, cell_fluxes(space, u, tensors, cell_material)
+        return total
 
     k_eff, bounds, potential, flux, solver = {}, {}, {}, {}, {}
     seconds["solve"] = 0.0
     periodic = tensor = None
     if protocol == "periodic":
         t0 = time.perf_counter()
-        periodic = PeriodicProblem(matrix, basis.doflocs, lo, hi)
+        periodic = PeriodicProblem(matrix, doflocs, lo, hi, tol=tol)
         tensor = np.full((mesh.ndim, mesh.ndim), np.nan)
         seconds["solve"] += time.perf_counter() - t0
     for step, name in enumerate(names, start=2):
@@ -273,12 +270,12 @@ def simulate_steps(mesh_or_labels, conductivity: Mapping, *, spacing=None, order
         t0 = time.perf_counter()
         axis = image_axes[name]
         if periodic is None:
-            result = mixed_boundary(matrix, basis.doflocs, name, lo, hi, energy, tol=tol,
-                                    parts=parts, cell_dofs=basis.element_dofs.T,
-                                    cell_material=mesh.material)
+            result = mixed_boundary(matrix, doflocs, name, lo, hi, energy, tol=tol,
+                                    parts=parts, cell_dofs=space.element_dofs,
+                                    cell_material=mesh.material, coarse=coarse)
             value, values, info = result.k_eff, result.values, result.info
         else:
-            tensor[:, axis], values, info = periodic.solve(axis, tol=tol)
+            tensor[:, axis], values, info = periodic.solve(axis)
             value = float(tensor[axis, axis])
         voigt, reuss = voigt_reuss(tensors, fractions, axis)
         check_within_bounds(value, voigt, reuss, name)
@@ -286,9 +283,12 @@ def simulate_steps(mesh_or_labels, conductivity: Mapping, *, spacing=None, order
         bounds[name] = (reuss, voigt)
         solver[name] = info
         potential[name] = vertex_values(values, len(mesh.points))
-        grad = cell_gradients(basis, values)                             # (M, d) axis order
-        flux[name] = np.ascontiguousarray(_cell_flux(tensors, cell_material, grad)[:, ::-1])
+        cells_flux = last["flux"] if last.get("u") is values else cell_fluxes(
+            space, values, tensors, cell_material)[0]                   # (M, d) axis order
+        flux[name] = np.ascontiguousarray(cells_flux[:, ::-1])
+        last.clear()
         seconds["solve"] += time.perf_counter() - t0
+    seconds["setup"] = sum(info.setup for info in solver.values())
     if tensor is not None:
         check_symmetric(tensor)
     yield total, total, "done"

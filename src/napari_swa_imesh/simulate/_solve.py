@@ -1,7 +1,8 @@
 """Symmetric positive definite solves: conjugate gradients with algebraic multigrid.
 
-pyamg's smoothed aggregation is the preconditioner: its cost grows linearly with the
-unknowns, which is what lets a 128^3 volume (millions of unknowns) solve in seconds.
+Smoothed aggregation (:mod:`._amg`, from pyamg's parts) is the preconditioner: its cost
+grows linearly with the unknowns, which is what lets a 128^3 volume (millions of
+unknowns) solve in seconds.
 """
 
 from __future__ import annotations
@@ -13,8 +14,8 @@ import numpy as np
 from scipy import sparse
 from scipy.sparse import csgraph
 
-__all__ = ["SPDSolver", "SolverInfo", "check_constrained", "connected_parts", "solve_dirichlet",
-           "solve_spd", "split_fixed"]
+__all__ = ["DirichletSolver", "SPDSolver", "SolverInfo", "check_constrained",
+           "connected_parts", "solve_dirichlet", "solve_spd", "split_fixed"]
 
 DEFAULT_TOLERANCE = 1e-10        # relative residual of the conjugate-gradient solve
 MAX_ITERATIONS = 2000
@@ -34,12 +35,15 @@ class SolverInfo:
         Final relative residual ``|b - A x| / |b|`` of the diagonally scaled system.
     seconds : float
         Set-up plus solve time.
+    setup : float
+        Of `seconds`, the multigrid set-up (0 when a hierarchy was reused).
     """
 
     unknowns: int
     iterations: int
     residual: float
     seconds: float
+    setup: float = 0.0
 
 
 def connected_parts(matrix: sparse.csr_matrix) -> np.ndarray:
@@ -84,30 +88,44 @@ def check_constrained(parts: np.ndarray, fixed: np.ndarray, where: str = "",
 class SPDSolver:
     """Conjugate gradients preconditioned by one AMG hierarchy of `matrix`, reusable.
 
-    Build once, solve many right-hand sides (the time steps of a transient run share
-    one matrix). The system is solved symmetrically scaled by its diagonal,
-    ``D^-1/2 A D^-1/2``, so the stopping test weighs every row alike: with conductivities
-    1e-6 and 1e6 in one image an unscaled residual is met while the low-conductivity
-    part is still wrong.
+    Build once, solve many right-hand sides (the time steps of a transient run, the
+    axes of the periodic protocol share one matrix). The system is solved symmetrically
+    scaled by its diagonal, ``D^-1/2 A D^-1/2``, so the stopping test weighs every row
+    alike: with conductivities 1e-6 and 1e6 in one image an unscaled residual is met
+    while the low-conductivity part is still wrong.
+
+    Parameters
+    ----------
+    matrix : (n, n) csr_matrix
+        Symmetric positive definite.
+    tol : float
+        Relative residual of each solve.
+    overwrite : bool
+        Scale `matrix` in place instead of a copy (for a matrix the caller drops).
+    coarse : (n, n_coarse) sparse matrix, optional
+        The first coarse space of the multigrid, as its functions' values at the
+        unknowns (P2: the P1 functions, :func:`~._assembly.p1_embedding`).
     """
 
-    def __init__(self, matrix: sparse.csr_matrix, *, tol: float = DEFAULT_TOLERANCE):
-        import pyamg
+    def __init__(self, matrix: sparse.csr_matrix, *, tol: float = DEFAULT_TOLERANCE,
+                 overwrite: bool = False, coarse: sparse.spmatrix | None = None):
+        from ._amg import Hierarchy
 
         t0 = time.perf_counter()
         self.scale = 1.0 / np.sqrt(matrix.diagonal())
-        scaling = sparse.diags(self.scale)
-        self.matrix = (scaling @ matrix @ scaling).tocsr()
+        scaled = matrix.tocsr(copy=not overwrite)
+        scaled.data *= np.repeat(self.scale, np.diff(scaled.indptr))
+        scaled.data *= self.scale[scaled.indices]
+        self.matrix = scaled
         self.tol = tol
-        # 'local' weighting bounds the prolongation smoother's spectral radius row by row;
-        # the default estimates it from a random start, so results vary from run to run
-        self.hierarchy = pyamg.smoothed_aggregation_solver(
-            self.matrix, symmetry="symmetric", smooth=("jacobi", {"weighting": "local"}))
+        # in the scaled unknowns y = D^1/2 x a coarse function is D^1/2 times its values
+        self.hierarchy = Hierarchy(scaled, None if coarse is None else
+                                   sparse.diags(1.0 / self.scale) @ coarse)
         self.setup_seconds = time.perf_counter() - t0
 
     def solve(self, rhs: np.ndarray, x0: np.ndarray | None = None
               ) -> tuple[np.ndarray, SolverInfo]:
-        """Solve for one right-hand side.
+        """Solve for one right-hand side, from the initial guess `x0` (default 0).
 
         Raises
         ------
@@ -115,19 +133,19 @@ class SPDSolver:
             When the residual does not reach the tolerance (a result that would be wrong
             is not returned).
         """
+        from ._amg import pcg
+
         t0 = time.perf_counter()
         rhs = rhs * self.scale
         norm_b = float(np.linalg.norm(rhs))
         if norm_b == 0:
             return np.zeros_like(rhs), SolverInfo(rhs.size, 0, 0.0, 0.0)
-        residuals: list[float] = []
-        y0 = None if x0 is None else x0 / self.scale
-        y = self.hierarchy.solve(rhs, x0=y0, tol=self.tol, accel="cg",
-                                 maxiter=MAX_ITERATIONS, residuals=residuals)
+        y = np.zeros_like(rhs) if x0 is None else x0 / self.scale
+        y, iterations = pcg(self.matrix, rhs, self.hierarchy.precondition, y, tol=self.tol,
+                            maxiter=MAX_ITERATIONS)
         residual = float(np.linalg.norm(rhs - self.matrix @ y)) / norm_b
         x = y * self.scale
-        info = SolverInfo(int(rhs.size), max(len(residuals) - 1, 0), residual,
-                          time.perf_counter() - t0)
+        info = SolverInfo(int(rhs.size), iterations, residual, time.perf_counter() - t0)
         if not np.isfinite(residual) or residual > 10 * self.tol:
             raise ValueError(
                 f"the linear solver stopped at relative residual {residual:.1e} after "
@@ -138,12 +156,14 @@ class SPDSolver:
 
 
 def solve_spd(matrix: sparse.csr_matrix, rhs: np.ndarray, *, x0: np.ndarray | None = None,
-              tol: float = DEFAULT_TOLERANCE) -> tuple[np.ndarray, SolverInfo]:
-    """Solve ``matrix @ x = rhs`` for a symmetric positive definite `matrix` (one shot)."""
-    solver = SPDSolver(matrix, tol=tol)
+              tol: float = DEFAULT_TOLERANCE, overwrite: bool = False,
+              coarse: sparse.spmatrix | None = None) -> tuple[np.ndarray, SolverInfo]:
+    """Solve ``matrix @ x = rhs`` for a symmetric positive definite `matrix` (one shot;
+    `overwrite` and `coarse` as for :class:`SPDSolver`)."""
+    solver = SPDSolver(matrix, tol=tol, overwrite=overwrite, coarse=coarse)
     x, info = solver.solve(rhs, x0)
     return x, SolverInfo(info.unknowns, info.iterations, info.residual,
-                         info.seconds + solver.setup_seconds)
+                         info.seconds + solver.setup_seconds, solver.setup_seconds)
 
 
 def split_fixed(matrix: sparse.csr_matrix, fixed: np.ndarray
@@ -159,18 +179,53 @@ def split_fixed(matrix: sparse.csr_matrix, fixed: np.ndarray
     return free, rows[:, free].tocsr(), rows[:, ~free].tocsr()
 
 
+class DirichletSolver:
+    """``matrix @ u = rhs`` with ``u[fixed] = values``, condensed (stays SPD): the split
+    and the multigrid hierarchy are made once, then solved for any values, right-hand
+    side, initial guess or tolerance (a solve continued to a tighter one reuses them).
+
+    `coarse` (n, n_coarse), optional: the first coarse space of the multigrid (see
+    :class:`SPDSolver`), restricted here to the free unknowns and the coarse functions
+    that vanish on the fixed ones (columns are coarse dofs numbered as the first
+    ``n_coarse`` unknowns, as P1 vertices are among P2 dofs).
+    """
+
+    def __init__(self, matrix: sparse.csr_matrix, fixed: np.ndarray, *,
+                 tol: float = DEFAULT_TOLERANCE, coarse: sparse.spmatrix | None = None):
+        self.n = matrix.shape[0]
+        self.fixed = fixed
+        self.free, reduced, self.coupling = split_fixed(matrix, fixed)
+        if coarse is not None:
+            coarse = coarse.tocsr()[self.free][:, self.free[:coarse.shape[1]]]
+        self.solver = SPDSolver(reduced, tol=tol, overwrite=True, coarse=coarse)
+        self._setup = self.solver.setup_seconds          # reported with the first solve
+
+    def solve(self, values: np.ndarray, rhs: np.ndarray | None = None, *,
+              x0: np.ndarray | None = None, tol: float | None = None
+              ) -> tuple[np.ndarray, SolverInfo]:
+        """The full vector `u` (fixed entries included); `x0` (full length) is an initial
+        guess for the free entries, `tol` overrides the constructor's."""
+        u = np.zeros(self.n)
+        u[self.fixed] = values
+        b = -(self.coupling @ u[~self.free])
+        if rhs is not None:
+            b += rhs[self.free]
+        if tol is not None:
+            self.solver.tol = tol
+        u[self.free], info = self.solver.solve(b, None if x0 is None else x0[self.free])
+        info = SolverInfo(info.unknowns, info.iterations, info.residual,
+                          info.seconds + self._setup, self._setup)
+        self._setup = 0.0
+        return u, info
+
+
 def solve_dirichlet(matrix: sparse.csr_matrix, fixed: np.ndarray, values: np.ndarray,
-                    rhs: np.ndarray | None = None, *, tol: float = DEFAULT_TOLERANCE
+                    rhs: np.ndarray | None = None, *, tol: float = DEFAULT_TOLERANCE,
+                    x0: np.ndarray | None = None, coarse: sparse.spmatrix | None = None
                     ) -> tuple[np.ndarray, SolverInfo]:
     """Solve ``matrix @ u = rhs`` with ``u[fixed] = values`` (condensed, stays SPD).
 
-    Returns the full vector `u` (fixed entries included).
+    `x0` (full length) is an initial guess for the free entries; `coarse` as for
+    :class:`DirichletSolver`. Returns the full vector `u` (fixed entries included).
     """
-    u = np.zeros(matrix.shape[0])
-    u[fixed] = values
-    free, reduced, coupling = split_fixed(matrix, fixed)
-    b = -(coupling @ u[~free])
-    if rhs is not None:
-        b = b + rhs[free]
-    u[free], info = solve_spd(reduced, b, tol=tol)
-    return u, info
+    return DirichletSolver(matrix, fixed, tol=tol, coarse=coarse).solve(values, rhs, x0=x0)

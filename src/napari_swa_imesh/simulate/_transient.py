@@ -19,8 +19,9 @@ from numbers import Real
 import numpy as np
 
 from ..mesh import Mesh
-from ._conductivity import conductivity_tensors, is_isotropic, material_label
-from ._fe import fe_basis, mass_basis, mass_matrix, stiffness_matrix, vertex_values
+from ._assembly import fe_space, p1_embedding, stiffness_matrix
+from ._conductivity import conductivity_tensors, material_label
+from ._fe import fe_basis, mass_basis, mass_matrix, vertex_values
 from ._protocols import face_dofs, face_names
 from ._simulate import check_tolerance, prepare_mesh
 from ._solve import DEFAULT_TOLERANCE, SPDSolver, solve_spd, split_fixed
@@ -153,8 +154,9 @@ order, exclude, save_every, material_names, tol
     start = _per_material(initial, materials, mesh.material_names, "initial value", 0.0)
     yield 1, steps + 2, f"assembling P{order} on {mesh.n_cells} elements"
 
-    basis = fe_basis(mesh, order)
-    stiffness = stiffness_matrix(basis, tensors, cell_material, is_isotropic(tensors))
+    basis = fe_basis(mesh, order)                # mass and loads; same dof numbering
+    space = fe_space(mesh, order)
+    stiffness = stiffness_matrix(space, tensors, cell_material)
     exact = mass_basis(basis)                  # mass, start and amounts share it
     mass = mass_matrix(exact, cap[cell_material])
     dt = duration / steps
@@ -173,7 +175,10 @@ order, exclude, save_every, material_names, tol
     values = np.concatenate([np.full(d.size, float(fixed[f]))
                              for f, d in zip(fixed, fixed_dofs)]) if fixed_dofs else np.zeros(0)
     free, reduced, coupling = split_fixed(system, dofs)
-    solver = SPDSolver(reduced, tol=tol)
+    coarse = p1_embedding(space)             # P2: the P1 functions, first coarse level
+    if coarse is not None:
+        coarse = coarse[free][:, free[:coarse.shape[1]]]
+    solver = SPDSolver(reduced, tol=tol, overwrite=True, coarse=coarse)
     seconds = {"mesh_and_assembly": time.perf_counter() - t0}
 
     u = _initial_field(exact, order, mass, (cap * start)[cell_material])
