@@ -56,13 +56,7 @@ class Hierarchy:
         self.prolongators: list[sparse.csr_matrix] = []
         self.restrictors: list[sparse.csr_matrix] = []
         if prolongator is not None and a.shape[0] > MAX_COARSE:
-            p = prolongator.tocsr()
-            r = p.T.tocsr()
-            coarse = (r @ (a @ p)).tocsr()
-            self.matrices.append(_single(a))
-            self.prolongators.append(_single(p))
-            self.restrictors.append(_single(r))
-            a = coarse
+            a = self._add_level(a, prolongator.tocsr())
         near_null = np.ones((a.shape[0], 1))
         zero = np.zeros((a.shape[0], 1))
         for _ in range(IMPROVE_SWEEPS):
@@ -77,14 +71,19 @@ class Hierarchy:
             p = jacobi_prolongation_smoother(a, tentative.tocsr(), strength, near_null,
                                              weighting="local").tocsr()
             del strength, aggregates, tentative
-            r = p.T.tocsr()
-            coarse = (r @ (a @ p)).tocsr()
-            self.matrices.append(_single(a))
-            self.prolongators.append(_single(p))
-            self.restrictors.append(_single(r))
-            a = coarse
+            a = self._add_level(a, p)
         self.coarse_solve = _coarse_solver(a)
         self.sizes = [m.shape[0] for m in self.matrices] + [a.shape[0]]
+
+    def _add_level(self, a: sparse.csr_matrix, p: sparse.csr_matrix) -> sparse.csr_matrix:
+        """Keep `a` and its transfers (in the preconditioner's precision); return the
+        Galerkin coarse matrix ``P^T A P``."""
+        r = p.T.tocsr()
+        coarse = (r @ (a @ p)).tocsr()
+        self.matrices.append(_single(a))
+        self.prolongators.append(_single(p))
+        self.restrictors.append(_single(r))
+        return coarse
 
     def precondition(self, residual: np.ndarray) -> np.ndarray:
         """One V-cycle for ``A z = residual`` from ``z = 0`` (symmetric: forward

@@ -222,13 +222,15 @@ def solve_boundary_value(mesh: Mesh, conductivity: Mapping, *, dirichlet=None,
     def exchange(u, v, w):
         return u * v
 
+    # int v over each group, once: the Neumann and Robin loads and the Neumann inflow
+    surface = {name: skfem.asm(unit, fb) for name, fb in facet_bases.items()}
     for name, (q,) in fluxes.items():
-        rhs += q * skfem.asm(unit, facet_bases[name])
+        rhs += q * surface[name]
     robin_matrix = None
     for name, (h, u_inf) in films.items():
         part = h * skfem.asm(exchange, facet_bases[name]).tocsr()
         robin_matrix = part if robin_matrix is None else robin_matrix + part
-        rhs += h * u_inf * skfem.asm(unit, facet_bases[name])
+        rhs += h * u_inf * surface[name]
     system = matrix if robin_matrix is None else (matrix + robin_matrix).tocsr()
 
     fixed_parts = [basis.get_dofs(facets=ids[name]).flatten() for name in fixed_values]
@@ -265,7 +267,7 @@ def solve_boundary_value(mesh: Mesh, conductivity: Mapping, *, dirichlet=None,
         claimed[dofs] = True
         inflow[name] = float(reaction[dofs].sum())
     for name, (q,) in fluxes.items():
-        inflow[name] = q * float(skfem.asm(unit, facet_bases[name]).sum())
+        inflow[name] = q * float(surface[name].sum())
     for name, (h, u_inf) in films.items():
         fb = facet_bases[name]
         inflow[name] = float(h * np.sum((u_inf - fb.interpolate(u)) * fb.dx))
