@@ -15,23 +15,13 @@ refused with a sentence if it has not.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
 
 import numpy as np
 from scipy import sparse
 
 from ._solve import DEFAULT_TOLERANCE, SolverInfo, SPDSolver, connected_parts, split_fixed
 
-__all__ = ["PeriodicProblem", "PeriodicResult", "periodic_map", "periodic_tensor"]
-
-
-@dataclass
-class PeriodicResult:
-    """The tensor (image axis order), one potential per axis and the solver reports."""
-
-    tensor: np.ndarray
-    potential: list[np.ndarray]
-    solver: list[SolverInfo]
+__all__ = ["PeriodicProblem", "periodic_map"]
 
 
 def periodic_map(dof_coordinates: np.ndarray, lo: np.ndarray, hi: np.ndarray
@@ -136,32 +126,3 @@ class PeriodicProblem:
         u = x + self.copy @ w
         column = self.coordinates @ (self.matrix @ u) / self.volume
         return column, u, info
-
-
-def periodic_tensor(matrix: sparse.csr_matrix, dof_coordinates: np.ndarray,
-                    lo: np.ndarray, hi: np.ndarray, axes: list[int], *, tol: float
-                    ) -> PeriodicResult:
-    """Effective conductivity tensor by the periodic-fluctuation protocol.
-
-    Parameters
-    ----------
-    matrix, dof_coordinates, lo, hi
-        As for :class:`PeriodicProblem`.
-    axes : list of int
-        Image axes to apply a mean gradient along; the tensor's other columns are NaN.
-    tol : float
-        Relative residual of each solve.
-
-    Returns
-    -------
-    PeriodicResult
-        ``tensor`` (d, d) in image axis order.
-    """
-    problem = PeriodicProblem(matrix, dof_coordinates, lo, hi, tol=tol)
-    tensor = np.full((lo.size, lo.size), np.nan)
-    potentials, infos = [], []
-    for i in axes:
-        tensor[:, i], u, info = problem.solve(i)
-        potentials.append(u)
-        infos.append(info)
-    return PeriodicResult(tensor, potentials, infos)
