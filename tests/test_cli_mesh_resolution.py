@@ -79,6 +79,7 @@ def test_coarsen_that_removes_a_material_warns_naming_it(tmp_path, capsys):
     (["--max-size", "-2"], "--max-size must be a positive length"),
     (["--coarsen", "6"], "coarsen must be a whole number from 0 to 5"),
     (["--method", "delaunay", "--refine", "1"], "the delaunay method meshes voxels"),
+    (["--method", "delaunay", "--periodic"], "periodic meshes need the template method"),
     (["--spacing", "100", "1", "1"], "resample the image closer to cubic voxels"),
 ])
 def test_bad_resolution_options_exit_2_and_leave_the_folder_unchanged(tmp_path, capsys,

@@ -159,9 +159,6 @@ def _run_mesh(args: argparse.Namespace) -> int:
     if args.spacing:
         normalize_spacing(args.spacing, len(args.spacing))  # a bad value fails before reading
     _check_resolution_args(args)
-    if args.periodic and args.method != "template":
-        raise ValueError("--periodic needs the template method (the delaunay method cannot "
-                         "match opposite faces).")
     # from the file's header: refuse a volume whose labels and grids alone cannot fit
     placement = _placement(args, peek)
     if peek is not None and len(peek[0]) in (2, 3) and limit != 0:
@@ -245,8 +242,11 @@ def _check_resolution_args(args) -> None:
     from ._coarsen import check_coarsen
     from ._lattice import check_refine
 
+    from ._imesh import check_periodic
+
     check_refine(args.refine)
     check_coarsen(args.coarsen)
+    check_periodic(args.method, args.periodic)
     if args.max_size is not None and not (np.isfinite(args.max_size) and args.max_size > 0):
         raise ValueError(f"--max-size must be a positive length; got {args.max_size}.")
 

@@ -141,10 +141,8 @@ def mesh_labels(labels, *, method: str = "template", exclude=(), spacing=None,
     lattice, max_size, coarsen = resolution_arguments(
         spacing_t, method=method, refine=refine, max_size=max_size, subdivide=subdivide,
         coarsen=coarsen)
+    check_periodic(method, periodic)
     lab, coarse_report = coarsen_labels(lab, coarsen)
-    if periodic and method != "template":
-        raise ValueError("periodic meshes need the template method (the delaunay method "
-                         "cannot match opposite faces).")
     mesh, tree = _mesh_labels(lab, method=method, exclude=exclude_arr, spacing=spacing_t,
                               material_names=material_names, lattice=lattice,
                               max_size=max_size, periodic=bool(periodic))
@@ -177,6 +175,14 @@ def resolution_arguments(spacing: tuple, *, method: str, refine, max_size, subdi
                          "method for refine, max_size or anisotropic subdivision (or "
                          "subdivide=False).")
     return lattice, max_size, coarsen
+
+
+def check_periodic(method: str, periodic: bool) -> None:
+    """Periodic faces come from the templates (cells of one lattice cell are always cut
+    alike); ValueError for any other method."""
+    if periodic and method != "template":
+        raise ValueError("periodic meshes need the template method (the delaunay method "
+                         "cannot match opposite faces).")
 
 
 def warn_lost_materials(report: dict, names: dict | None = None) -> None:
