@@ -350,13 +350,20 @@ class RecommendedModel(SegmentationModel):
                 field = self._bias_field(base, work)
                 work = np.divide(base, field, out=field)        # the field is spent
             del base, field
+        return self._classify_standardised(work)
+
+    def _classify_standardised(self, work: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """:meth:`_classify` of an image already standardised (and bias-corrected); every
+        step is local, so a block with a margin of :func:`~._chunked.halo` px gives the
+        whole image's result inside the margin. `work` may be overwritten."""
+        shape = work.shape
         feats, _ = multiscale_features(work, self.scale)
         del work
         flat = feats.reshape(-1, feats.shape[-1])
         ll = self._log_likelihood(flat, self.scale)                 # (K, N)
-        cls = argmax_first(ll).reshape(img.shape)
-        level = np.full(img.shape, self.scale, np.int8)
-        todo = np.ones(img.shape, bool)
+        cls = argmax_first(ll).reshape(shape)
+        level = np.full(shape, self.scale, np.int8)
+        todo = np.ones(shape, bool)
         for j in range(self.scale, self.finest_scale, -1):
             w = window(j)
             # the level-j window of these pixels holds two labels: its statistics are mixed
@@ -368,7 +375,7 @@ class RecommendedModel(SegmentationModel):
             cls.ravel()[idx] = argmax_first(ll[:, idx])
             level.ravel()[idx] = j - 1
             todo = straddle
-        return ll.reshape((-1,) + img.shape), level
+        return ll.reshape((-1,) + shape), level
 
     def predict_proba(self, image, *, check_input: bool = True
                       ) -> tuple[np.ndarray, np.ndarray]:

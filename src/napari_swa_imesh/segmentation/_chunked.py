@@ -1,0 +1,368 @@
+"""A saved recommended model applied chunk by chunk on Dask: images larger than memory.
+
+Every step of :meth:`RecommendedModel.predict` but the bias field is local, so each chunk
+is classified with a margin (``dask.array.map_overlap``, no padding at the image's own
+faces) of :func:`halo` px, the exact reach of one label (axes below are per axis):
+
+* the features of level j see 2^j px (window half-width 2^(j-1), plus the Haar details
+  of level j-1, 2^(j-1) px);
+* refining level j looks 2^(j-1) px around for a second label: from the coarse level J
+  down to the finest f that adds 2^J - 2^f px to the 2^J of level J's features;
+* the Potts MRF: a pixel is active if it is unsure or touches another label (1 px), grown
+  by one (2 px), then each of the :data:`~._mrf.SWEEPS` sweeps reads the face neighbours
+  (1 px each): 2 + SWEEPS px.
+
+Inside the margin a chunk's labels are the whole image's (tested on tiny chunks).
+
+The global steps: the intensity standardisation is the model's own (offset and scale fixed
+at training), so it is pointwise; the bias field is estimated as in memory, on a
+downsampled copy (the strided copy the in-memory path labels when the finest level is the
+pixel value, else block sums of a chunked labelling pass at the finest level), and each
+chunk evaluates the field's linear interpolation on its own voxels only.
+
+Memory: a worker holds one padded chunk at :func:`bytes_per_voxel` (the worst case: every
+voxel active in the MRF); :func:`plan_chunks` picks the largest chunk that the budget
+allows per worker, and refuses when even a small one does not fit.
+"""
+
+from __future__ import annotations
+
+import os
+
+import numpy as np
+
+from .._validation import label_dtype
+from ._bias import (class_mean_image, coarse_bias_field, grid_factor, upsample_linear,
+                    upsample_linear_at)
+from ._mrf import SWEEPS, potts_mean_field
+from ._recommended import _FIELD_GRID, BIAS_ROUNDS, RecommendedModel
+from ._tiles import _axis_counts, block_mean, block_sum
+
+__all__ = ["halo", "bytes_per_voxel", "plan_chunks", "predict_chunked", "parse_memory",
+           "default_memory", "MRF_REACH", "MIN_CORE"]
+
+MRF_REACH = 2 + SWEEPS   # active set (1 px), grown by one (1 px), one px per sweep
+MIN_CORE = 16            # smallest chunk side worth the margin around it
+MEMORY_FRACTION = 0.5    # default budget: this share of the memory available now
+
+
+def halo(model: RecommendedModel) -> int:
+    """Margin (px per side) that makes a chunk's labels equal the whole image's.
+
+    Examples
+    --------
+    >>> m = RecommendedModel()
+    >>> m.scale, m.finest_scale = 3, 1
+    >>> halo(m)        # 2^3 (features) + 2^3 - 2^1 (refinement) + 7 (MRF)
+    21
+    """
+    j, f = model.scale, model.finest_scale
+    reach = 0 if j == 0 else (1 << (j + 1)) - (1 << f)
+    return reach + (MRF_REACH if model.beta > 0 else 0)
+
+
+def bytes_per_voxel(model: RecommendedModel, ndim: int) -> int:
+    """Working memory per voxel of a padded chunk (the larger of the feature and MRF steps).
+
+    Features: the float32 stack, the Haar energies, float64 running sums and filter
+    temporaries, the log-likelihoods. MRF, per voxel when all are active (noise at the
+    pixel level): indices, likelihoods, probabilities, neighbour columns and temporaries.
+    Measured peaks (tracemalloc) stay below this (see ``benchmarks/bench_scale.py``).
+    """
+    k = len(model.labels)
+    f = len(model.levels[model.scale].offset_) if model.levels else 1
+    features = 4 * f + 4 * model.scale + 56 + 4 * k
+    mrf = 4 * k + 8 + 8 * ndim + 8 + 5 * 4 * k + 2 * ndim * 8 + 8
+    return int(max(features, mrf)) + 4 + 4 + 1       # + the padded input, work, labels
+
+
+def parse_memory(text) -> int:
+    """Bytes of a budget such as ``"2GB"``, ``"1.5GiB"``, ``"500MB"`` or a number of bytes.
+
+    Raises
+    ------
+    ValueError
+        For anything else, or a budget of zero or less.
+    """
+    from dask.utils import parse_bytes
+
+    try:
+        value = int(parse_bytes(text))
+    except (ValueError, TypeError) as exc:
+        raise ValueError(f"cannot read {text!r} as an amount of memory; give e.g. 2GB, "
+                         "1.5GiB or 500MB.") from exc
+    if value <= 0:
+        raise ValueError(f"the memory budget must be more than 0; got {text!r}.")
+    return value
+
+
+def default_memory() -> int:
+    """:data:`MEMORY_FRACTION` of the memory available now (psutil)."""
+    import psutil
+
+    return int(MEMORY_FRACTION * psutil.virtual_memory().available)
+
+
+def plan_chunks(shape, model: RecommendedModel, memory: int, *, workers: int | None = None,
+                reserved: int = 0, multiple: int = 1) -> tuple[tuple[int, ...], int]:
+    """Chunk shape (without margin) and number of worker threads for a memory budget.
+
+    For each worker count up to the cores, the largest chunk whose padded block fits the
+    budget per worker; the count whose chunks waste the least time on margins per worker
+    wins (``workers / ((c + 2h) / c)^d``).
+
+    Parameters
+    ----------
+    shape : tuple of int
+    model : RecommendedModel
+    memory : int
+        Budget in bytes for the whole process.
+    workers : int, optional
+        Fix the number of threads (default: choose up to ``os.cpu_count()``).
+    reserved : int
+        Bytes of the budget already taken (the process itself, an output held whole).
+    multiple : int
+        Chunk sides are multiples of this (the bias field's grid cells).
+
+    Raises
+    ------
+    ValueError
+        When not even a chunk of :data:`MIN_CORE` px per axis (or the whole image, if
+        smaller) fits the budget.
+    """
+    d, h = len(shape), halo(model)
+    bpv = bytes_per_voxel(model, d)
+    counts = [workers] if workers else range(1, (os.cpu_count() or 1) + 1)
+    best = None
+    for w in counts:
+        free = (memory - reserved) / w
+        core = _largest_core(shape, h, bpv, free, multiple)
+        if core is None:
+            continue
+        waste = np.prod([(c + 2 * h * (c < n)) / c for c, n in zip(core, shape)])
+        score = w / waste
+        if best is None or score > best[0]:
+            best = (score, core, w)
+    if best is None:
+        small = tuple(min(n, max(MIN_CORE, multiple)) for n in shape)
+        need = reserved + bpv * int(np.prod([c + 2 * h * (c < n) for c, n in
+                                             zip(small, shape)]))
+        raise ValueError(
+            f"a chunk of {'x'.join(map(str, small))} voxels with its margin of {h} px needs "
+            f"about {need / 1e9:.2f} GB with what this process holds, more than the budget "
+            f"of {memory / 1e9:.2f} GB; give more memory (--memory) or close other programs.")
+    return best[1], best[2]
+
+
+def _largest_core(shape, h: int, bpv: int, free: float, multiple: int):
+    """Largest near-cubic chunk whose padded block holds `free` bytes, or None."""
+    d = len(shape)
+    fixed = [False] * d
+    core = list(shape)
+    for _ in range(d):                       # axes shorter than the side are taken whole
+        grow = [i for i in range(d) if not fixed[i]]
+        if not grow:
+            break
+        whole = np.prod([shape[i] for i in range(d) if fixed[i]] or [1])
+        side = int((free / bpv / whole) ** (1 / len(grow))) - 2 * h
+        for i in grow:
+            core[i] = min(shape[i], side)
+        short = [i for i in grow if shape[i] <= side]
+        if not short:
+            break
+        for i in short:
+            fixed[i] = True
+    core = [c if c == n else c // multiple * multiple for c, n in zip(core, shape)]
+    if min(c for c in core) < 1 or any(c < min(n, max(MIN_CORE, h, multiple))
+                                       for c, n in zip(core, shape)):
+        return None
+    padded = np.prod([c + 2 * h * (c < n) for c, n in zip(core, shape)])
+    return tuple(core) if padded * bpv <= free else None
+
+
+def predict_chunked(model: RecommendedModel, image, *, memory: int | None = None,
+                    workers: int | None = None, reserved: int = 0, chunks=None,
+                    **compute):
+    """Labels of a large image by a fitted recommended model, as a lazy Dask array.
+
+    Parameters
+    ----------
+    model : RecommendedModel
+        Fitted or loaded (:func:`~._model_io.load_model`).
+    image : (M, N[, P]) dask.array.Array or array_like
+        Grey-level image (e.g. from :func:`napari_swa_imesh._zarr_io.open_lazy`).
+    memory : int, optional
+        Budget in bytes (default :func:`default_memory`).
+    workers : int, optional
+        Threads (default: chosen by :func:`plan_chunks`).
+    reserved : int
+        Bytes of the budget already taken.
+    chunks : tuple of int, optional
+        Chunk shape to use instead of the planned one (tests use tiny chunks).
+    **compute
+        Passed to ``dask.compute`` for the global steps (``scheduler``...).
+
+    Returns
+    -------
+    labels : dask.array.Array
+        Labels (int32, int64 for labels >= 2^31) with the planned chunks; computing it
+        chunk by chunk (``store``) holds one padded chunk per worker.
+    plan : dict
+        ``chunks``, ``workers``, ``halo``, ``bytes_per_voxel``, ``memory``.
+
+    Raises
+    ------
+    ValueError
+        A reference model, a dimensionality the model was not fitted for, an image of one
+        value, a budget too small for one chunk; NaN or infinity in a chunk when computed.
+
+    Examples
+    --------
+    >>> rng = np.random.default_rng(0)
+    >>> from ._samples import Samples
+    >>> img = np.concatenate([rng.normal(0, 1, (32, 16)), rng.normal(4, 1, (32, 16))], 1)
+    >>> s = Samples.from_dict({"boxes": [{"label": 1, "start": [0, 0], "stop": [32, 12]},
+    ...                                  {"label": 2, "start": [0, 20], "stop": [32, 32]}]})
+    >>> m = RecommendedModel(max_scale=1, bias_correction=False).fit(img, s)
+    >>> lab, plan = predict_chunked(m, img, chunks=(16, 16))
+    >>> bool((lab.compute() == m.predict(img)).all())
+    True
+    """
+    import dask.array as da
+
+    if not isinstance(model, RecommendedModel):
+        raise ValueError("chunked segmentation applies models of the recommended method; "
+                         "this is a reference (tile) model: apply it in memory, or fit a "
+                         "recommended model.")
+    if not model.materials:
+        raise ValueError("this model is not fitted; call fit() or load a saved model.")
+    x = image if isinstance(image, da.Array) else da.from_array(np.asarray(image))
+    if x.ndim != model.ndim:
+        raise ValueError(f"the model was fitted on {model.ndim}-D images; got a {x.ndim}-D "
+                         "image.")
+    if x.dtype.kind not in "biuf":
+        raise TypeError(f"image must hold real numbers; got dtype {x.dtype}.")
+    memory = default_memory() if memory is None else int(memory)
+    f = model.finest_scale
+    multiple = grid_factor(x.shape) if model.bias_correction and f > 0 else 1
+    if chunks is None:
+        core, workers = plan_chunks(x.shape, model, memory, workers=workers,
+                                    reserved=reserved, multiple=multiple)
+    else:
+        # the bias sums need whole grid cells in every chunk
+        core = tuple(min(n, max(multiple, c // multiple * multiple))
+                     for c, n in zip(chunks, x.shape))
+        workers = workers or 1
+    h = halo(model)
+    plan = {"chunks": core, "workers": workers, "halo": h, "memory": memory,
+            "bytes_per_voxel": bytes_per_voxel(model, x.ndim)}
+    x = x.rechunk(core)
+    field = _bias_small(model, x, f, compute) if model.bias_correction else None
+    if field is None:
+        _check_contrast(x, compute)
+    work = x.map_blocks(_work_block, model, field, x.shape, dtype=np.float32)
+    dtype = label_dtype(model.labels)
+    labels = work.map_overlap(_labels_block, model=model, dtype=dtype, depth=h,
+                              boundary="none", trim=True) if h else \
+        work.map_blocks(_labels_block, model=model, dtype=dtype)
+    return labels, plan
+
+
+def _check_contrast(x, compute) -> None:
+    import dask
+
+    lo, hi = dask.compute(x.min(), x.max(), **compute)
+    _refuse_flat(lo, hi)
+
+
+def _refuse_flat(lo, hi) -> None:
+    if not (np.isfinite(lo) and np.isfinite(hi)):
+        raise ValueError("the image has NaN or infinite values; fill or mask them first "
+                         "(e.g. numpy.nan_to_num).")
+    if lo == hi:
+        raise ValueError(f"the image holds one value everywhere ({float(lo):g}); there is "
+                         "nothing to segment. Check that the right file or channel was given.")
+
+
+def _region(block_info):
+    return [np.arange(a, b) for a, b in block_info[0]["array-location"]]
+
+
+def _work_block(block, model, field, shape, block_info=None):
+    """Standardised (and bias-corrected) float32 block, as the in-memory path makes it."""
+    if block.dtype.kind == "f" and not np.isfinite(block).all():
+        start = [a for a, _ in block_info[0]["array-location"]]
+        raise ValueError(f"the image has NaN or infinite values in the chunk starting at "
+                         f"{start}; fill or mask them first (e.g. numpy.nan_to_num).")
+    work = model._standardised(np.asarray(block))
+    if field is not None:
+        work /= upsample_linear_at(field, shape, _region(block_info))
+    return work
+
+
+def _labels_block(work, model):
+    ll, _ = model._classify_standardised(work)
+    cls = potts_mean_field(ll, model.beta, labels_only=True)
+    return model._class_values()[cls].astype(label_dtype(model.labels), copy=False)
+
+
+def _bias_small(model, x, f, compute) -> np.ndarray:
+    """The field on a small grid whose linear interpolation to ``x.shape`` is the
+    in-memory field (both rounds of :data:`BIAS_ROUNDS`)."""
+    import dask
+
+    shape = x.shape
+    if f == 0:
+        # the in-memory path labels a strided copy: the same copy, read chunk by chunk
+        step = max(1, min(shape) // _FIELD_GRID)
+        idx = [np.arange(0, n, step) for n in shape]
+        sub, lo, hi = dask.compute(x[tuple(slice(None, None, step) for _ in shape)],
+                                   x.min(), x.max(), **compute)
+        _refuse_flat(lo, hi)
+        base = model._standardised(np.asarray(sub))
+        work, small = base, None
+        for _ in range(BIAS_ROUNDS):
+            if small is not None:
+                work = base / upsample_linear_at(small, shape, idx)
+            labels = model._predict_level(work, 0)
+            mu = class_mean_image(labels, model.class_means)
+            factor = grid_factor(base.shape)
+            coarse = coarse_bias_field(block_mean(base * mu, factor),
+                                       block_mean(mu * mu, factor))
+            small = coarse if step == 1 else upsample_linear(coarse, base.shape)
+        return small
+    lo, hi = dask.compute(x.min(), x.max(), **compute)
+    _refuse_flat(lo, hi)
+    # a finer level labels every voxel in memory: block sums of I mu and mu^2 over the
+    # chunks (chunk sides are multiples of the grid cell, so every cell is in one chunk)
+    factor = grid_factor(shape)
+    counts = _axis_counts(shape, factor)
+    small = None
+    for _ in range(BIAS_ROUNDS):
+        work = x.map_blocks(_work_block, model, small, shape, dtype=np.float32)
+        labels = work.map_overlap(_level_block, model=model, level=f,
+                                  dtype=label_dtype(model.labels),
+                                  depth=1 << f, boundary="none", trim=True)
+        base = x.map_blocks(_work_block, model, None, shape, dtype=np.float32)
+        sums = _block_sums(base, labels, model, factor)
+        num, den = dask.compute(*sums, **compute)
+        small = coarse_bias_field(num / counts, den / counts)
+    return small
+
+
+def _level_block(work, model, level):
+    return model._predict_level(work, level).astype(label_dtype(model.labels), copy=False)
+
+
+def _block_sums(base, labels, model, factor):
+    """Dask arrays of the grid-cell sums of ``base * mu`` and ``mu^2`` (mu: class means)."""
+    import dask.array as da
+
+    out_chunks = tuple(tuple(-(-c // factor) for c in cs) for cs in base.chunks)
+
+    def sums(b, lab, which):
+        mu = class_mean_image(lab, model.class_means)
+        return block_sum(b * mu if which == 0 else mu * mu, factor, dtype=np.float64)
+
+    return tuple(da.map_blocks(sums, base, labels, w, chunks=out_chunks, dtype=np.float64)
+                 for w in (0, 1))
