@@ -34,11 +34,12 @@ import numpy as np
 from .._validation import label_dtype
 from ._bias import (class_mean_image, coarse_bias_field, grid_factor, upsample_linear,
                     upsample_linear_at)
+from ._classifiers import _CHUNK as _BATCH
 from ._mrf import SWEEPS, potts_mean_field
 from ._recommended import _FIELD_GRID, BIAS_ROUNDS, RecommendedModel
 from ._tiles import _axis_counts, block_mean, block_sum
 
-__all__ = ["halo", "bytes_per_voxel", "plan_chunks", "predict_chunked", "parse_memory",
+__all__ = ["halo", "bytes_per_voxel", "batch_bytes", "plan_chunks", "predict_chunked", "parse_memory",
            "default_memory", "MRF_REACH", "MIN_CORE"]
 
 MRF_REACH = 2 + SWEEPS   # active set (1 px), grown by one (1 px), one px per sweep
@@ -67,13 +68,21 @@ def bytes_per_voxel(model: RecommendedModel, ndim: int) -> int:
     Features: the float32 stack, the Haar energies, float64 running sums and filter
     temporaries, the log-likelihoods. MRF, per voxel when all are active (noise at the
     pixel level): indices, likelihoods, probabilities, neighbour columns and temporaries.
-    Measured peaks (tracemalloc) stay below this (see ``benchmarks/bench_scale.py``).
+    Add :func:`batch_bytes` once per block. Checked against tracemalloc peaks in the tests.
     """
-    k = len(model.labels)
-    f = len(model.levels[model.scale].offset_) if model.levels else 1
-    features = 4 * f + 4 * model.scale + 56 + 4 * k
-    mrf = 4 * k + 8 + 8 * ndim + 8 + 5 * 4 * k + 2 * ndim * 8 + 8
+    k, f = len(model.labels), _n_features(model)
+    features = 4 * f + 4 * model.scale + 40 + 4 * k
+    mrf = 24 * k + 24 * ndim + 24
     return int(max(features, mrf)) + 4 + 4 + 1       # + the padded input, work, labels
+
+
+def batch_bytes(model: RecommendedModel, n_voxels: int) -> int:
+    """Temporaries of the classifier's batches (rows of features, bounded per batch)."""
+    return 16 * _n_features(model) * min(int(n_voxels), _BATCH)
+
+
+def _n_features(model) -> int:
+    return len(model.levels[model.scale].offset_) if model.levels else 1
 
 
 def parse_memory(text) -> int:
@@ -132,10 +141,11 @@ def plan_chunks(shape, model: RecommendedModel, memory: int, *, workers: int | N
     """
     d, h = len(shape), halo(model)
     bpv = bytes_per_voxel(model, d)
+    batch = batch_bytes(model, int(np.prod(shape)))
     counts = [workers] if workers else range(1, (os.cpu_count() or 1) + 1)
     best = None
     for w in counts:
-        free = (memory - reserved) / w
+        free = (memory - reserved) / w - batch
         core = _largest_core(shape, h, bpv, free, multiple)
         if core is None:
             continue
@@ -145,8 +155,8 @@ def plan_chunks(shape, model: RecommendedModel, memory: int, *, workers: int | N
             best = (score, core, w)
     if best is None:
         small = tuple(min(n, max(MIN_CORE, multiple)) for n in shape)
-        need = reserved + bpv * int(np.prod([c + 2 * h * (c < n) for c, n in
-                                             zip(small, shape)]))
+        need = reserved + batch + bpv * int(np.prod([c + 2 * h * (c < n) for c, n in
+                                                     zip(small, shape)]))
         raise ValueError(
             f"a chunk of {'x'.join(map(str, small))} voxels with its margin of {h} px needs "
             f"about {need / 1e9:.2f} GB with what this process holds, more than the budget "
@@ -156,6 +166,8 @@ def plan_chunks(shape, model: RecommendedModel, memory: int, *, workers: int | N
 
 def _largest_core(shape, h: int, bpv: int, free: float, multiple: int):
     """Largest near-cubic chunk whose padded block holds `free` bytes, or None."""
+    if free <= 0:
+        return None
     d = len(shape)
     fixed = [False] * d
     core = list(shape)
@@ -205,7 +217,7 @@ def predict_chunked(model: RecommendedModel, image, *, memory: int | None = None
     Returns
     -------
     labels : dask.array.Array
-        Labels (int32, int64 for labels >= 2^31) with the planned chunks; computing it
+        Labels in the smallest integer type that holds them, with the planned chunks; computing it
         chunk by chunk (``store``) holds one padded chunk per worker.
     plan : dict
         ``chunks``, ``workers``, ``halo``, ``bytes_per_voxel``, ``memory``.
@@ -214,7 +226,8 @@ def predict_chunked(model: RecommendedModel, image, *, memory: int | None = None
     ------
     ValueError
         A reference model, a dimensionality the model was not fitted for, an image of one
-        value, a budget too small for one chunk; NaN or infinity in a chunk when computed.
+        value or NaN/infinity (found by a pass over the chunks before any labelling), a
+        budget too small for one chunk.
 
     Examples
     --------
@@ -261,7 +274,7 @@ def predict_chunked(model: RecommendedModel, image, *, memory: int | None = None
     if field is None:
         _check_contrast(x, compute)
     work = x.map_blocks(_work_block, model, field, x.shape, dtype=np.float32)
-    dtype = label_dtype(model.labels)
+    dtype = _smallest_dtype(model.labels)
     labels = work.map_overlap(_labels_block, model=model, dtype=dtype, depth=h,
                               boundary="none", trim=True) if h else \
         work.map_blocks(_labels_block, model=model, dtype=dtype)
@@ -289,11 +302,8 @@ def _region(block_info):
 
 
 def _work_block(block, model, field, shape, block_info=None):
-    """Standardised (and bias-corrected) float32 block, as the in-memory path makes it."""
-    if block.dtype.kind == "f" and not np.isfinite(block).all():
-        start = [a for a, _ in block_info[0]["array-location"]]
-        raise ValueError(f"the image has NaN or infinite values in the chunk starting at "
-                         f"{start}; fill or mask them first (e.g. numpy.nan_to_num).")
+    """Standardised (and bias-corrected) float32 block, as the in-memory path makes it
+    (NaN and infinity were refused by the global minimum and maximum)."""
     work = model._standardised(np.asarray(block))
     if field is not None:
         work /= upsample_linear_at(field, shape, _region(block_info))
@@ -303,7 +313,14 @@ def _work_block(block, model, field, shape, block_info=None):
 def _labels_block(work, model):
     ll, _ = model._classify_standardised(work)
     cls = potts_mean_field(ll, model.beta, labels_only=True)
-    return model._class_values()[cls].astype(label_dtype(model.labels), copy=False)
+    return model._class_values()[cls].astype(_smallest_dtype(model.labels), copy=False)
+
+
+def _smallest_dtype(labels) -> np.dtype:
+    """The dtype labels are written in (as :func:`~napari_swa_imesh.io.label_array`)."""
+    from ..io import label_array
+
+    return label_array(np.asarray(labels + [0])).dtype
 
 
 def _bias_small(model, x, f, compute) -> np.ndarray:

@@ -63,7 +63,14 @@ def add_commands(subparsers) -> None:
     p.add_argument("--truth", default=None, help="ground truth to report Dice against")
     p.add_argument("--gray", action="store_true", help="convert an RGB picture to grey")
     p.add_argument("-o", "--output", required=True,
-                   help="labels file: .npy, .tif, .nii.gz or .png")
+                   help="labels file: .npy, .tif, .nii.gz or .png; with --model also a "
+                        ".zarr store, written chunk by chunk")
+    p.add_argument("--memory", default=None,
+                   help="with --model: work chunk by chunk within this budget for the whole "
+                        "process (e.g. 2GB; default half the memory available); Zarr "
+                        "images and outputs are always chunked")
+    p.add_argument("--workers", type=int, default=None,
+                   help="threads of the chunked path (default: planned from the budget)")
     p.add_argument("--force", action="store_true", help="replace existing output files")
     p.add_argument("--json", action="store_true", help="print one JSON object")
     p.set_defaults(func=_run_segment)
@@ -167,6 +174,7 @@ def _check_segment_args(args: argparse.Namespace) -> None:
 
 
 def _run_segment(args: argparse.Namespace) -> int:
+    from .._zarr_io import is_zarr
     from ..io import atomic_write, check_label_format, grid_affine, is_nifti, label_array, \
         read_affine, read_image, write_labels_to
     from ._metrics import evaluate
@@ -177,6 +185,12 @@ def _run_segment(args: argparse.Namespace) -> int:
     from ._tiles import tile_placement
 
     timer = StepTimer()
+    if args.model and _chunked_run(args):
+        return 0
+    if args.samples and (is_zarr(args.image) or args.memory or args.workers):
+        raise ValueError("fitting reads the whole image (--memory, --workers and Zarr images "
+                         "go with --model); fit on a crop that fits in memory with "
+                         "--model-out, then apply the model with --model.")
     _check_segment_args(args)
     with timer("read"):
         image, spacing = read_image(args.image, gray=args.gray)
@@ -244,6 +258,43 @@ def _run_segment(args: argparse.Namespace) -> int:
                   + f"  (mean {summary['mean_dice']:.3f})")
         print(f"labels written to {args.output}")
     return 0
+
+
+def _chunked_run(args: argparse.Namespace) -> bool:
+    """``segment --model`` chunk by chunk when :func:`~._apply.wants_chunks` says so;
+    False to run in memory."""
+    from ._apply import apply_model, wants_chunks
+    from ._chunked import parse_memory
+    from ._model_io import load_model
+
+    memory = parse_memory(args.memory) if args.memory is not None else None
+    if args.workers is not None and args.workers < 1:
+        raise ValueError(f"--workers must be 1 or more; got {args.workers}.")
+    model = load_model(args.model)
+    if not wants_chunks(args.image, args.output, model, memory=memory):
+        return False
+    whole = [f for f, v in (("--sieve", args.sieve), ("--tiles", args.tiles),
+                            ("--signatures", args.signatures), ("--truth", args.truth),
+                            ("--model-out", args.model_out), ("--res-plot", args.res_plot),
+                            ("--scale", args.scale is not None), ("--gray", args.gray))
+             if v]
+    if whole:
+        raise ValueError(f"{', '.join(whole)} need(s) the whole image in memory; drop "
+                         f"{'them' if len(whole) > 1 else 'it'} to segment chunk by chunk "
+                         "(a Zarr image or output, or --memory).")
+    summary = apply_model(args.image, model, args.output, memory=memory,
+                          workers=args.workers, force=args.force, chunked=True)
+    if args.json:
+        print_json(summary)
+    else:
+        plan = summary["plan"]
+        print(f"labels written to {args.output} chunk by chunk: chunks of "
+              f"{'x'.join(map(str, plan['chunks']))} voxels with a margin of {plan['halo']} "
+              f"px, {plan['workers']} thread(s), budget {plan['memory'] / 1e9:.2f} GB, "
+              f"{summary['seconds']:.1f} s")
+        for label, v in summary["volumes"].items():
+            print(f"  material {label}: {v['voxels']} voxels, volume {v['volume']:.6g}")
+    return True
 
 
 def _run_samples_from_truth(args: argparse.Namespace) -> int:
