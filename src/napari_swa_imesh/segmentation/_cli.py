@@ -76,6 +76,26 @@ def add_commands(subparsers) -> None:
     p.set_defaults(func=_run_segment)
 
     p = subparsers.add_parser(
+        "batch", help="segment a cohort of images with one saved model on dask.distributed",
+        description="Apply a saved model to many images, one task per image on a Dask "
+                    "cluster (a LocalCluster by default). Each labels file is "
+                    "OUTDIR/<stem>_labels<suffix> in the input's format, equal to a "
+                    "`segment --model` run of that image.")
+    p.add_argument("images", nargs="+", help="image files, Zarr stores, folders or globs")
+    p.add_argument("--model", required=True, help="a saved model (.npz)")
+    p.add_argument("-o", "--output", required=True, help="output folder (must exist)")
+    p.add_argument("--scheduler", default=None,
+                   help="address of a running Dask scheduler (default: a LocalCluster)")
+    p.add_argument("--workers", type=int, default=None,
+                   help="local worker processes (default: cores, at most one per image)")
+    p.add_argument("--memory", default=None,
+                   help="budget of the whole batch (e.g. 8GB), split between the workers")
+    p.add_argument("--retries", type=int, default=2, help="tries again per failed image")
+    p.add_argument("--force", action="store_true", help="replace existing labels files")
+    p.add_argument("--json", action="store_true", help="print one JSON object")
+    p.set_defaults(func=_run_batch)
+
+    p = subparsers.add_parser(
         "samples-from-truth", help="sample boxes from the largest homogeneous blocks of a truth",
         description="Write a samples JSON whose boxes are the largest homogeneous blocks of "
                     "each material in a ground-truth label image (its 2^d-tree).")
@@ -295,6 +315,77 @@ def _chunked_run(args: argparse.Namespace) -> bool:
         for label, v in summary["volumes"].items():
             print(f"  material {label}: {v['voxels']} voxels, volume {v['volume']:.6g}")
     return True
+
+
+def _run_batch(args: argparse.Namespace) -> int:
+    import os
+    import sys
+
+    from ..io import check_writable
+    from ._batch import connect, expand_inputs, output_for, run_batch
+    from ._chunked import default_memory, parse_memory
+    from ._model_io import load_model
+
+    timer = StepTimer()
+    images = expand_inputs(args.images)
+    load_model(args.model)                                   # a bad model fails here
+    if not os.path.isdir(args.output):
+        raise FileNotFoundError(f"output folder {args.output} does not exist; create it "
+                                "first.")
+    for p in images:
+        check_writable(output_for(p, args.output), force=args.force)
+    if args.workers is not None and args.workers < 1:
+        raise ValueError(f"--workers must be 1 or more; got {args.workers}.")
+    if args.retries < 0:
+        raise ValueError(f"--retries must be 0 or more; got {args.retries}.")
+    budget = parse_memory(args.memory) if args.memory else default_memory()
+    workers = args.workers or max(1, min(os.cpu_count() or 1, len(images)))
+
+    def progress(done, total, row):
+        bar = "#" * (20 * done // total)
+        what = "failed" if "error" in row else f"{row['seconds']:.1f} s"
+        print(f"[{bar:<20}] {done}/{total} {Path(row['image']).name}: {what}",
+              file=sys.stderr, flush=True)
+
+    with timer("connect"):
+        client = connect(args.scheduler, workers=workers, memory=budget // workers)
+    try:
+        n = len(client.scheduler_info().get("workers", {})) or workers
+        with timer("segment"):
+            rows = run_batch(images, args.model, args.output, client=client,
+                             force=args.force, memory=budget // n, retries=args.retries,
+                             progress=None if args.json else progress)
+    finally:
+        cluster = client.cluster
+        client.close()
+        if cluster is not None and not args.scheduler:
+            cluster.close()
+    failed = [r for r in rows if "error" in r]
+    if args.json:
+        print_json({"images": rows, "workers": n, "scheduler": args.scheduler or "local",
+                    "seconds": timer.seconds})
+    else:
+        print(_batch_table(rows))
+        print(f"{len(rows) - len(failed)} of {len(rows)} images segmented on {n} worker(s) "
+              f"in {timer.seconds['segment']:.1f} s")
+    if failed:
+        raise ValueError(f"{len(failed)} of {len(rows)} images failed ("
+                         f"{Path(failed[0]['image']).name}: {failed[0]['error']}); fix them "
+                         "and run the batch again for those.")
+    return 0
+
+
+def _batch_table(rows: list[dict]) -> str:
+    """Per image: labels file, seconds, and every material's volume."""
+    labels = sorted({int(k) for r in rows for k in r.get("volumes", {})})
+    head = ["image", "labels", "seconds"] + [f"volume {k}" for k in labels]
+    body = [[Path(r["image"]).name, Path(r["output"]).name,
+             "failed" if "error" in r else f"{r['seconds']:.2f}"]
+            + [f"{r['volumes'][k]['volume']:.6g}" if "volumes" in r else ""
+               for k in labels] for r in rows]
+    widths = [max(len(str(x)) for x in col) for col in zip(head, *body)]
+    return "\n".join("  ".join(str(x).ljust(w) for x, w in zip(line, widths))
+                     for line in [head, *body])
 
 
 def _run_samples_from_truth(args: argparse.Namespace) -> int:

@@ -1,0 +1,187 @@
+"""A cohort of images segmented with one saved model on ``dask.distributed``.
+
+One task per image (:func:`segment_one`, which is :func:`~._apply.apply_model`: the labels
+equal a one-by-one ``swa-imesh segment --model`` run), submitted to a ``LocalCluster`` of
+single-threaded worker processes or to an existing scheduler, each retried on failure.
+Nothing of our own schedules: placement, retries and lost workers are the scheduler's.
+
+Outputs are named after the inputs, in the input's format: ``scan01.npy`` ->
+``OUTDIR/scan01_labels.npy``, ``a.nii.gz`` -> ``a_labels.nii.gz``, a Zarr store -> a
+``_labels.zarr`` store; JPEG, which cannot hold labels exactly, gives PNG.
+"""
+
+from __future__ import annotations
+
+import glob
+from collections.abc import Callable, Sequence
+from pathlib import Path
+
+__all__ = ["expand_inputs", "output_for", "connect", "run_batch", "segment_one",
+           "CONNECT_SECONDS"]
+
+CONNECT_SECONDS = 5        # an address that does not answer fails after this
+_GLOB = set("*?[")
+
+
+def _stem_suffix(path: Path) -> tuple[str, str]:
+    name = path.name
+    for long in (".ome.zarr", ".nii.gz"):
+        if name.lower().endswith(long):
+            return name[:-len(long)], long
+    return path.stem, path.suffix
+
+
+def output_for(path, outdir) -> Path:
+    """``OUTDIR/<stem>_labels<suffix>`` in the input's format.
+
+    Examples
+    --------
+    >>> [output_for(p, "out").name for p in ("scan01.npy", "b.nii.gz", "c.ome.zarr", "d.jpg")]
+    ['scan01_labels.npy', 'b_labels.nii.gz', 'c_labels.zarr', 'd_labels.png']
+    """
+    stem, suffix = _stem_suffix(Path(path))
+    suffix = {".ome.zarr": ".zarr", ".jpg": ".png", ".jpeg": ".png"}.get(suffix.lower(),
+                                                                         suffix)
+    return Path(outdir) / f"{stem}_labels{suffix}"
+
+
+def expand_inputs(items: Sequence) -> list[Path]:
+    """Image paths from files, Zarr stores, folders (their images) and glob patterns.
+
+    Raises
+    ------
+    FileNotFoundError
+        An item that names nothing, or a pattern or folder without images.
+    ValueError
+        Two inputs with the same stem (their outputs would collide).
+    """
+    from ..io import IMAGE_SUFFIXES, image_suffix
+    from .._zarr_io import is_zarr
+
+    found: list[Path] = []
+    for item in map(str, items):
+        p = Path(item)
+        if _GLOB & set(item):
+            hits = [Path(h) for h in sorted(glob.glob(item))]
+        elif p.is_dir() and not is_zarr(p):
+            hits = sorted(c for c in p.iterdir() if is_zarr(c) or (
+                c.is_file() and image_suffix(c) in IMAGE_SUFFIXES))
+        elif p.exists():
+            hits = [p]
+        else:
+            raise FileNotFoundError(f"no image at {p}; check the path.")
+        if not hits:
+            raise FileNotFoundError(f"{item} holds no image ({', '.join(IMAGE_SUFFIXES)} "
+                                    "or .zarr); check the folder or pattern.")
+        found += hits
+    stems: dict[str, Path] = {}
+    for p in found:
+        stem = _stem_suffix(p)[0]
+        if stem in stems and stems[stem].resolve() != p.resolve():
+            raise ValueError(f"{stems[stem]} and {p} would both write {stem}_labels; rename "
+                             "one or run them in two batches.")
+        stems[stem] = p
+    return list(dict.fromkeys(p.resolve() for p in found))
+
+
+def connect(scheduler: str | None = None, *, workers: int = 2, memory: int | None = None):
+    """A ``distributed.Client``: on `scheduler`, else on a new ``LocalCluster``.
+
+    Parameters
+    ----------
+    scheduler : str, optional
+        Address of a running scheduler (``tcp://host:8786``).
+    workers : int
+        Single-threaded worker processes of the local cluster.
+    memory : int, optional
+        Memory limit of each local worker, bytes.
+
+    Raises
+    ------
+    ValueError
+        When the scheduler does not answer within :data:`CONNECT_SECONDS`.
+    """
+    import logging
+
+    from distributed import Client, LocalCluster
+
+    if scheduler:
+        try:
+            return Client(scheduler, timeout=f"{CONNECT_SECONDS}s")
+        except (OSError, TimeoutError, ValueError) as exc:
+            raise ValueError(f"no Dask scheduler answers at {scheduler} within "
+                             f"{CONNECT_SECONDS} s ({type(exc).__name__}); start one "
+                             "(`dask scheduler`) or leave --scheduler out to use a local "
+                             "cluster.") from exc
+    cluster = LocalCluster(n_workers=workers, threads_per_worker=1, processes=True,
+                           memory_limit=memory or "auto", dashboard_address=None,
+                           silence_logs=logging.ERROR)
+    return Client(cluster)
+
+
+def segment_one(image: str, model_path: str, output: str, *, force: bool = False,
+                memory: int | None = None) -> dict:
+    """One task: :func:`~._apply.apply_model` of the model file on one image (chunks, if
+    any, on this worker's own thread)."""
+    from ._apply import apply_model
+    from ._model_io import load_model
+
+    model = load_model(model_path)
+    return apply_model(image, model, output, memory=memory, force=force, workers=1,
+                       scheduler="sync")
+
+
+def run_batch(images: Sequence, model_path, outdir, *, client, force: bool = False,
+              memory: int | None = None, retries: int = 2,
+              progress: Callable[[int, int, dict], None] | None = None) -> list[dict]:
+    """Segment every image on the client's cluster; one row per image, in input order.
+
+    Parameters
+    ----------
+    images : sequence of Path
+        From :func:`expand_inputs`.
+    model_path : str or Path
+        The saved model (each worker loads it).
+    outdir : str or Path
+        An existing folder; outputs are :func:`output_for` each image.
+    client : distributed.Client
+    force : bool
+        Replace existing outputs (without it they are refused before any work).
+    memory : int, optional
+        Budget of each task (chunked images).
+    retries : int
+        Times the scheduler retries a failed task.
+    progress : callable, optional
+        Called as ``progress(done, total, row)`` when each image finishes.
+
+    Returns
+    -------
+    list of dict
+        :func:`~._apply.apply_model`'s summary per image, or ``image``, ``output`` and
+        ``error`` (one sentence) for an image that failed every try.
+    """
+    from distributed import as_completed
+
+    from ..io import check_writable
+
+    outdir = Path(outdir)
+    if not outdir.is_dir():
+        raise FileNotFoundError(f"output folder {outdir} does not exist; create it first.")
+    outputs = [output_for(p, outdir) for p in images]
+    for out in outputs:
+        check_writable(out, force=force)
+    futures = {client.submit(segment_one, str(p), str(model_path), str(out), force=force,
+                             memory=memory, retries=retries, pure=False,
+                             key=f"segment-{i}-{Path(p).name}"): i
+               for i, (p, out) in enumerate(zip(images, outputs))}
+    rows: list[dict | None] = [None] * len(outputs)
+    for done, fut in enumerate(as_completed(futures), 1):
+        i = futures[fut]
+        try:
+            rows[i] = fut.result()
+        except Exception as exc:  # the task's own sentence (bad image, full disk...)
+            rows[i] = {"image": str(images[i]), "output": str(outputs[i]),
+                       "error": f"{exc}"}
+        if progress is not None:
+            progress(done, len(outputs), rows[i])
+    return rows
