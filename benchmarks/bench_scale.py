@@ -23,7 +23,6 @@ from __future__ import annotations
 
 import argparse
 import json
-import subprocess
 import sys
 import tempfile
 import time
@@ -42,7 +41,7 @@ def _coarse(rng, side: int, cell: int, sigma: float = 1.0) -> np.ndarray:
 
 
 def make_volume(path: Path, side: int, *, seed: int = 0, slab: int = 32,
-                noise: float = 0.05, bias: float = 0.3, truth_path: Path | None = None):
+                noise: float = 0.08, bias: float = 0.3, truth_path: Path | None = None):
     """Write a side^3 float32 phantom to the Zarr store `path`, `slab` planes at a time."""
     import zarr
 
@@ -106,8 +105,8 @@ def bench_chunked(work: Path, side: int, crop: int, memory: str) -> None:
           f"{time.perf_counter() - t:.0f} s")
     truth = zarr.open_array(str(work / "truth.zarr"), mode="r")
     corner = (slice(0, 96),) * 3
-    model = RecommendedModel(bias_correction=True).fit(np.asarray(big[corner]), samples_from_truth(
-        np.asarray(truth[corner]).astype(np.int32)))
+    model = RecommendedModel(bias_correction=True).fit(
+        np.asarray(big[corner]), samples_from_truth(np.asarray(truth[corner]).astype(np.int32)))
     model.save(work / "m.npz", force=True)
     h = halo(model)
     print(f"model: scales {model.scale}..{model.finest_scale}, bias correction "

@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 import zarr
 
-from napari_swa_imesh._zarr_io import open_levels, open_lazy
+from napari_swa_imesh._zarr_io import open_lazy, open_levels
 from napari_swa_imesh.cli import main
 from napari_swa_imesh.data import tissue_phantom
 from napari_swa_imesh.segmentation import RecommendedModel, samples_from_truth

@@ -6,11 +6,15 @@ import numpy as np
 import pytest
 
 from napari_swa_imesh.data import tissue_phantom
-from napari_swa_imesh.segmentation import RecommendedModel, Samples, samples_from_truth
-from napari_swa_imesh.segmentation import _chunked
-from napari_swa_imesh.segmentation._chunked import (batch_bytes, bytes_per_voxel, halo,
-                                                    parse_memory, plan_chunks,
-                                                    predict_chunked)
+from napari_swa_imesh.segmentation import RecommendedModel, Samples, _chunked, samples_from_truth
+from napari_swa_imesh.segmentation._chunked import (
+    batch_bytes,
+    bytes_per_voxel,
+    halo,
+    parse_memory,
+    plan_chunks,
+    predict_chunked,
+)
 from napari_swa_imesh.segmentation._window_features import multiscale_features
 
 

@@ -22,8 +22,13 @@ from ._recommended import RecommendedModel
 __all__ = ["apply_model", "wants_chunks", "material_volumes"]
 
 
-def wants_chunks(image, output, model, *, memory: int | None = None) -> bool:
-    """Whether :func:`apply_model` works chunk by chunk (see the module docstring)."""
+def wants_chunks(image, output, model, *, memory: int | None = None,
+                 budget: int | None = None) -> bool:
+    """Whether :func:`apply_model` works chunk by chunk (see the module docstring).
+
+    `memory` is a budget the user asked for (then always chunked); `budget` only sets
+    what "too big for memory" means (default :func:`~._chunked.default_memory`).
+    """
     from .._zarr_io import is_zarr, open_lazy
 
     if is_zarr(image) or is_zarr(output) or memory is not None:
@@ -32,7 +37,7 @@ def wants_chunks(image, output, model, *, memory: int | None = None) -> bool:
         return False
     lazy, _ = open_lazy(image)
     need = lazy.size * (bytes_per_voxel(model, lazy.ndim) + lazy.dtype.itemsize + 4)
-    return need > default_memory()
+    return need > (default_memory() if budget is None else budget)
 
 
 def material_volumes(counts: dict[int, int], spacing) -> dict[int, dict]:
@@ -79,9 +84,18 @@ def apply_model(image, model, output, *, memory: int | None = None,
     FileNotFoundError, FileExistsError, ValueError
         A missing image, an existing output without `force`, bad input (one sentence).
     """
-    from ..io import (atomic_write, check_label_format, check_writable, image_suffix,
-                      is_store, label_array, read_affine, read_image, write_labels_to)
     from .._zarr_io import open_lazy, write_zarr_to
+    from ..io import (
+        atomic_write,
+        check_label_format,
+        check_writable,
+        image_suffix,
+        is_store,
+        label_array,
+        read_affine,
+        read_image,
+        write_labels_to,
+    )
 
     t0 = time.perf_counter()
     check_writable(output, force=force)

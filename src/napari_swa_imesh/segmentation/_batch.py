@@ -55,8 +55,8 @@ def expand_inputs(items: Sequence) -> list[Path]:
     ValueError
         Two inputs with the same stem (their outputs would collide).
     """
-    from ..io import IMAGE_SUFFIXES, image_suffix
     from .._zarr_io import is_zarr
+    from ..io import IMAGE_SUFFIXES, image_suffix
 
     found: list[Path] = []
     for item in map(str, items):
@@ -113,22 +113,29 @@ def connect(scheduler: str | None = None, *, workers: int = 2, memory: int | Non
                              f"{CONNECT_SECONDS} s ({type(exc).__name__}); start one "
                              "(`dask scheduler`) or leave --scheduler out to use a local "
                              "cluster.") from exc
-    cluster = LocalCluster(n_workers=workers, threads_per_worker=1, processes=True,
-                           memory_limit=memory or "auto", dashboard_address=None,
-                           silence_logs=logging.ERROR)
+    import dask
+
+    # each task is a few long numpy calls: the workers' stack sampler (every 10 ms, under
+    # the GIL) would only slow them down
+    with dask.config.set({"distributed.worker.profile.enabled": False}):
+        cluster = LocalCluster(n_workers=workers, threads_per_worker=1, processes=True,
+                               memory_limit=memory or "auto", dashboard_address=None,
+                               silence_logs=logging.ERROR)
     return Client(cluster)
 
 
 def segment_one(image: str, model_path: str, output: str, *, force: bool = False,
                 memory: int | None = None) -> dict:
-    """One task: :func:`~._apply.apply_model` of the model file on one image (chunks, if
-    any, on this worker's own thread)."""
-    from ._apply import apply_model
+    """One task: :func:`~._apply.apply_model` of the model file on one image, chunked when
+    a lone ``segment --model`` run would be (Zarr, or too big for `memory`), the chunks on
+    this worker's own thread."""
+    from ._apply import apply_model, wants_chunks
     from ._model_io import load_model
 
     model = load_model(model_path)
+    chunked = wants_chunks(image, output, model, budget=memory)
     return apply_model(image, model, output, memory=memory, force=force, workers=1,
-                       scheduler="sync")
+                       chunked=chunked, scheduler="sync")
 
 
 def run_batch(images: Sequence, model_path, outdir, *, client, force: bool = False,

@@ -32,15 +32,20 @@ import os
 import numpy as np
 
 from .._validation import label_dtype
-from ._bias import (class_mean_image, coarse_bias_field, grid_factor, upsample_linear,
-                    upsample_linear_at)
+from ._bias import (
+    class_mean_image,
+    coarse_bias_field,
+    grid_factor,
+    upsample_linear,
+    upsample_linear_at,
+)
 from ._classifiers import _CHUNK as _BATCH
 from ._mrf import SWEEPS, potts_mean_field
 from ._recommended import _FIELD_GRID, BIAS_ROUNDS, RecommendedModel
 from ._tiles import _axis_counts, block_mean, block_sum
 
-__all__ = ["halo", "bytes_per_voxel", "batch_bytes", "plan_chunks", "predict_chunked", "parse_memory",
-           "default_memory", "MRF_REACH", "MIN_CORE"]
+__all__ = ["halo", "bytes_per_voxel", "batch_bytes", "plan_chunks", "predict_chunked",
+           "parse_memory", "default_memory", "MRF_REACH", "MIN_CORE"]
 
 MRF_REACH = 2 + SWEEPS   # active set (1 px), grown by one (1 px), one px per sweep
 MIN_CORE = 16            # smallest chunk side worth the margin around it
@@ -266,6 +271,8 @@ def predict_chunked(model: RecommendedModel, image, *, memory: int | None = None
         core = tuple(min(n, max(multiple, c // multiple * multiple))
                      for c, n in zip(chunks, x.shape))
         workers = workers or 1
+    if compute.get("scheduler", "threads") == "threads":
+        compute = {**compute, "num_workers": compute.get("num_workers", workers)}
     h = halo(model)
     plan = {"chunks": core, "workers": workers, "halo": h, "memory": memory,
             "bytes_per_voxel": bytes_per_voxel(model, x.ndim)}
