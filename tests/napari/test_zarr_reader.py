@@ -74,3 +74,58 @@ def test_manifest_names_the_zarr_reader_for_folders():
     (reader,) = [r for r in manifest.contributions.readers
                  if r.command.endswith("get_zarr_reader")]
     assert reader.accepts_directories and reader.filename_patterns == ["*.zarr"]
+
+
+def _model_and_image(tmp_path):
+    from napari_swa_imesh.segmentation import RecommendedModel, Samples
+
+    rng = np.random.default_rng(3)
+    train = np.concatenate([rng.normal(0, 1, (48, 48)), rng.normal(4, 1, (48, 48))], 1)
+    model = RecommendedModel(max_scale=1, bias_correction=False).fit(train, Samples.from_dict(
+        {"boxes": [{"label": 1, "start": [0, 0], "stop": [48, 48]},
+                   {"label": 2, "start": [0, 48], "stop": [48, 96]}]}))
+    model.save(tmp_path / "m.npz")
+    image = np.where(np.add.outer(np.arange(120), np.arange(100)) % 50 < 25,
+                     rng.normal(0, 1, (120, 100)), rng.normal(4, 1, (120, 100)))
+    z = zarr.create_array(str(tmp_path / "img.zarr"), shape=image.shape, chunks=(32, 32),
+                          dtype="f4")
+    z[:] = image
+    return model, np.asarray(z[:])
+
+
+def test_chunked_steps_report_every_chunk(tmp_path):
+    from napari_swa_imesh._napari._chunked_classify import chunked_steps
+
+    model, image = _model_and_image(tmp_path)
+    gen = chunked_steps(da.from_zarr(str(tmp_path / "img.zarr")), model, chunks=(40, 50))
+    reports = []
+    while True:
+        try:
+            reports.append(next(gen))
+        except StopIteration as stop:
+            labels, plan = stop.value
+            break
+    assert reports[0][:2] == (0, 6) and reports[-1][:2] == (6, 6)
+    assert isinstance(labels, da.Array) and plan["chunks"] == (40, 50)
+    np.testing.assert_array_equal(labels.compute(), model.predict(image))
+
+
+def test_classify_widget_applies_a_model_to_a_lazy_layer(make_napari_viewer, qtbot,
+                                                         tmp_path):
+    from swa_napari_helpers import wait_idle
+
+    from napari_swa_imesh._napari._chunked_classify import CHUNKED_KEY
+    from napari_swa_imesh._napari._classify_widget import ClassifyWidget
+
+    model, image = _model_and_image(tmp_path)
+    viewer = make_napari_viewer()
+    ((data, kwargs, _),) = get_zarr_reader(tmp_path / "img.zarr")(tmp_path / "img.zarr")
+    layer = viewer.add_image(data, **kwargs)
+    widget = ClassifyWidget(viewer)
+    widget.load_model(tmp_path / "m.npz")
+    widget.image_combo.value = layer
+    widget.apply_model()
+    wait_idle(qtbot, widget)
+    labels = viewer.layers["img SWA labels"]
+    assert isinstance(labels.data, da.Array) and CHUNKED_KEY in labels.metadata
+    np.testing.assert_array_equal(np.asarray(labels.data), model.predict(image))
