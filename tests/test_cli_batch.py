@@ -80,6 +80,27 @@ def test_existing_outputs_unknown_schedulers_and_twins_exit_2(cohort, capsys, tm
         expand_inputs([str(tmp_path / "nothing*.npy")])
 
 
+def test_batch_meshes_each_image_in_its_frame(cohort, capsys, tmp_path):
+    import meshio
+
+    code, text, _ = run(capsys, "batch", "--model", cohort / "m.npz", "-o", tmp_path,
+                        cohort / "in" / "scan01.npy", "--mesh", ".vtu", "--json",
+                        "--workers", 1)
+    assert code == 0
+    (row,) = json.loads(text)["images"]
+    mesh = meshio.read(tmp_path / "scan01_mesh.vtu")
+    assert row["mesh"]["cells"] == len(mesh.cells[0].data) > 0
+    labels = np.load(tmp_path / "scan01_labels.npy")
+    # every voxel is meshed: the tetrahedra fill the 24 x 32 x 32 box of unit voxels
+    p = mesh.points[mesh.cells[0].data]
+    volume = np.abs(np.linalg.det(p[:, 1:] - p[:, :1])).sum() / 6
+    assert volume == pytest.approx(labels.size)
+    for material in (1, 2, 3):
+        cells = mesh.cell_data["material"][0] == material
+        got = np.abs(np.linalg.det(p[cells, 1:] - p[cells, :1])).sum() / 6
+        assert got == pytest.approx(row["volumes"][str(material)]["volume"])
+
+
 def test_summary_table_lists_file_seconds_and_volumes():
     from napari_swa_imesh.segmentation._cli import _batch_table
 

@@ -7,7 +7,9 @@ Nothing of our own schedules: placement, retries and lost workers are the schedu
 
 Outputs are named after the inputs, in the input's format: ``scan01.npy`` ->
 ``OUTDIR/scan01_labels.npy``, ``a.nii.gz`` -> ``a_labels.nii.gz``, a Zarr store -> a
-``_labels.zarr`` store; JPEG, which cannot hold labels exactly, gives PNG.
+``_labels.zarr`` store; JPEG, which cannot hold labels exactly, gives PNG. With a mesh
+suffix each task also meshes its labels (``OUTDIR/scan01_mesh.vtu``, in the image's
+frame: its spacing, or a NIfTI image's world).
 """
 
 from __future__ import annotations
@@ -16,7 +18,7 @@ import glob
 from collections.abc import Callable, Sequence
 from pathlib import Path
 
-__all__ = ["expand_inputs", "output_for", "connect", "run_batch", "segment_one",
+__all__ = ["expand_inputs", "output_for", "mesh_for", "connect", "run_batch", "segment_one",
            "CONNECT_SECONDS"]
 
 CONNECT_SECONDS = 5        # an address that does not answer fails after this
@@ -43,6 +45,17 @@ def output_for(path, outdir) -> Path:
     suffix = {".ome.zarr": ".zarr", ".jpg": ".png", ".jpeg": ".png"}.get(suffix.lower(),
                                                                          suffix)
     return Path(outdir) / f"{stem}_labels{suffix}"
+
+
+def mesh_for(path, outdir, suffix: str) -> Path:
+    """``OUTDIR/<stem>_mesh<suffix>``.
+
+    Examples
+    --------
+    >>> mesh_for("scan01.nii.gz", "out", ".vtu").name
+    'scan01_mesh.vtu'
+    """
+    return Path(outdir) / f"{_stem_suffix(Path(path))[0]}_mesh{suffix}"
 
 
 def expand_inputs(items: Sequence) -> list[Path]:
@@ -125,21 +138,47 @@ def connect(scheduler: str | None = None, *, workers: int = 2, memory: int | Non
 
 
 def segment_one(image: str, model_path: str, output: str, *, force: bool = False,
-                memory: int | None = None) -> dict:
+                memory: int | None = None, mesh: str | None = None,
+                exclude: Sequence[int] = ()) -> dict:
     """One task: :func:`~._apply.apply_model` of the model file on one image, chunked when
     a lone ``segment --model`` run would be (Zarr, or too big for `memory`), the chunks on
-    this worker's own thread."""
+    this worker's own thread; then, with `mesh` (a mesh file path), the IMESH mesh of the
+    labels (materials in `exclude` left out), written through ``mesh.write_mesh``."""
     from ._apply import apply_model, wants_chunks
     from ._model_io import load_model
 
     model = load_model(model_path)
     chunked = wants_chunks(image, output, model, budget=memory)
-    return apply_model(image, model, output, memory=memory, force=force, workers=1,
-                       chunked=chunked, scheduler="sync")
+    row = apply_model(image, model, output, memory=memory, force=force, workers=1,
+                      chunked=chunked, scheduler="sync")
+    if mesh:
+        row["mesh"] = _mesh_labels_file(image, output, mesh, exclude=exclude, force=force)
+    return row
+
+
+def _mesh_labels_file(image: str, labels_path: str, mesh_path: str, *, exclude,
+                      force: bool) -> dict:
+    """Mesh a written labels file (placed as the image: spacing, or a NIfTI affine)."""
+    from ..io import read_affine, read_image
+    from .._zarr_io import is_zarr, open_lazy
+    from ..mesh import mesh_labels, write_mesh
+
+    if is_zarr(labels_path):
+        lazy, spacing = open_lazy(labels_path)
+        labels = lazy.compute()
+    else:
+        labels, spacing = read_image(labels_path)
+    affine = read_affine(image)
+    mesh = mesh_labels(labels, exclude=list(exclude), spacing=None if affine is not None
+                       else spacing, affine=affine)
+    write_mesh(mesh, mesh_path, force=force)
+    return {"file": str(mesh_path), "points": int(len(mesh.points)),
+            "cells": int(len(mesh.cells))}
 
 
 def run_batch(images: Sequence, model_path, outdir, *, client, force: bool = False,
-              memory: int | None = None, retries: int = 2,
+              memory: int | None = None, retries: int = 2, mesh: str | None = None,
+              exclude: Sequence[int] = (),
               progress: Callable[[int, int, dict], None] | None = None) -> list[dict]:
     """Segment every image on the client's cluster; one row per image, in input order.
 
@@ -158,6 +197,11 @@ def run_batch(images: Sequence, model_path, outdir, *, client, force: bool = Fal
         Budget of each task (chunked images).
     retries : int
         Times the scheduler retries a failed task.
+    mesh : str, optional
+        A mesh suffix (``.vtu``, ``.msh``, ...): also mesh each image's labels into
+        ``OUTDIR/<stem>_mesh<suffix>`` (:func:`mesh_for`).
+    exclude : sequence of int
+        Materials the meshes leave out.
     progress : callable, optional
         Called as ``progress(done, total, row)`` when each image finishes.
 
@@ -175,12 +219,14 @@ def run_batch(images: Sequence, model_path, outdir, *, client, force: bool = Fal
     if not outdir.is_dir():
         raise FileNotFoundError(f"output folder {outdir} does not exist; create it first.")
     outputs = [output_for(p, outdir) for p in images]
-    for out in outputs:
+    meshes = [mesh_for(p, outdir, mesh) if mesh else None for p in images]
+    for out in outputs + [m for m in meshes if m]:
         check_writable(out, force=force)
     futures = {client.submit(segment_one, str(p), str(model_path), str(out), force=force,
-                             memory=memory, retries=retries, pure=False,
+                             memory=memory, mesh=None if m is None else str(m),
+                             exclude=tuple(exclude), retries=retries, pure=False,
                              key=f"segment-{i}-{Path(p).name}"): i
-               for i, (p, out) in enumerate(zip(images, outputs))}
+               for i, (p, out, m) in enumerate(zip(images, outputs, meshes))}
     rows: list[dict | None] = [None] * len(outputs)
     for done, fut in enumerate(as_completed(futures), 1):
         i = futures[fut]

@@ -91,6 +91,11 @@ def add_commands(subparsers) -> None:
     p.add_argument("--memory", default=None,
                    help="budget of the whole batch (e.g. 8GB), split between the workers")
     p.add_argument("--retries", type=int, default=2, help="tries again per failed image")
+    p.add_argument("--mesh", default=None, metavar="SUFFIX",
+                   help="also mesh each image's labels into OUTDIR/<stem>_mesh<SUFFIX> "
+                        "(.vtu, .msh, .xdmf, .inp, ...)")
+    p.add_argument("--exclude", type=int, nargs="*", default=[],
+                   help="materials the meshes leave out")
     p.add_argument("--force", action="store_true", help="replace existing labels files")
     p.add_argument("--json", action="store_true", help="print one JSON object")
     p.set_defaults(func=_run_batch)
@@ -322,7 +327,7 @@ def _run_batch(args: argparse.Namespace) -> int:
     import sys
 
     from ..io import check_writable
-    from ._batch import connect, expand_inputs, output_for, run_batch
+    from ._batch import connect, expand_inputs, mesh_for, output_for, run_batch
     from ._chunked import default_memory, parse_memory
     from ._model_io import load_model
 
@@ -332,8 +337,18 @@ def _run_batch(args: argparse.Namespace) -> int:
     if not os.path.isdir(args.output):
         raise FileNotFoundError(f"output folder {args.output} does not exist; create it "
                                 "first.")
+    if args.mesh:
+        from ..mesh._export import MESH_SUFFIXES
+
+        if args.mesh not in MESH_SUFFIXES:
+            raise ValueError(f"--mesh takes a mesh suffix ({', '.join(MESH_SUFFIXES)}); got "
+                             f"{args.mesh!r}.")
+    if args.exclude and not args.mesh:
+        raise ValueError("--exclude says what the meshes leave out; add --mesh SUFFIX.")
     for p in images:
         check_writable(output_for(p, args.output), force=args.force)
+        if args.mesh:
+            check_writable(mesh_for(p, args.output, args.mesh), force=args.force)
     if args.workers is not None and args.workers < 1:
         raise ValueError(f"--workers must be 1 or more; got {args.workers}.")
     if args.retries < 0:
@@ -354,6 +369,7 @@ def _run_batch(args: argparse.Namespace) -> int:
         with timer("segment"):
             rows = run_batch(images, args.model, args.output, client=client,
                              force=args.force, memory=budget // n, retries=args.retries,
+                             mesh=args.mesh, exclude=args.exclude,
                              progress=None if args.json else progress)
     finally:
         cluster = client.cluster
