@@ -159,8 +159,8 @@ def segment_one(image: str, model_path: str, output: str, *, force: bool = False
 def _mesh_labels_file(image: str, labels_path: str, mesh_path: str, *, exclude,
                       force: bool) -> dict:
     """Mesh a written labels file (placed as the image: spacing, or a NIfTI affine)."""
-    from ..io import read_affine, read_image
     from .._zarr_io import is_zarr, open_lazy
+    from ..io import read_affine, read_image
     from ..mesh import mesh_labels, write_mesh
 
     if is_zarr(labels_path):
