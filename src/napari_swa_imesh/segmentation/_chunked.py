@@ -39,10 +39,10 @@ from ._bias import (
     upsample_linear,
     upsample_linear_at,
 )
-from ._classifiers import _CHUNK as _BATCH
+from ._classifiers import PREDICT_BATCH
 from ._mrf import SWEEPS, potts_mean_field
-from ._recommended import _FIELD_GRID, BIAS_ROUNDS, RecommendedModel
-from ._tiles import _axis_counts, block_mean, block_sum
+from ._recommended import BIAS_ROUNDS, FIELD_GRID, RecommendedModel
+from ._tiles import block_counts, block_mean, block_sum
 
 __all__ = ["halo", "bytes_per_voxel", "batch_bytes", "plan_chunks", "predict_chunked",
            "parse_memory", "default_memory", "MRF_REACH", "MIN_CORE"]
@@ -83,7 +83,7 @@ def bytes_per_voxel(model: RecommendedModel, ndim: int) -> int:
 
 def batch_bytes(model: RecommendedModel, n_voxels: int) -> int:
     """Temporaries of the classifier's batches (rows of features, bounded per batch)."""
-    return 16 * _n_features(model) * min(int(n_voxels), _BATCH)
+    return 16 * _n_features(model) * min(int(n_voxels), PREDICT_BATCH)
 
 
 def _n_features(model) -> int:
@@ -338,7 +338,7 @@ def _bias_small(model, x, f, compute) -> np.ndarray:
     shape = x.shape
     if f == 0:
         # the in-memory path labels a strided copy: the same copy, read chunk by chunk
-        step = max(1, min(shape) // _FIELD_GRID)
+        step = max(1, min(shape) // FIELD_GRID)
         idx = [np.arange(0, n, step) for n in shape]
         sub, lo, hi = dask.compute(x[tuple(slice(None, None, step) for _ in shape)],
                                    x.min(), x.max(), **compute)
@@ -360,7 +360,7 @@ def _bias_small(model, x, f, compute) -> np.ndarray:
     # a finer level labels every voxel in memory: block sums of I mu and mu^2 over the
     # chunks (chunk sides are multiples of the grid cell, so every cell is in one chunk)
     factor = grid_factor(shape)
-    counts = _axis_counts(shape, factor)
+    counts = block_counts(shape, factor)
     small = None
     for _ in range(BIAS_ROUNDS):
         work = x.map_blocks(_work_block, model, small, shape, dtype=np.float32)

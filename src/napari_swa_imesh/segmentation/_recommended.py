@@ -43,7 +43,7 @@ from ._samples import Material, Samples
 from ._tiles import majority_tiles
 from ._window_features import feature_levels, multiscale_features, window
 
-__all__ = ["RecommendedModel", "RECOMMENDED_METHOD", "BIAS_ROUNDS"]
+__all__ = ["RecommendedModel", "RECOMMENDED_METHOD", "BIAS_ROUNDS", "FIELD_GRID"]
 
 RECOMMENDED_METHOD = "recommended"
 BIAS_ROUNDS = 2         # field estimates per fit or prediction: the second one labels the
@@ -53,7 +53,7 @@ DEFAULT_TOP = 6         # the RES suggestion is capped here (65-px windows) ...
 NO_RES_TOP = 2          # ... and without a suggestion (too few tiles) levels go to 2
 AUTO_GAIN = 0.01        # "auto" bias correction: kept if it shrinks the within-material
 #                         variance by 1 % (measured 1.6-3 % with bias, < 0.6 % without)
-_FIELD_GRID = 64        # pixel-value level: label ~64 px along the shortest side for the field
+FIELD_GRID = 64         # pixel-value level: label ~64 px along the shortest side for the field
 _SLAB = 1 << 20         # pixels per slab when standardising (bounds float64 temporaries)
 _TOP_FEATURES = 8       # features listed by summary()
 
@@ -318,7 +318,7 @@ class RecommendedModel(SegmentationModel):
         smooth anyway (this keeps it cheap on large volumes).
         """
         level = self.finest_scale
-        step = max(1, min(base.shape) // _FIELD_GRID) if level == 0 else 1
+        step = max(1, min(base.shape) // FIELD_GRID) if level == 0 else 1
         sub = tuple(slice(None, None, step) for _ in base.shape)
         labels = self._predict_level(work[sub], level)
         field = estimate_bias_field(base[sub], labels, self.class_means)
