@@ -6,8 +6,9 @@ Run:  python benchmarks/bench_scale.py [--side 512] [--crop 160] [--memory 2.5GB
 
 1. A ``side``^3 float32 volume (three materials, noise, a smooth 30 % bias) is generated
    slab by slab into a Zarr store; a model is fitted on the first 96^3 box along the
-   diagonal that holds every material (at 512^3: the corner). ``swa-imesh segment BIG.zarr --model M.npz -o OUT.zarr --memory 2.5GB``
-   runs in a child process whose peak RSS, summed over the process tree, is sampled every 20 ms. The in-memory
+   diagonal that holds every material (at 512^3: the corner). ``swa-imesh segment
+   BIG.zarr --model M.npz -o OUT.zarr --memory 2.5GB`` runs in a child process whose peak
+   RSS, summed over the process tree, is sampled every 20 ms. The in-memory
    path (``segment CROP.npy --model M.npz -o CROP.npy``) runs on a ``crop``^3 centre
    crop. Printed: the peak against the budget; agreement of the chunked labels with the
    in-memory labels of the crop, away from the crop's faces (by the model's margin), and
