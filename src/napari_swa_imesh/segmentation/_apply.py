@@ -111,8 +111,9 @@ def apply_model(image, model, output, *, memory: int | None = None,
     else:
         if not isinstance(model, RecommendedModel):
             raise ValueError("chunked segmentation applies models of the recommended "
-                             "method; this is a reference (tile) model: write the labels "
-                             "to a .npy/.tif/.nii.gz file without --memory.")
+                             "method; this is a reference (tile) model: apply it in memory "
+                             "to a .npy/.tif/.nii.gz image, without --memory and with a "
+                             ".npy/.tif/.nii.gz output.")
         lazy, spacing = open_lazy(image)
         held = 0 if is_store(output) else lazy.size * np.dtype(
             label_dtype(model.labels)).itemsize
