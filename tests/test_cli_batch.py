@@ -101,6 +101,26 @@ def test_batch_meshes_each_image_in_its_frame(cohort, capsys, tmp_path):
         assert got == pytest.approx(row["volumes"][str(material)]["volume"])
 
 
+def test_zarr_inputs_are_labelled_chunk_by_chunk_on_the_workers(cohort, capsys, tmp_path):
+    import zarr
+
+    image = np.load(cohort / "in" / "scan02.npy")
+    z = zarr.create_array(str(tmp_path / "scan02.zarr"), shape=image.shape,
+                          chunks=(8, 16, 16), dtype=image.dtype)
+    z[:] = image
+    (tmp_path / "out").mkdir()
+    code, text, _ = run(capsys, "batch", "--model", cohort / "m.npz", "-o", tmp_path / "out",
+                        tmp_path / "scan02.zarr", "--workers", 1, "--json")
+    assert code == 0
+    (row,) = json.loads(text)["images"]
+    assert row["chunked"] and row["output"].endswith("scan02_labels.zarr")
+    assert run(capsys, "segment", cohort / "in" / "scan02.npy", "--model", cohort / "m.npz",
+               "-o", tmp_path / "alone.npy")[0] == 0
+    np.testing.assert_array_equal(
+        zarr.open_array(str(tmp_path / "out" / "scan02_labels.zarr"), mode="r")[:],
+        np.load(tmp_path / "alone.npy"))
+
+
 def test_summary_table_lists_file_seconds_and_volumes():
     from napari_swa_imesh.segmentation._cli import _batch_table
 
