@@ -131,3 +131,32 @@ def test_summary_table_lists_file_seconds_and_volumes():
     assert lines[0].split() == ["image", "labels", "seconds", "volume", "1", "volume", "3"]
     assert lines[1].split() == ["a.npy", "a_labels.npy", "1.23", "20", "2"]
     assert lines[2].split() == ["b.tif", "b_labels.tif", "failed"]
+
+
+def test_the_scheduler_retries_a_failed_image(cohort, tmp_path, monkeypatch):
+    from distributed import Client, LocalCluster
+
+    from napari_swa_imesh.segmentation import _batch
+
+    log = tmp_path / "tries.txt"           # the task is pickled: count on disk
+    real = _batch.segment_one
+
+    def flaky(image, *args, **kwargs):      # a worker lost once, as on a busy cluster
+        with open(log, "a") as fh:
+            fh.write("try\n")
+        if log.read_text().count("try") == 1:
+            raise OSError("worker lost")
+        return real(image, *args, **kwargs)
+
+    monkeypatch.setattr(_batch, "segment_one", flaky)
+    image = cohort / "in" / "scan00.npy"
+    (tmp_path / "out").mkdir()
+    with LocalCluster(n_workers=1, threads_per_worker=1, processes=False,
+                      dashboard_address=None) as cluster, Client(cluster) as client:
+        (row,) = _batch.run_batch([image], cohort / "m.npz", tmp_path / "out",
+                                  client=client, retries=1)
+        assert "error" not in row and log.read_text().count("try") == 2
+        log.unlink()
+        (row,) = _batch.run_batch([image], cohort / "m.npz", tmp_path / "out",
+                                  client=client, retries=0, force=True)
+        assert row["error"] == "worker lost" and log.read_text().count("try") == 1

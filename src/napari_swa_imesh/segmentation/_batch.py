@@ -15,6 +15,7 @@ frame: its spacing, or a NIfTI image's world).
 from __future__ import annotations
 
 import glob
+import uuid
 from collections.abc import Callable, Sequence
 from pathlib import Path
 
@@ -213,6 +214,9 @@ def run_batch(images: Sequence, model_path, outdir, *, client, force: bool = Fal
     """
     from distributed import as_completed
 
+    # keys name the image and are new each run: a scheduler keeps results of a key it
+    # still holds, which would hand back an earlier run's row
+
     from ..io import check_writable
 
     outdir = Path(outdir)
@@ -225,7 +229,7 @@ def run_batch(images: Sequence, model_path, outdir, *, client, force: bool = Fal
     futures = {client.submit(segment_one, str(p), str(model_path), str(out), force=force,
                              memory=memory, mesh=None if m is None else str(m),
                              exclude=tuple(exclude), retries=retries, pure=False,
-                             key=f"segment-{i}-{Path(p).name}"): i
+                             key=f"segment-{Path(p).name}-{uuid.uuid4().hex[:12]}"): i
                for i, (p, out, m) in enumerate(zip(images, outputs, meshes))}
     rows: list[dict | None] = [None] * len(outputs)
     for done, fut in enumerate(as_completed(futures), 1):
