@@ -216,7 +216,6 @@ def run_batch(images: Sequence, model_path, outdir, *, client, force: bool = Fal
 
     # keys name the image and are new each run: a scheduler keeps results of a key it
     # still holds, which would hand back an earlier run's row
-
     from ..io import check_writable
 
     outdir = Path(outdir)
