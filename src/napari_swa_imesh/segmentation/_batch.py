@@ -214,8 +214,6 @@ def run_batch(images: Sequence, model_path, outdir, *, client, force: bool = Fal
     """
     from distributed import as_completed
 
-    # keys name the image and are new each run: a scheduler keeps results of a key it
-    # still holds, which would hand back an earlier run's row
     from ..io import check_writable
 
     outdir = Path(outdir)
@@ -225,6 +223,8 @@ def run_batch(images: Sequence, model_path, outdir, *, client, force: bool = Fal
     meshes = [mesh_for(p, outdir, mesh) if mesh else None for p in images]
     for out in outputs + [m for m in meshes if m]:
         check_writable(out, force=force)
+    # keys name the image and are new each run: a scheduler keeps results of a key it
+    # still holds, which would hand back an earlier run's row
     futures = {client.submit(segment_one, str(p), str(model_path), str(out), force=force,
                              memory=memory, mesh=None if m is None else str(m),
                              exclude=tuple(exclude), retries=retries, pure=False,
