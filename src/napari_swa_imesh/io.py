@@ -39,7 +39,7 @@ def check_writable(path, *, force: bool = False) -> Path:
     FileExistsError
         `path` exists and `force` is false.
     IsADirectoryError
-        `path` is a folder.
+        `path` is a folder, other than a store (:func:`is_store`).
     FileNotFoundError
         Its folder does not exist.
     """
