@@ -135,7 +135,14 @@ def connect(scheduler: str | None = None, *, workers: int = 2, memory: int | Non
         cluster = LocalCluster(n_workers=workers, threads_per_worker=1, processes=True,
                                memory_limit=memory or "auto", dashboard_address=None,
                                silence_logs=logging.ERROR)
-    return Client(cluster)
+    client = Client(cluster)
+    client.run(_load_package)              # imports belong to starting the cluster
+    return client
+
+
+def _load_package() -> None:
+    from . import _apply, _model_io  # noqa: F401
+
 
 
 def segment_one(image: str, model_path: str, output: str, *, force: bool = False,
