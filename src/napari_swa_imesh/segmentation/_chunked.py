@@ -1,8 +1,9 @@
 """A saved recommended model applied chunk by chunk on Dask: images larger than memory.
 
 Every step of :meth:`RecommendedModel.predict` but the bias field is local, so each chunk
-is classified with a margin (``dask.array.map_overlap``, no padding at the image's own
-faces) of :func:`halo` px, the exact reach of one label (axes below are per axis):
+is classified with a margin of :func:`halo` px (clipped at the image's own faces: what
+``dask.array.map_overlap`` with ``boundary="none"`` gives), the exact reach of one label
+(axes below are per axis):
 
 * the features of level j see 2^j px (window half-width 2^(j-1), plus the Haar details
   of level j-1, 2^(j-1) px);
@@ -12,7 +13,11 @@ faces) of :func:`halo` px, the exact reach of one label (axes below are per axis
   by one (2 px), then each of the :data:`~._mrf.SWEEPS` sweeps reads the face neighbours
   (1 px each): 2 + SWEEPS px.
 
-Inside the margin a chunk's labels are the whole image's (tested on tiny chunks).
+Inside the margin a chunk's labels are the whole image's (tested on tiny chunks). Each
+task reads its own padded window from the store's chunks: ``map_overlap`` itself keeps
+every input chunk alive while a neighbour still needs a slice of it (the slices are
+views), which held a slab of the volume (4 GB for a 2.5 GB budget at 1024^3); windows
+cost some re-reading of the margins instead, and memory is one padded chunk per worker.
 
 The global steps: the intensity standardisation is the model's own (offset and scale fixed
 at training), so it is pointwise; the bias field is estimated as in memory, on a
@@ -31,7 +36,6 @@ import os
 
 import numpy as np
 
-from .._validation import label_dtype
 from ._bias import (
     class_mean_image,
     coarse_bias_field,
@@ -276,16 +280,62 @@ def predict_chunked(model: RecommendedModel, image, *, memory: int | None = None
     h = halo(model)
     plan = {"chunks": core, "workers": workers, "halo": h, "memory": memory,
             "bytes_per_voxel": bytes_per_voxel(model, x.ndim)}
-    x = x.rechunk(core)
-    field = _bias_small(model, x, f, compute) if model.bias_correction else None
+    field = _bias_small(model, x, f, core, compute) if model.bias_correction else None
     if field is None:
         _check_contrast(x, compute)
-    work = x.map_blocks(_work_block, model, field, x.shape, dtype=np.float32)
+    window = _Window(image if isinstance(image, np.ndarray) else x)
     dtype = _smallest_dtype(model.labels)
-    labels = work.map_overlap(_labels_block, model=model, dtype=dtype, depth=h,
-                              boundary="none", trim=True) if h else \
-        work.map_blocks(_labels_block, model=model, dtype=dtype)
+    labels = _template(x.shape, core).map_blocks(
+        _labels_direct, window=window, model=model, field=field, margin=h, dtype=dtype,
+        meta=np.empty((0,) * x.ndim, dtype))
     return labels, plan
+
+
+class _Window:
+    """Reads a padded window of the image inside a task, from the store's own chunks (a
+    Dask array is computed there, synchronously: only the chunks the window touches)."""
+
+    def __init__(self, source):
+        self.source = source
+
+    def __call__(self, lo, hi) -> np.ndarray:
+        part = self.source[tuple(slice(a, b) for a, b in zip(lo, hi))]
+        if hasattr(part, "compute"):
+            part = part.compute(scheduler="sync")
+        return np.asarray(part)
+
+
+def _template(shape, core):
+    """A cheap array whose blocks are the chunks (each task reads its own window)."""
+    import dask.array as da
+
+    return da.empty(shape, chunks=core, dtype=np.uint8)
+
+
+def _padded(block_info, margin: int):
+    """(lo, hi) of the chunk grown by `margin` and clipped at the image's faces, and the
+    slices of the chunk inside that window."""
+    loc, shape = block_info[0]["array-location"], block_info[0]["shape"]
+    lo = [max(0, a - margin) for a, _ in loc]
+    hi = [min(n, b + margin) for (_, b), n in zip(loc, shape)]
+    inner = tuple(slice(a - low, b - low) for (a, b), low in zip(loc, lo))
+    return lo, hi, inner, shape
+
+
+def _work_window(window, model, field, lo, hi, shape) -> np.ndarray:
+    """Standardised (and bias-corrected) float32 window, as the in-memory path makes it
+    (NaN and infinity were refused by the global minimum and maximum)."""
+    work = model._standardised(window(lo, hi))
+    if field is not None:
+        work /= upsample_linear_at(field, shape, [np.arange(a, b) for a, b in zip(lo, hi)])
+    return work
+
+
+def _labels_direct(_, window, model, field, margin, block_info=None):
+    """Labels of one chunk: its window with the margin, classified, the chunk cut out
+    (what ``map_overlap`` with ``boundary="none"`` computes, without holding neighbours)."""
+    lo, hi, inner, shape = _padded(block_info, margin)
+    return _labels_block(_work_window(window, model, field, lo, hi, shape), model)[inner]
 
 
 def _check_contrast(x, compute) -> None:
@@ -304,19 +354,6 @@ def _refuse_flat(lo, hi) -> None:
                          "nothing to segment. Check that the right file or channel was given.")
 
 
-def _region(block_info):
-    return [np.arange(a, b) for a, b in block_info[0]["array-location"]]
-
-
-def _work_block(block, model, field, shape, block_info=None):
-    """Standardised (and bias-corrected) float32 block, as the in-memory path makes it
-    (NaN and infinity were refused by the global minimum and maximum)."""
-    work = model._standardised(np.asarray(block))
-    if field is not None:
-        work /= upsample_linear_at(field, shape, _region(block_info))
-    return work
-
-
 def _labels_block(work, model):
     ll, _ = model._classify_standardised(work)
     cls = potts_mean_field(ll, model.beta, labels_only=True)
@@ -330,7 +367,7 @@ def _smallest_dtype(labels) -> np.dtype:
     return label_array(np.asarray(labels + [0])).dtype
 
 
-def _bias_small(model, x, f, compute) -> np.ndarray:
+def _bias_small(model, x, f, core, compute) -> np.ndarray:
     """The field on a small grid whose linear interpolation to ``x.shape`` is the
     in-memory field (both rounds of :data:`BIAS_ROUNDS`)."""
     import dask
@@ -361,32 +398,28 @@ def _bias_small(model, x, f, compute) -> np.ndarray:
     # chunks (chunk sides are multiples of the grid cell, so every cell is in one chunk)
     factor = grid_factor(shape)
     counts = block_counts(shape, factor)
+    template = _template(shape, core)
+    out_chunks = ((2,),) + tuple(tuple(-(-c // factor) for c in cs) for cs in template.chunks)
+    window = _Window(x)
     small = None
     for _ in range(BIAS_ROUNDS):
-        work = x.map_blocks(_work_block, model, small, shape, dtype=np.float32)
-        labels = work.map_overlap(_level_block, model=model, level=f,
-                                  dtype=label_dtype(model.labels),
-                                  depth=1 << f, boundary="none", trim=True)
-        base = x.map_blocks(_work_block, model, None, shape, dtype=np.float32)
-        sums = _block_sums(base, labels, model, factor)
-        num, den = dask.compute(*sums, **compute)
+        sums = template.map_blocks(_sums_direct, window=window, model=model, field=small,
+                                   level=f, factor=factor, chunks=out_chunks, new_axis=0,
+                                   dtype=np.float64, meta=np.empty((0,) * (x.ndim + 1)))
+        num, den = sums.compute(**compute)
         small = coarse_bias_field(num / counts, den / counts)
     return small
 
 
-def _level_block(work, model, level):
-    return model._predict_level(work, level).astype(label_dtype(model.labels), copy=False)
-
-
-def _block_sums(base, labels, model, factor):
-    """Dask arrays of the grid-cell sums of ``base * mu`` and ``mu^2`` (mu: class means)."""
-    import dask.array as da
-
-    out_chunks = tuple(tuple(-(-c // factor) for c in cs) for cs in base.chunks)
-
-    def sums(b, lab, which):
-        mu = class_mean_image(lab, model.class_means)
-        return block_sum(b * mu if which == 0 else mu * mu, factor, dtype=np.float64)
-
-    return tuple(da.map_blocks(sums, base, labels, w, chunks=out_chunks, dtype=np.float64)
-                 for w in (0, 1))
+def _sums_direct(_, window, model, field, level, factor, block_info=None):
+    """Grid-cell sums of ``I mu`` and ``mu^2`` over one chunk, mu the class means of the
+    labels of `level` (margin 2^level: its features' reach) of the image corrected by
+    `field`; I the uncorrected standardised image (as :meth:`_bias_field` takes them)."""
+    lo, hi, inner, shape = _padded(block_info, 1 << level)
+    base = _work_window(window, model, None, lo, hi, shape)
+    work = base if field is None else base / upsample_linear_at(
+        field, shape, [np.arange(a, b) for a, b in zip(lo, hi)])
+    mu = class_mean_image(model._predict_level(work, level)[inner], model.class_means)
+    base = base[inner]
+    return np.stack([block_sum(base * mu, factor, dtype=np.float64),
+                     block_sum(mu * mu, factor, dtype=np.float64)])
