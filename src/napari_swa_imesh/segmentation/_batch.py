@@ -141,7 +141,8 @@ def connect(scheduler: str | None = None, *, workers: int = 2, memory: int | Non
 
 
 def _load_package() -> None:
-    from . import _apply, _model_io  # noqa: F401
+    from ._apply import apply_model  # noqa: F401
+    from ._model_io import load_model  # noqa: F401
 
 
 
