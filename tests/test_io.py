@@ -53,3 +53,31 @@ def test_gray_converts_rgb(tmp_path):
     assert img.shape == (8, 9, 3)
     gray, sp = read_image(tmp_path / "c.png", gray=True)
     assert gray.shape == (8, 9) and sp == (1.0, 1.0)
+
+
+def test_atomic_write_moves_a_store_folder_into_place_and_replaces_it_whole(tmp_path):
+    from napari_swa_imesh.io import atomic_write
+
+    target = tmp_path / "labels.zarr"
+    with atomic_write([target]) as (tmp,):
+        assert tmp.parent.parent == tmp_path and not target.exists()
+        (tmp / "c").mkdir(parents=True)
+        (tmp / "c" / "0").write_text("first")
+    assert (target / "c" / "0").read_text() == "first"
+    with pytest.raises(FileExistsError, match="already exists"):
+        with atomic_write([target]) as (tmp,):
+            tmp.mkdir()
+    with pytest.raises(RuntimeError, match="boom"):
+        with atomic_write([target], force=True) as (tmp,):
+            (tmp / "c").mkdir(parents=True)
+            raise RuntimeError("boom")
+    assert (target / "c" / "0").read_text() == "first"
+    with atomic_write([target], force=True) as (tmp,):
+        tmp.mkdir()
+        (tmp / "new").write_text("second")
+    assert sorted(p.name for p in target.iterdir()) == ["new"]
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["labels.zarr"]
+    (tmp_path / "plain").mkdir()
+    with pytest.raises(IsADirectoryError, match="is a folder"):
+        with atomic_write([tmp_path / "plain"], force=True) as (tmp,):
+            pass

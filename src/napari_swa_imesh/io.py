@@ -24,7 +24,7 @@ from ._validation import normalize_spacing
 
 __all__ = ["read_image", "read_affine", "is_nifti", "grid_affine", "write_labels",
            "write_labels_to", "label_array", "check_label_format", "image_suffix",
-           "IMAGE_SUFFIXES", "LABEL_SUFFIXES", "check_writable", "atomic_write",
+           "IMAGE_SUFFIXES", "LABEL_SUFFIXES", "check_writable", "atomic_write", "is_store",
            "check_figure_path", "write_figure"]
 
 LABEL_SUFFIXES = (".npy", ".tif", ".tiff", ".nii", ".nii.gz", ".png")
@@ -39,12 +39,12 @@ def check_writable(path, *, force: bool = False) -> Path:
     FileExistsError
         `path` exists and `force` is false.
     IsADirectoryError
-        `path` is a folder.
+        `path` is a folder, other than a store (:func:`is_store`).
     FileNotFoundError
         Its folder does not exist.
     """
     p = Path(path)
-    if p.is_dir():
+    if p.is_dir() and not is_store(p):
         raise IsADirectoryError(f"{p} is a folder; give a file name to write.")
     if p.exists() and not force:
         raise FileExistsError(
@@ -61,6 +61,11 @@ def check_writable(path, *, force: bool = False) -> Path:
     return p
 
 
+def is_store(path) -> bool:
+    """Whether `path` names a store (a folder written as one output): a ``.zarr`` name."""
+    return Path(path).name.lower().endswith(".zarr")
+
+
 def _umask() -> int:
     # os.umask can only be read by setting it; the lock keeps other threads of this
     # process from creating files in between
@@ -75,7 +80,9 @@ def atomic_write(paths: Sequence, *, force: bool = False) -> Iterator[list[Path]
     """Write several files all or nothing: yield temporary paths, then move them in place.
 
     The temporary files lie in a hidden folder beside each target and carry the target's
-    own file name (so twins such as ``.xdmf``/``.h5`` name each other right). When the
+    own file name (so twins such as ``.xdmf``/``.h5`` name each other right). A store
+    (:func:`is_store`, a ``.zarr`` folder) is written there as a folder and moved the same
+    way (a replaced store is set aside first, then removed). When the
     block ends without an exception every file is given the mode a normal file would get
     (``0o666`` less the umask) and moved over its target; on any exception the temporary
     folder is removed and no target is touched. Every output of this package goes
@@ -116,13 +123,16 @@ def atomic_write(paths: Sequence, *, force: bool = False) -> Iterator[list[Path]
                 folders[parent] = Path(tempfile.mkdtemp(prefix=".swa-imesh-", dir=parent))
             temps.append(folders[parent] / t.name)
         yield temps
-        missing = [str(t) for t, tmp in zip(targets, temps) if not tmp.is_file()]
+        missing = [str(t) for t, tmp in zip(targets, temps)
+                   if not (tmp.is_dir() if is_store(t) else tmp.is_file())]
         if missing:
             raise RuntimeError(f"internal error: {', '.join(missing)} not written.")
         mode = 0o666 & ~_umask()
         for tmp in temps:
-            os.chmod(tmp, mode)
+            os.chmod(tmp, mode | (0o111 & ~_umask() if tmp.is_dir() else 0))
         for tmp, t in zip(temps, targets):
+            if t.is_dir():      # a store being replaced: set aside, removed with the folder
+                os.replace(t, tmp.with_name(tmp.name + ".old"))
             os.replace(tmp, t)
     finally:
         for folder in folders.values():

@@ -20,6 +20,7 @@ from ..segmentation import (
     tile_placement,
 )
 from . import _samples_layer as sl
+from ._chunked_classify import add_lazy_labels, chunked_steps, lazy_level0
 from ._dock import button, group, scroll_body, side_by_side, wrapped_label
 from ._layers import (
     AFFINE_KEY,
@@ -328,6 +329,12 @@ class ClassifyWidget(QWidget):
         if image is None:
             notify_error("no image layer to apply the model to: open one and pick it.")
             return None
+        lazy = lazy_level0(image)
+        if lazy is not None:        # a Dask/Zarr layer: chunk by chunk, never loaded whole
+            return self.tasks.run(lambda: chunked_steps(lazy, self.loaded_model),
+                                  title="Applying the model chunk by chunk",
+                                  on_result=lambda out: add_lazy_labels(
+                                      self.viewer, image, out[0], self.loaded_model, out[1]))
         try:
             data = sl.image_array(image)
         except ValueError as exc:

@@ -10,11 +10,15 @@ The pipeline of the reference's chapter 2, as functions on arrays:
   :class:`RecommendedModel` (multi-scale per-pixel statistics, boundary refinement, MRF,
   bias correction), :class:`SWAModel` (the reference: GM, MD, LVQ on tiles),
   :func:`load_model`;
+* large images: :func:`predict_chunked` (a saved recommended model chunk by chunk on
+  Dask), :func:`apply_model` (an image file to a labels file or Zarr store);
 * scores: :func:`dice_scores`, :func:`jaccard_scores`, :func:`confusion_matrix`,
   :func:`evaluate`.
 """
 
+from ._apply import apply_model
 from ._bias import estimate_bias_field
+from ._chunked import plan_chunks, predict_chunked
 from ._classifiers import (
     CLASSIFIERS,
     GaussianClassifier,
@@ -52,7 +56,8 @@ __all__ = [
     "Material", "SampleBox", "Samples", "load_samples", "save_samples", "samples_from_truth",
     "ResStatistics", "res_statistics", "plot_res", "plot_res_scales",
     "SWAModel", "load_model", "SegmentationResult", "segment", "segment_steps", "METHODS",
-    "RecommendedModel", "estimate_bias_field", "multiscale_feature_names",
+    "RecommendedModel", "estimate_bias_field", "predict_chunked", "plan_chunks",
+    "apply_model", "multiscale_feature_names",
     "multiscale_features", "potts_mean_field",
     "sieve_labels", "tile_placement", "upsample_tiles", "majority_tiles",
     "material_signatures", "write_signatures_csv",

@@ -12,7 +12,8 @@ from scipy import ndimage as ndi
 
 from ._tiles import block_mean
 
-__all__ = ["estimate_bias_field", "upsample_linear", "GRID_CELLS"]
+__all__ = ["estimate_bias_field", "upsample_linear", "upsample_linear_at", "GRID_CELLS",
+           "grid_factor", "class_mean_image", "coarse_bias_field"]
 
 GRID_CELLS = 32         # coarse grid: about this many cells along the shortest side
 _TINY = 1e-12           # relative floor under G*(mu^2) (regions of class mean 0)
@@ -50,15 +51,59 @@ def estimate_bias_field(image, labels, class_means: dict[int, float], *,
     (M, N[, P]) ndarray of float32
         The field (1 where the image matches the class means).
     """
-    keys = np.array(sorted(class_means))                 # labels may be any 63-bit value
-    values = np.array([class_means[k] for k in keys], np.float32)
-    mu = values[np.minimum(np.searchsorted(keys, labels), keys.size - 1)]
-    factor = max(1, min(image.shape) // GRID_CELLS)
+    mu = class_mean_image(labels, class_means)
+    factor = grid_factor(image.shape)
     num = block_mean(np.asarray(image, np.float32) * mu, factor)
     den = block_mean(mu * mu, factor)
+    return upsample_linear(coarse_bias_field(num, den, smoothness), image.shape)
+
+
+def grid_factor(shape: tuple[int, ...]) -> int:
+    """Pixels per side of a cell of the coarse grid the field is estimated on."""
+    return max(1, min(shape) // GRID_CELLS)
+
+
+def class_mean_image(labels: np.ndarray, class_means: dict[int, float]) -> np.ndarray:
+    """float32 class mean of every pixel's label."""
+    keys = np.array(sorted(class_means))                 # labels may be any 63-bit value
+    values = np.array([class_means[k] for k in keys], np.float32)
+    return values[np.minimum(np.searchsorted(keys, labels), keys.size - 1)]
+
+
+def coarse_bias_field(num: np.ndarray, den: np.ndarray, smoothness: float = 0.15
+                      ) -> np.ndarray:
+    """The field on the coarse grid from the cell means of ``I mu`` and ``mu^2`` (float32)."""
     sigma = smoothness * min(num.shape)
     num = ndi.gaussian_filter(num, sigma, mode="nearest")
     den = ndi.gaussian_filter(den, sigma, mode="nearest")
     field = num / np.maximum(den, _TINY * max(float(den.max()), _NONE))
-    field = np.where(field > 0, field, 1.0).astype(np.float32)
-    return upsample_linear(field, image.shape)          # float32 in, float32 out
+    return np.where(field > 0, field, 1.0).astype(np.float32)
+
+
+def upsample_linear_at(small: np.ndarray, shape: tuple[int, ...], region) -> np.ndarray:
+    """``upsample_linear(small, shape)[np.ix_(*region)]`` without the full-size array.
+
+    Parameters
+    ----------
+    small : ndarray
+        The coarse grid.
+    shape : tuple of int
+        Shape of the whole upsampled array.
+    region : sequence of 1-D int arrays
+        Output indices per axis (a block: ``arange(start, stop)``; a strided copy:
+        ``arange(0, n, step)``).
+
+    Returns
+    -------
+    ndarray of float32
+        Equal to the slice of :func:`upsample_linear` to float32 rounding (separable
+        weights, the same grid-mode coordinates and held edges).
+    """
+    out = np.asarray(small, np.float64)
+    for axis, (m, n, idx) in enumerate(zip(small.shape, shape, region)):
+        x = np.clip((np.asarray(idx) + 0.5) * (m / n) - 0.5, 0, m - 1)
+        lo = np.floor(x).astype(np.intp)
+        hi = np.minimum(lo + 1, m - 1)
+        w = (x - lo).reshape((-1,) + (1,) * (small.ndim - axis - 1))
+        out = np.take(out, lo, axis) * (1 - w) + np.take(out, hi, axis) * w
+    return out.astype(np.float32)

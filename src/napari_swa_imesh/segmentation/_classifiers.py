@@ -14,10 +14,10 @@ import numpy as np
 from scipy.spatial import cKDTree
 
 __all__ = ["GaussianClassifier", "MinimumDistanceClassifier", "LVQClassifier",
-           "make_classifier", "leave_one_out_error", "CLASSIFIERS"]
+           "make_classifier", "leave_one_out_error", "CLASSIFIERS", "PREDICT_BATCH"]
 
 CLASSIFIERS = ("gm", "md", "lvq")
-_CHUNK = 1 << 19  # rows per prediction batch: bounds the temporary memory (tens of MB)
+PREDICT_BATCH = 1 << 19  # rows per prediction batch: bounds the temporary memory
 
 
 class _Standardised:
@@ -40,8 +40,9 @@ class _Standardised:
         """Predict a class label for every row of `X` (in batches, to bound memory)."""
         X = np.asarray(X, dtype=np.float64)
         out = np.empty(X.shape[0], dtype=self.classes_.dtype)
-        for i in range(0, X.shape[0], _CHUNK):
-            out[i:i + _CHUNK] = self.classes_[self._predict_index(self._scaled(X[i:i + _CHUNK]))]
+        for i in range(0, X.shape[0], PREDICT_BATCH):
+            rows = X[i:i + PREDICT_BATCH]
+            out[i:i + PREDICT_BATCH] = self.classes_[self._predict_index(self._scaled(rows))]
         return out
 
     def get_params(self) -> dict:
@@ -182,11 +183,11 @@ class GaussianClassifier(_Standardised):
         scale = (1.0 / self.scale_).astype(dtype)
         if out is None:
             out = np.empty((self.classes_.size, X.shape[0]), dtype)
-        for i in range(0, X.shape[0], _CHUNK):
-            z = (X[i:i + _CHUNK] - offset) * scale                       # (b, p)
+        for i in range(0, X.shape[0], PREDICT_BATCH):
+            z = (X[i:i + PREDICT_BATCH] - offset) * scale                # (b, p)
             for c in range(self.classes_.size):
                 w = z @ inv[c].T - shift[c]
-                out[c, i:i + _CHUNK] = const[c] - 0.5 * np.einsum("ij,ij->i", w, w)
+                out[c, i:i + PREDICT_BATCH] = const[c] - 0.5 * np.einsum("ij,ij->i", w, w)
         return out
 
     def predict(self, X) -> np.ndarray:

@@ -63,10 +63,42 @@ def add_commands(subparsers) -> None:
     p.add_argument("--truth", default=None, help="ground truth to report Dice against")
     p.add_argument("--gray", action="store_true", help="convert an RGB picture to grey")
     p.add_argument("-o", "--output", required=True,
-                   help="labels file: .npy, .tif, .nii.gz or .png")
+                   help="labels file: .npy, .tif, .nii.gz or .png; with --model also a "
+                        ".zarr store, written chunk by chunk")
+    p.add_argument("--memory", default=None,
+                   help="with --model: work chunk by chunk within this budget for the whole "
+                        "process (e.g. 2GB; default half the memory available); Zarr "
+                        "images and outputs are always chunked")
+    p.add_argument("--workers", type=int, default=None,
+                   help="threads of the chunked path (default: planned from the budget)")
     p.add_argument("--force", action="store_true", help="replace existing output files")
     p.add_argument("--json", action="store_true", help="print one JSON object")
     p.set_defaults(func=_run_segment)
+
+    p = subparsers.add_parser(
+        "batch", help="segment a cohort of images with one saved model on dask.distributed",
+        description="Apply a saved model to many images, one task per image on a Dask "
+                    "cluster (a LocalCluster by default). Each labels file is "
+                    "OUTDIR/<stem>_labels<suffix> in the input's format, equal to a "
+                    "`segment --model` run of that image.")
+    p.add_argument("images", nargs="+", help="image files, Zarr stores, folders or globs")
+    p.add_argument("--model", required=True, help="a saved model (.npz)")
+    p.add_argument("-o", "--output", required=True, help="output folder (must exist)")
+    p.add_argument("--scheduler", default=None,
+                   help="address of a running Dask scheduler (default: a LocalCluster)")
+    p.add_argument("--workers", type=int, default=None,
+                   help="local worker processes (default: cores, at most one per image)")
+    p.add_argument("--memory", default=None,
+                   help="budget of the whole batch (e.g. 8GB), split between the workers")
+    p.add_argument("--retries", type=int, default=2, help="tries again per failed image")
+    p.add_argument("--mesh", default=None, metavar="SUFFIX",
+                   help="also mesh each image's labels into OUTDIR/<stem>_mesh<SUFFIX> "
+                        "(.vtu, .msh, .xdmf, .inp, ...)")
+    p.add_argument("--exclude", type=int, nargs="*", default=[],
+                   help="materials the meshes leave out")
+    p.add_argument("--force", action="store_true", help="replace existing labels files")
+    p.add_argument("--json", action="store_true", help="print one JSON object")
+    p.set_defaults(func=_run_batch)
 
     p = subparsers.add_parser(
         "samples-from-truth", help="sample boxes from the largest homogeneous blocks of a truth",
@@ -167,6 +199,7 @@ def _check_segment_args(args: argparse.Namespace) -> None:
 
 
 def _run_segment(args: argparse.Namespace) -> int:
+    from .._zarr_io import is_zarr
     from ..io import atomic_write, check_label_format, grid_affine, is_nifti, label_array, \
         read_affine, read_image, write_labels_to
     from ._metrics import evaluate
@@ -177,6 +210,12 @@ def _run_segment(args: argparse.Namespace) -> int:
     from ._tiles import tile_placement
 
     timer = StepTimer()
+    if args.model and _chunked_run(args):
+        return 0
+    if args.samples and (is_zarr(args.image) or args.memory or args.workers):
+        raise ValueError("fitting reads the whole image (--memory, --workers and Zarr images "
+                         "go with --model); fit on a crop that fits in memory with "
+                         "--model-out, then apply the model with --model.")
     _check_segment_args(args)
     with timer("read"):
         image, spacing = read_image(args.image, gray=args.gray)
@@ -244,6 +283,125 @@ def _run_segment(args: argparse.Namespace) -> int:
                   + f"  (mean {summary['mean_dice']:.3f})")
         print(f"labels written to {args.output}")
     return 0
+
+
+def _chunked_run(args: argparse.Namespace) -> bool:
+    """``segment --model`` chunk by chunk when :func:`~._apply.wants_chunks` says so;
+    False to run in memory."""
+    from ._apply import apply_model, wants_chunks
+    from ._chunked import parse_memory
+    from ._model_io import load_model
+
+    memory = parse_memory(args.memory) if args.memory is not None else None
+    if args.workers is not None and args.workers < 1:
+        raise ValueError(f"--workers must be 1 or more; got {args.workers}.")
+    model = load_model(args.model)
+    if not wants_chunks(args.image, args.output, model, memory=memory):
+        return False
+    whole = [f for f, v in (("--sieve", args.sieve), ("--tiles", args.tiles),
+                            ("--signatures", args.signatures), ("--truth", args.truth),
+                            ("--model-out", args.model_out), ("--res-plot", args.res_plot),
+                            ("--scale", args.scale is not None), ("--gray", args.gray))
+             if v]
+    if whole:
+        raise ValueError(f"{', '.join(whole)} need(s) the whole image in memory; drop "
+                         f"{'them' if len(whole) > 1 else 'it'} to segment chunk by chunk "
+                         "(a Zarr image or output, or --memory).")
+    summary = apply_model(args.image, model, args.output, memory=memory,
+                          workers=args.workers, force=args.force, chunked=True)
+    if args.json:
+        print_json(summary)
+    else:
+        plan = summary["plan"]
+        print(f"labels written to {args.output} chunk by chunk: chunks of "
+              f"{'x'.join(map(str, plan['chunks']))} voxels with a margin of {plan['halo']} "
+              f"px, {plan['workers']} thread(s), budget {plan['memory'] / 1e9:.2f} GB, "
+              f"{summary['seconds']:.1f} s")
+        for label, v in summary["volumes"].items():
+            print(f"  material {label}: {v['voxels']} voxels, volume {v['volume']:.6g}")
+    return True
+
+
+def _run_batch(args: argparse.Namespace) -> int:
+    import os
+    import sys
+
+    from ..io import check_writable
+    from ._batch import connect, expand_inputs, mesh_for, output_for, run_batch
+    from ._chunked import default_memory, parse_memory
+    from ._model_io import load_model
+
+    timer = StepTimer()
+    images = expand_inputs(args.images)
+    load_model(args.model)                                   # a bad model fails here
+    if not os.path.isdir(args.output):
+        raise FileNotFoundError(f"output folder {args.output} does not exist; create it "
+                                "first.")
+    if args.mesh:
+        from ..mesh._export import MESH_SUFFIXES
+
+        if args.mesh not in MESH_SUFFIXES:
+            raise ValueError(f"--mesh takes a mesh suffix ({', '.join(MESH_SUFFIXES)}); got "
+                             f"{args.mesh!r}.")
+    if args.exclude and not args.mesh:
+        raise ValueError("--exclude says what the meshes leave out; add --mesh SUFFIX.")
+    for p in images:
+        check_writable(output_for(p, args.output), force=args.force)
+        if args.mesh:
+            check_writable(mesh_for(p, args.output, args.mesh), force=args.force)
+    if args.workers is not None and args.workers < 1:
+        raise ValueError(f"--workers must be 1 or more; got {args.workers}.")
+    if args.retries < 0:
+        raise ValueError(f"--retries must be 0 or more; got {args.retries}.")
+    budget = parse_memory(args.memory) if args.memory else default_memory()
+    workers = args.workers or max(1, min(os.cpu_count() or 1, len(images)))
+
+    def progress(done, total, row):
+        bar = "#" * (20 * done // total)
+        what = "failed" if "error" in row else f"{row['seconds']:.1f} s"
+        print(f"[{bar:<20}] {done}/{total} {Path(row['image']).name}: {what}",
+              file=sys.stderr, flush=True)
+
+    with timer("connect"):
+        client = connect(args.scheduler, workers=workers, memory=budget // workers)
+    try:
+        n = len(client.scheduler_info().get("workers", {})) or workers
+        with timer("segment"):
+            rows = run_batch(images, args.model, args.output, client=client,
+                             force=args.force, memory=budget // n, retries=args.retries,
+                             mesh=args.mesh, exclude=args.exclude,
+                             progress=None if args.json else progress)
+    finally:
+        cluster = client.cluster
+        client.close()
+        if cluster is not None and not args.scheduler:
+            cluster.close()
+    failed = [r for r in rows if "error" in r]
+    if args.json:
+        print_json({"images": rows, "workers": n, "scheduler": args.scheduler or "local",
+                    "seconds": timer.seconds})
+    else:
+        print(_batch_table(rows))
+        print(f"{len(rows) - len(failed)} of {len(rows)} images segmented on {n} worker(s) "
+              f"in {timer.seconds['segment']:.1f} s")
+    if failed:
+        raise ValueError(f"{len(failed)} of {len(rows)} images failed ("
+                         f"{Path(failed[0]['image']).name}: {failed[0]['error']}); fix them "
+                         "and run the batch again for those.")
+    return 0
+
+
+def _batch_table(rows: list[dict]) -> str:
+    """Per image: labels file, seconds, and every material's volume."""
+    labels = sorted({int(k) for r in rows for k in r.get("volumes", {})})
+    head = ["image", "labels", "seconds"] + [f"volume {k}" for k in labels]
+    body = [[Path(r["image"]).name, Path(r["output"]).name,
+             "failed" if "error" in r else f"{r['seconds']:.2f}"]
+            + [f"{r['volumes'][k]['volume']:.6g}" if "volumes" in r else ""
+               for k in labels] for r in rows]
+    widths = [max(len(str(x)) for x in col) for col in zip(head, *body)]
+    return "\n".join("  ".join(str(x).ljust(w) for x, w in zip(line, widths))
+                     for line in [head, *body])
 
 
 def _run_samples_from_truth(args: argparse.Namespace) -> int:

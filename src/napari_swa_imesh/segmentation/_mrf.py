@@ -55,26 +55,29 @@ def potts_mean_field(log_likelihood: np.ndarray, beta: float, iterations: int = 
     del active
     idx = np.ravel_multi_index(coords, shape)             # sorted: nonzero is row-major
     ll = log_likelihood.reshape(k, -1)[:, idx]            # (K, A)
-    q = _softmax_first(ll)
+    q = np.zeros((k, idx.size + 1), np.float32)           # column A: no active neighbour
+    q[:, :-1] = _softmax_first(ll)
     flat_cls = cls.ravel()
-    neighbours = []                                       # per direction: (pos, active, fixed)
+    fixed = np.zeros((k, idx.size), np.float32)           # sure neighbours' indicators
+    gathers = []                                          # per direction: neighbour's column
     strides = np.cumprod((1,) + shape[::-1])[:-1][::-1]
     for axis, st in enumerate(strides):
         for step, inside in ((-st, coords[axis] > 0), (st, coords[axis] < shape[axis] - 1)):
             nbr = np.where(inside, idx + step, idx)
             pos = np.minimum(np.searchsorted(idx, nbr), idx.size - 1)
             act = inside & (idx[pos] == nbr)
-            fixed = np.zeros((k, idx.size), np.float32)   # outside the image: nothing
-            rest = np.flatnonzero(inside & ~act)
-            fixed[flat_cls[nbr[rest]], rest] = 1.0
-            neighbours.append((pos, act.astype(np.float32), fixed))
+            rest = np.flatnonzero(inside & ~act)          # outside the image: nothing
+            fixed[flat_cls[nbr[rest]], rest] += 1.0       # one neighbour per pixel and side
+            gathers.append(np.where(act, pos, idx.size).astype(np.intp))
     del coords
     for _ in range(iterations):
-        nb = np.zeros_like(q)
-        for pos, act, fixed in neighbours:
-            nb += q[:, pos] * act
-            nb += fixed
-        q = _softmax_first(ll + beta * nb)
+        nb = fixed.copy()
+        for g in gathers:
+            nb += q[:, g]
+        nb *= beta
+        nb += ll
+        q[:, :-1] = _softmax_first(nb)
+    q = q[:, :-1]
     if labels_only:
         flat_cls[idx] = argmax_first(q)
         return cls

@@ -43,7 +43,7 @@ from ._samples import Material, Samples
 from ._tiles import majority_tiles
 from ._window_features import feature_levels, multiscale_features, window
 
-__all__ = ["RecommendedModel", "RECOMMENDED_METHOD", "BIAS_ROUNDS"]
+__all__ = ["RecommendedModel", "RECOMMENDED_METHOD", "BIAS_ROUNDS", "FIELD_GRID"]
 
 RECOMMENDED_METHOD = "recommended"
 BIAS_ROUNDS = 2         # field estimates per fit or prediction: the second one labels the
@@ -53,7 +53,7 @@ DEFAULT_TOP = 6         # the RES suggestion is capped here (65-px windows) ...
 NO_RES_TOP = 2          # ... and without a suggestion (too few tiles) levels go to 2
 AUTO_GAIN = 0.01        # "auto" bias correction: kept if it shrinks the within-material
 #                         variance by 1 % (measured 1.6-3 % with bias, < 0.6 % without)
-_FIELD_GRID = 64        # pixel-value level: label ~64 px along the shortest side for the field
+FIELD_GRID = 64         # pixel-value level: label ~64 px along the shortest side for the field
 _SLAB = 1 << 20         # pixels per slab when standardising (bounds float64 temporaries)
 _TOP_FEATURES = 8       # features listed by summary()
 
@@ -318,7 +318,7 @@ class RecommendedModel(SegmentationModel):
         smooth anyway (this keeps it cheap on large volumes).
         """
         level = self.finest_scale
-        step = max(1, min(base.shape) // _FIELD_GRID) if level == 0 else 1
+        step = max(1, min(base.shape) // FIELD_GRID) if level == 0 else 1
         sub = tuple(slice(None, None, step) for _ in base.shape)
         labels = self._predict_level(work[sub], level)
         field = estimate_bias_field(base[sub], labels, self.class_means)
@@ -350,13 +350,20 @@ class RecommendedModel(SegmentationModel):
                 field = self._bias_field(base, work)
                 work = np.divide(base, field, out=field)        # the field is spent
             del base, field
+        return self._classify_standardised(work)
+
+    def _classify_standardised(self, work: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """:meth:`_classify` of an image already standardised (and bias-corrected); every
+        step is local, so a block with a margin of :func:`~._chunked.halo` px gives the
+        whole image's result inside the margin. `work` may be overwritten."""
+        shape = work.shape
         feats, _ = multiscale_features(work, self.scale)
         del work
         flat = feats.reshape(-1, feats.shape[-1])
         ll = self._log_likelihood(flat, self.scale)                 # (K, N)
-        cls = argmax_first(ll).reshape(img.shape)
-        level = np.full(img.shape, self.scale, np.int8)
-        todo = np.ones(img.shape, bool)
+        cls = argmax_first(ll).reshape(shape)
+        level = np.full(shape, self.scale, np.int8)
+        todo = np.ones(shape, bool)
         for j in range(self.scale, self.finest_scale, -1):
             w = window(j)
             # the level-j window of these pixels holds two labels: its statistics are mixed
@@ -368,7 +375,7 @@ class RecommendedModel(SegmentationModel):
             cls.ravel()[idx] = argmax_first(ll[:, idx])
             level.ravel()[idx] = j - 1
             todo = straddle
-        return ll.reshape((-1,) + img.shape), level
+        return ll.reshape((-1,) + shape), level
 
     def predict_proba(self, image, *, check_input: bool = True
                       ) -> tuple[np.ndarray, np.ndarray]:

@@ -18,7 +18,7 @@ from skimage.measure import block_reduce
 from .._validation import label_dtype, normalize_spacing
 
 __all__ = ["validate_scale", "validate_mask", "block_view", "block_spread", "pad_to_even",
-           "pair_sum", "block_sum", "block_mean", "tile_counts", "tile_means",
+           "pair_sum", "block_sum", "block_mean", "block_counts", "tile_counts", "tile_means",
            "majority_tiles", "upsample_tiles", "tile_placement"]
 
 
@@ -114,7 +114,7 @@ def block_sum(arr: np.ndarray, block, *, dtype=None) -> np.ndarray:
     return block_reduce(arr, block, np.sum, cval=0, func_kwargs={"dtype": dtype})
 
 
-def _axis_counts(shape: tuple[int, ...], block: int) -> np.ndarray:
+def block_counts(shape: tuple[int, ...], block: int) -> np.ndarray:
     """Pixels per block when every pixel counts: an outer product of per-axis counts
     (only the last block along an axis is partial)."""
     counts = np.ones((), dtype=np.int64)
@@ -134,13 +134,13 @@ def block_mean(arr: np.ndarray, block: int) -> np.ndarray:
     [[2.0, 5.0]]
     """
     # float64 sums: a block of 2^k float32 pixels would lose k bits in float32
-    return block_sum(arr, block, dtype=np.float64) / _axis_counts(arr.shape, block)
+    return block_sum(arr, block, dtype=np.float64) / block_counts(arr.shape, block)
 
 
 def tile_counts(shape: tuple[int, ...], scale: int, valid: np.ndarray | None) -> np.ndarray:
     """Valid pixels per tile at `scale`, shape ceil(shape / 2**scale), int64."""
     if valid is None:
-        return _axis_counts(shape, 1 << scale)
+        return block_counts(shape, 1 << scale)
     return block_sum(valid, 1 << scale, dtype=np.int64)
 
 

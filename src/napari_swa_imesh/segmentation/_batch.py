@@ -1,0 +1,251 @@
+"""A cohort of images segmented with one saved model on ``dask.distributed``.
+
+One task per image (:func:`segment_one`, which is :func:`~._apply.apply_model`: the labels
+equal a one-by-one ``swa-imesh segment --model`` run), submitted to a ``LocalCluster`` of
+single-threaded worker processes or to an existing scheduler, each retried on failure.
+Nothing of our own schedules: placement, retries and lost workers are the scheduler's.
+
+Outputs are named after the inputs, in the input's format: ``scan01.npy`` ->
+``OUTDIR/scan01_labels.npy``, ``a.nii.gz`` -> ``a_labels.nii.gz``, a Zarr store -> a
+``_labels.zarr`` store; JPEG, which cannot hold labels exactly, gives PNG. With a mesh
+suffix each task also meshes its labels (``OUTDIR/scan01_mesh.vtu``, in the image's
+frame: its spacing, or a NIfTI image's world).
+"""
+
+from __future__ import annotations
+
+import glob
+import uuid
+from collections.abc import Callable, Sequence
+from pathlib import Path
+
+__all__ = ["expand_inputs", "output_for", "mesh_for", "connect", "run_batch", "segment_one",
+           "CONNECT_SECONDS"]
+
+CONNECT_SECONDS = 5        # an address that does not answer fails after this
+_GLOB = set("*?[")
+
+
+def _stem_suffix(path: Path) -> tuple[str, str]:
+    name = path.name
+    for long in (".ome.zarr", ".nii.gz"):
+        if name.lower().endswith(long):
+            return name[:-len(long)], long
+    return path.stem, path.suffix
+
+
+def output_for(path, outdir) -> Path:
+    """``OUTDIR/<stem>_labels<suffix>`` in the input's format.
+
+    Examples
+    --------
+    >>> [output_for(p, "out").name for p in ("scan01.npy", "b.nii.gz", "c.ome.zarr", "d.jpg")]
+    ['scan01_labels.npy', 'b_labels.nii.gz', 'c_labels.zarr', 'd_labels.png']
+    """
+    stem, suffix = _stem_suffix(Path(path))
+    suffix = {".ome.zarr": ".zarr", ".jpg": ".png", ".jpeg": ".png"}.get(suffix.lower(),
+                                                                         suffix)
+    return Path(outdir) / f"{stem}_labels{suffix}"
+
+
+def mesh_for(path, outdir, suffix: str) -> Path:
+    """``OUTDIR/<stem>_mesh<suffix>``.
+
+    Examples
+    --------
+    >>> mesh_for("scan01.nii.gz", "out", ".vtu").name
+    'scan01_mesh.vtu'
+    """
+    return Path(outdir) / f"{_stem_suffix(Path(path))[0]}_mesh{suffix}"
+
+
+def expand_inputs(items: Sequence) -> list[Path]:
+    """Image paths from files, Zarr stores, folders (their images) and glob patterns.
+
+    Raises
+    ------
+    FileNotFoundError
+        An item that names nothing, or a pattern or folder without images.
+    ValueError
+        Two inputs with the same stem (their outputs would collide).
+    """
+    from .._zarr_io import is_zarr
+    from ..io import IMAGE_SUFFIXES, image_suffix
+
+    found: list[Path] = []
+    for item in map(str, items):
+        p = Path(item)
+        if _GLOB & set(item):
+            hits = [Path(h) for h in sorted(glob.glob(item))]
+        elif p.is_dir() and not is_zarr(p):
+            hits = sorted(c for c in p.iterdir() if is_zarr(c) or (
+                c.is_file() and image_suffix(c) in IMAGE_SUFFIXES))
+        elif p.exists():
+            hits = [p]
+        else:
+            raise FileNotFoundError(f"no image at {p}; check the path.")
+        if not hits:
+            raise FileNotFoundError(f"{item} holds no image ({', '.join(IMAGE_SUFFIXES)} "
+                                    "or .zarr); check the folder or pattern.")
+        found += hits
+    stems: dict[str, Path] = {}
+    for p in found:
+        stem = _stem_suffix(p)[0]
+        if stem in stems and stems[stem].resolve() != p.resolve():
+            raise ValueError(f"{stems[stem]} and {p} would both write {stem}_labels; rename "
+                             "one or run them in two batches.")
+        stems[stem] = p
+    return list(dict.fromkeys(p.resolve() for p in found))
+
+
+def connect(scheduler: str | None = None, *, workers: int = 2, memory: int | None = None):
+    """A ``distributed.Client``: on `scheduler`, else on a new ``LocalCluster``.
+
+    Parameters
+    ----------
+    scheduler : str, optional
+        Address of a running scheduler (``tcp://host:8786``).
+    workers : int
+        Single-threaded worker processes of the local cluster.
+    memory : int, optional
+        Memory limit of each local worker, bytes.
+
+    Raises
+    ------
+    ValueError
+        When the scheduler does not answer within :data:`CONNECT_SECONDS`.
+    """
+    import logging
+
+    from distributed import Client, LocalCluster
+
+    if scheduler:
+        try:
+            return Client(scheduler, timeout=f"{CONNECT_SECONDS}s")
+        except (OSError, TimeoutError, ValueError) as exc:
+            raise ValueError(f"no Dask scheduler answers at {scheduler} within "
+                             f"{CONNECT_SECONDS} s ({type(exc).__name__}); start one "
+                             "(`dask scheduler`) or leave --scheduler out to use a local "
+                             "cluster.") from exc
+    import dask
+
+    # each task is a few long numpy calls: the workers' stack sampler (every 10 ms, under
+    # the GIL) would only slow them down
+    with dask.config.set({"distributed.worker.profile.enabled": False}):
+        cluster = LocalCluster(n_workers=workers, threads_per_worker=1, processes=True,
+                               memory_limit=memory or "auto", dashboard_address=None,
+                               silence_logs=logging.ERROR)
+    client = Client(cluster)
+    client.run(_load_package)              # imports belong to starting the cluster
+    return client
+
+
+def _load_package() -> None:
+    from ._apply import apply_model  # noqa: F401
+    from ._model_io import load_model  # noqa: F401
+
+
+
+def segment_one(image: str, model_path: str, output: str, *, force: bool = False,
+                memory: int | None = None, mesh: str | None = None,
+                exclude: Sequence[int] = ()) -> dict:
+    """One task: :func:`~._apply.apply_model` of the model file on one image, chunked when
+    a lone ``segment --model`` run would be (Zarr, or too big for `memory`), the chunks on
+    this worker's own thread; then, with `mesh` (a mesh file path), the IMESH mesh of the
+    labels (materials in `exclude` left out), written through ``mesh.write_mesh``."""
+    from ._apply import apply_model, wants_chunks
+    from ._model_io import load_model
+
+    model = load_model(model_path)
+    chunked = wants_chunks(image, output, model, budget=memory)
+    row = apply_model(image, model, output, memory=memory, force=force, workers=1,
+                      chunked=chunked, scheduler="sync")
+    if mesh:
+        row["mesh"] = _mesh_labels_file(image, output, mesh, exclude=exclude, force=force)
+    return row
+
+
+def _mesh_labels_file(image: str, labels_path: str, mesh_path: str, *, exclude,
+                      force: bool) -> dict:
+    """Mesh a written labels file (placed as the image: spacing, or a NIfTI affine)."""
+    from .._zarr_io import is_zarr, open_lazy
+    from ..io import read_affine, read_image
+    from ..mesh import mesh_labels, write_mesh
+
+    if is_zarr(labels_path):
+        lazy, spacing = open_lazy(labels_path)
+        labels = lazy.compute()
+    else:
+        labels, spacing = read_image(labels_path)
+    affine = read_affine(image)
+    mesh = mesh_labels(labels, exclude=list(exclude), spacing=None if affine is not None
+                       else spacing, affine=affine)
+    write_mesh(mesh, mesh_path, force=force)
+    return {"file": str(mesh_path), "points": int(len(mesh.points)),
+            "cells": int(len(mesh.cells))}
+
+
+def run_batch(images: Sequence, model_path, outdir, *, client, force: bool = False,
+              memory: int | None = None, retries: int = 2, mesh: str | None = None,
+              exclude: Sequence[int] = (),
+              progress: Callable[[int, int, dict], None] | None = None) -> list[dict]:
+    """Segment every image on the client's cluster; one row per image, in input order.
+
+    Parameters
+    ----------
+    images : sequence of Path
+        From :func:`expand_inputs`.
+    model_path : str or Path
+        The saved model (each worker loads it).
+    outdir : str or Path
+        An existing folder; outputs are :func:`output_for` each image.
+    client : distributed.Client
+    force : bool
+        Replace existing outputs (without it they are refused before any work).
+    memory : int, optional
+        Budget of each task (chunked images).
+    retries : int
+        Times the scheduler retries a failed task.
+    mesh : str, optional
+        A mesh suffix (``.vtu``, ``.msh``, ...): also mesh each image's labels into
+        ``OUTDIR/<stem>_mesh<suffix>`` (:func:`mesh_for`).
+    exclude : sequence of int
+        Materials the meshes leave out.
+    progress : callable, optional
+        Called as ``progress(done, total, row)`` when each image finishes.
+
+    Returns
+    -------
+    list of dict
+        :func:`~._apply.apply_model`'s summary per image, or ``image``, ``output`` and
+        ``error`` (one sentence) for an image that failed every try.
+    """
+    from distributed import as_completed
+
+    from ..io import check_writable
+
+    outdir = Path(outdir)
+    if not outdir.is_dir():
+        raise FileNotFoundError(f"output folder {outdir} does not exist; create it first.")
+    outputs = [output_for(p, outdir) for p in images]
+    meshes = [mesh_for(p, outdir, mesh) if mesh else None for p in images]
+    for out in outputs + [m for m in meshes if m]:
+        check_writable(out, force=force)
+    # keys name the image and are new each run: a scheduler keeps results of a key it
+    # still holds, which would hand back an earlier run's row
+    futures = {client.submit(segment_one, str(p), str(model_path), str(out), force=force,
+                             memory=memory, mesh=None if m is None else str(m),
+                             exclude=tuple(exclude), retries=retries, pure=False,
+                             key=f"segment-{Path(p).name}-{uuid.uuid4().hex[:12]}"): i
+               for i, (p, out, m) in enumerate(zip(images, outputs, meshes))}
+    rows: list[dict | None] = [None] * len(outputs)
+    for done, fut in enumerate(as_completed(futures), 1):
+        i = futures[fut]
+        try:
+            rows[i] = fut.result()
+        except Exception as exc:  # the task's own sentence (bad image, full disk...)
+            rows[i] = {"image": str(images[i]), "output": str(outputs[i]),
+                       "error": f"{exc}"}
+        if progress is not None:
+            progress(done, len(outputs), rows[i])
+    return rows

@@ -1,0 +1,142 @@
+"""``segment --model`` on Zarr and memory-mapped images, chunk by chunk, and its refusals."""
+
+import json
+import re
+
+import numpy as np
+import pytest
+import zarr
+
+from napari_swa_imesh._zarr_io import open_lazy, open_levels
+from napari_swa_imesh.cli import main
+from napari_swa_imesh.data import tissue_phantom
+from napari_swa_imesh.segmentation import RecommendedModel, samples_from_truth
+
+
+@pytest.fixture(scope="module")
+def scene(tmp_path_factory):
+    folder = tmp_path_factory.mktemp("chunked")
+    image, truth = tissue_phantom((40, 48, 48), noise=0.06, bias=0.3, spacing=(1, 1, 1))
+    RecommendedModel().fit(image, samples_from_truth(truth)).save(folder / "m.npz")
+    np.save(folder / "img.npy", image)
+    z = zarr.create_array(str(folder / "img.zarr"), shape=image.shape, chunks=(16, 16, 16),
+                          dtype=image.dtype, attributes={"spacing": [2.0, 1.0, 0.5]})
+    z[:] = image
+    return folder
+
+
+def run(capsys, *argv):
+    code = main([str(a) for a in argv])
+    out = capsys.readouterr()
+    return code, out.out, out.err
+
+
+def test_zarr_in_zarr_out_equals_the_in_memory_run(scene, capsys, tmp_path):
+    code, _, _ = run(capsys, "segment", scene / "img.npy", "--model", scene / "m.npz",
+                     "-o", tmp_path / "ref.npy")
+    assert code == 0
+    code, out, _ = run(capsys, "segment", scene / "img.zarr", "--model", scene / "m.npz",
+                       "-o", tmp_path / "lab.zarr", "--memory", "1GB", "--json")
+    assert code == 0
+    summary = json.loads(out)
+    ref = np.load(tmp_path / "ref.npy")
+    store = zarr.open_array(str(tmp_path / "lab.zarr"), mode="r")
+    np.testing.assert_array_equal(store[:], ref)
+    assert store.dtype == np.uint8 and store.attrs["spacing"] == [2.0, 1.0, 0.5]
+    assert summary["chunked"] and summary["plan"]["halo"] == 7
+    # volumes: voxel counts times the voxel size (1 mm^3 here)
+    for label, v in summary["volumes"].items():
+        assert v["voxels"] == int((ref == int(label)).sum()) and v["volume"] == v["voxels"]
+    assert [p.name for p in tmp_path.iterdir()] != [] and not any(
+        p.name.startswith(".swa-imesh-") for p in tmp_path.iterdir())
+
+
+def test_memory_mapped_npy_with_a_budget_writes_any_label_format(scene, capsys, tmp_path):
+    code, _, _ = run(capsys, "segment", scene / "img.npy", "--model", scene / "m.npz",
+                     "-o", tmp_path / "ref.npy")
+    code, out, _ = run(capsys, "segment", scene / "img.npy", "--model", scene / "m.npz",
+                       "-o", tmp_path / "lab.tif", "--memory", "800MB")
+    assert code == 0 and "chunk by chunk" in out
+    import tifffile
+
+    np.testing.assert_array_equal(tifffile.imread(tmp_path / "lab.tif"),
+                                  np.load(tmp_path / "ref.npy"))
+
+
+def test_existing_store_needs_force_and_is_replaced_whole(scene, capsys, tmp_path):
+    out = tmp_path / "lab.zarr"
+    assert run(capsys, "segment", scene / "img.zarr", "--model", scene / "m.npz",
+               "-o", out)[0] == 0
+    before = sorted(p.relative_to(out) for p in out.rglob("*"))
+    code, _, err = run(capsys, "segment", scene / "img.zarr", "--model", scene / "m.npz",
+                       "-o", out)
+    assert code == 2 and "already exists" in err and err.count("\n") == 1
+    assert sorted(p.relative_to(out) for p in out.rglob("*")) == before
+    (out / "stray").write_text("from an older run")
+    assert run(capsys, "segment", scene / "img.zarr", "--model", scene / "m.npz",
+               "-o", out, "--force")[0] == 0
+    assert not (out / "stray").exists() and sorted(
+        p.relative_to(out) for p in out.rglob("*")) == before
+    assert [p.name for p in tmp_path.iterdir()] == ["lab.zarr"]
+
+
+@pytest.mark.parametrize("case,message", [
+    ("group", "is a Zarr group, not an array or an OME-Zarr image"),
+    ("budget", "more than the budget of 0.05 GB; give more memory"),
+    ("sieve", "--sieve need.s. the whole image in memory"),
+    ("samples", "fitting reads the whole image"),
+    ("nothing", "no Zarr store at"),
+])
+def test_bad_input_exits_2_and_leaves_nothing(scene, capsys, tmp_path, case, message):
+    image, extra = scene / "img.zarr", []
+    if case == "group":
+        g = zarr.open_group(str(tmp_path / "grp.zarr"), mode="w")
+        g.create_array("data", shape=(4, 4), dtype="f4")
+        image = tmp_path / "grp.zarr"
+    elif case == "budget":
+        extra = ["--memory", "50MB"]
+    elif case == "sieve":
+        extra = ["--sieve", "5"]
+    elif case == "nothing":
+        image = tmp_path / "missing.zarr"
+    before = sorted(tmp_path.iterdir())
+    source = ["--samples", scene / "s.json"] if case == "samples" else [
+        "--model", scene / "m.npz"]
+    code, _, err = run(capsys, "segment", image, *source, "-o", tmp_path / "lab.zarr",
+                       *extra)
+    assert code == 2
+    assert re.search(message, err) and err.count("\n") == 1
+    assert sorted(tmp_path.iterdir()) == before
+
+
+def test_ome_zarr_levels_and_spacing(tmp_path):
+    root = zarr.open_group(str(tmp_path / "img.ome.zarr"), mode="w", zarr_format=2)
+    data = np.arange(2 * 8 * 12, dtype=np.float32).reshape(1, 2, 8, 12)
+    root.create_array("0", data=data[..., :, :, :], chunks=(1, 2, 4, 4))
+    root.create_array("1", data=data[..., ::2, ::2].copy(), chunks=(1, 2, 4, 4))
+    root.attrs["multiscales"] = [{
+        "version": "0.4",
+        "axes": [{"name": "c", "type": "channel"}, {"name": "z", "type": "space"},
+                 {"name": "y", "type": "space"}, {"name": "x", "type": "space"}],
+        "datasets": [
+            {"path": "0", "coordinateTransformations": [
+                {"type": "scale", "scale": [1, 3.0, 0.5, 0.5]}]},
+            {"path": "1", "coordinateTransformations": [
+                {"type": "scale", "scale": [1, 3.0, 1.0, 1.0]}]}]}]
+    levels, spacing = open_levels(tmp_path / "img.ome.zarr")
+    assert [lv.shape for lv in levels] == [(2, 8, 12), (2, 4, 6)]
+    assert spacing == (3.0, 0.5, 0.5)
+    np.testing.assert_array_equal(levels[1].compute(), data[0, :, ::2, ::2])
+    two = zarr.open_group(str(tmp_path / "two.ome.zarr"), mode="w", zarr_format=2)
+    two.create_array("0", data=np.zeros((2, 2, 4, 4), np.float32))
+    two.attrs["multiscales"] = root.attrs["multiscales"]
+    with pytest.raises(ValueError, match=r"holds \[2\] channels or time points"):
+        open_levels(tmp_path / "two.ome.zarr")
+
+
+def test_npy_is_read_block_by_block(tmp_path):
+    data = np.asfortranarray(np.arange(5 * 6 * 7, dtype=np.int16).reshape(5, 6, 7))
+    np.save(tmp_path / "a.npy", data)
+    lazy, spacing = open_lazy(tmp_path / "a.npy", chunks=(2, 3, 4))
+    assert lazy.numblocks == (3, 2, 2) and spacing == (1.0, 1.0, 1.0)
+    np.testing.assert_array_equal(lazy.compute(), data)
