@@ -59,7 +59,8 @@ def test_periodic_refined_run_meshes_the_labels_again_and_shows_the_tensor(
     wait_idle(qtbot, sim, timeout=120_000)
     result = sim.result
     expected = simulate(labels, {1: 1.0, 2: 10.0, 3: 0.5}, refine=1, protocol=PERIODIC)
-    assert result.protocol == PERIODIC and mesh_refine(result.mesh) == 1
+    # refine 1 at every interface, then one adaptive level where the flux jumps (default)
+    assert result.protocol == PERIODIC and result.mesh.info["adapted"]["from_refine"] == 1
     assert result.mesh.n_cells == expected.mesh.n_cells
     assert np.allclose(result.tensor, expected.tensor, rtol=1e-9)
     # the Mesh tab's mesh is unchanged; the field is drawn on the run's mesh
@@ -78,6 +79,13 @@ def test_periodic_refined_run_meshes_the_labels_again_and_shows_the_tensor(
     sim.protocol_combo.value = "mixed"
     sim.refine_spin.value = 0
     assert "as shown" in sim.mesh_note.value
+    sim.run()
+    wait_idle(qtbot, sim, timeout=120_000)
+    # the default adapts it once (the labels are at hand); P1 runs on it as it is
+    assert sim.result.mesh.info["adapted"]["from_refine"] == 0
+    assert "where the flux jumps" in sim.mesh_note.value
+    sim.order_combo.value = "P1 (linear)"
+    assert "where the flux jumps" not in sim.mesh_note.value
     sim.run()
     wait_idle(qtbot, sim, timeout=120_000)
     assert sim.result.mesh is flow.mesh.mesh and not sim.tensor_table.isVisibleTo(sim)

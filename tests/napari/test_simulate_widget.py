@@ -83,5 +83,7 @@ def test_the_workflow_hands_the_mesh_to_the_simulate_tab(make_napari_viewer, qtb
     flow.simulate.axis_boxes["y"].value = False
     flow.simulate.run()
     wait_idle(qtbot, flow.simulate, timeout=120_000)
-    expected = simulate(flow.mesh.mesh, {1: 1.0, 2: 10.0}, axes=["x", "z"])
+    # the default adapts the mesh with the labels it was made from, as the library does
+    expected = simulate(flow.mesh.mesh, {1: 1.0, 2: 10.0}, axes=["x", "z"], labels=labels)
     assert flow.simulate.result.k_eff == pytest.approx(expected.k_eff, rel=1e-9)
+    assert flow.simulate.result.choice == expected.choice == "P2, 1 adaptive step"

@@ -58,7 +58,8 @@ def test_simulate_a_mesh_file_gives_the_labels_result(labels_file, capsys, tmp_p
     rc, out, err = _run(capsys, "simulate", mesh_path, "-k", "1=1", "2=10", "3=0.1",
                         "--axes", "y", "--json")
     assert rc == 0, err
-    expected = simulate(labels, {1: 1.0, 2: 10.0, 3: 0.1}, axes="y").k_eff["y"]
+    # a mesh file cannot be adapted (no labels): the default is P2 on it as it is
+    expected = simulate(labels, {1: 1.0, 2: 10.0, 3: 0.1}, axes="y", adapt=0).k_eff["y"]
     assert json.loads(out)["k_eff"]["y"] == pytest.approx(expected, rel=1e-9)
     rc, out, err = _run(capsys, "simulate", path, "-k", "1=1", "2=10", "3=0.1",
                         "--order", "2", "--axes", "y")
@@ -70,7 +71,8 @@ def test_simulate_a_mesh_file_gives_the_labels_result(labels_file, capsys, tmp_p
     (["-k", "1=1", "2=0", "3=1"], "must be positive"),
     (["-k", "1=1", "2=nan", "3=1"], "not finite"),
     (["-k", "1=1", "2=1", "3=1", "steel=2"], "not in the mesh"),
-    (["-k", "1=1", "2=1", "3=1", "--order", "3"], "--order must be 1 or 2"),
+    (["-k", "1=1", "2=1", "3=1", "--order", "3"], "--order must be auto, 1 or 2"),
+    (["-k", "1=1", "2=1", "3=1", "--adapt", "3"], "--adapt must be auto, 0, 1 or 2"),
     (["-k", "1=1", "2=1", "3=1", "-o", "field.png"], "use .vtu or .xdmf"),
     (["-k", "1=1", "2=1", "3=1", "-o", "existing.vtu"], "--force"),
     (["-k", "1=", "2=1"], "MATERIAL=VALUE"),

@@ -45,7 +45,8 @@ __all__ = ["SimulateWidget", "Conductivity", "ConductivityTable", "parse_conduct
            "FIELD_KEY", "PROTOCOLS"]
 
 FIELD_KEY = "swa_imesh_field"
-ORDERS = {"P1 (linear)": 1, "P2 (quadratic, more accurate)": 2}
+ORDERS = {"auto: P2, refined once where the flux jumps": "auto", "P1 (linear)": 1,
+          "P2 (quadratic, more accurate)": 2}
 PROTOCOLS = [("mixed: k_eff per axis (potential 0 and 1 on two faces)", "mixed"),
              ("periodic: the full tensor (unit mean gradient)", "periodic")]
 COLORMAP = "turbo"
@@ -122,7 +123,7 @@ class SimulateWidget(QWidget):
         layout.addWidget(self.export_button.native)
         self.mesh_combo.changed.connect(self._on_mesh_changed)
         self.labels_combo.changed.connect(self._on_labels_changed)
-        for control in (self.protocol_combo, self.refine_spin):
+        for control in (self.protocol_combo, self.refine_spin, self.order_combo):
             control.changed.connect(self._update_note)
         self.show_combo.changed.connect(self._on_show_changed)
         self.run_button.changed.connect(self.run)
@@ -182,6 +183,11 @@ class SimulateWidget(QWidget):
             layer.metadata[MESH_KEY], refine=int(self.refine_spin.value),
             periodic=self.protocol_combo.value == "periodic")
 
+    def _adapt_note(self) -> str:
+        if ORDERS[self.order_combo.value] != "auto" or self.labels_combo.value is None:
+            return ""
+        return ", refined once more where the flux jumps (auto) if P2 fits the budget"
+
     def _update_note(self, *_) -> None:
         """Say which mesh the run will use: the one shown, or the labels meshed again."""
         layer = self.mesh_combo.value
@@ -193,7 +199,7 @@ class SimulateWidget(QWidget):
                  + (", periodic faces" if mesh.info.get("periodic") else ""))
         if not self._remeshing():
             self.mesh_note.value = f"the run uses the mesh as shown ({mesh.n_cells} " \
-                                   f"elements, {shown})"
+                                   f"elements, {shown})" + self._adapt_note()
             return
         wanted = f"refine {int(self.refine_spin.value)}" + (
             " with periodic faces" if self.protocol_combo.value == "periodic" else "")
@@ -233,6 +239,10 @@ class SimulateWidget(QWidget):
                              "set refine to the mesh's and use the mixed protocol.")
                 return None
             labels = np.asarray(self.labels_combo.value.data)
+        source = labels
+        picked = self.labels_combo.value
+        if source is None and picked is not None and tuple(picked.data.shape) == tuple(mesh.shape):
+            source = np.asarray(picked.data)   # lets the default adapt the mesh to the field
 
         def steps():
             run_mesh = mesh
@@ -240,7 +250,7 @@ class SimulateWidget(QWidget):
                 yield 0, 1, f"meshing the labels again (refine {refine}, {protocol})"
                 run_mesh = remesh(mesh, labels, refine=refine, periodic=protocol == "periodic")
             result = yield from simulate_steps(run_mesh, conductivity, order=order, axes=axes,
-                                               protocol=protocol)
+                                               protocol=protocol, labels=source)
             shown = shown_faces(result.mesh.cells, result.mesh.material)
             clipper = MeshClipper(result.mesh, shown=shown)
             return result, shown[0], clipper

@@ -38,9 +38,14 @@ def add_commands(subparsers) -> None:
                    metavar="L", help="labels not to mesh (insulating voids; labels only)")
     p.add_argument("--material-names", nargs="+", action="extend", default=[],
                    metavar="ID=NAME", help="names for materials, usable in --conductivity")
-    p.add_argument("--order", type=int, default=1, metavar="1|2",
-                   help="element degree: 1 (linear, default) or 2 (quadratic, more "
-                        "accurate per unknown)")
+    p.add_argument("--order", default="auto", metavar="auto|1|2",
+                   help="element degree: 1 (linear), 2 (quadratic, more accurate per "
+                        "unknown) or auto (default: for k_eff, P2 while its unknowns stay "
+                        "within 3 million, else P1; P1 for boundary-value and transient runs)")
+    p.add_argument("--adapt", default="auto", metavar="auto|0|1|2",
+                   help="k_eff on labels: adaptive steps before the final solve (a P1 solve, "
+                        "then the labels meshed again one level finer where the flux jumps "
+                        "most); auto (default): one step with P2")
     p.add_argument("--refine", type=int, default=0, metavar="K",
                    help="labels only: elements at material interfaces are 2^-K voxels "
                         "(0..4, default 0), where the field is least smooth")
@@ -115,13 +120,18 @@ def _run_simulate(args: argparse.Namespace) -> int:
         simulation_report,
         write_report,
     )
-    from ._simulate import ORDERS, simulate
+    from ._simulate import simulate
 
     # the door: every argument and the output path before any work
     conductivity = parse_conductivity_args(args.conductivity)
     names = parse_material_names(args.material_names)
-    if args.order not in ORDERS:
-        raise ValueError(f"--order must be 1 or 2, not {args.order}.")
+    order = {"auto": "auto", "1": 1, "2": 2}.get(str(args.order))
+    if order is None:
+        raise ValueError(f"--order must be auto, 1 or 2, not {args.order}.")
+    adapt = {"auto": "auto", "0": 0, "1": 1, "2": 2}.get(str(args.adapt))
+    if adapt is None:
+        raise ValueError(f"--adapt must be auto, 0, 1 or 2, not {args.adapt}.")
+    fixed_order = 1 if order == "auto" else order      # boundary-value and transient runs
     if not 0 < args.tol < 1:
         raise ValueError(f"--tol must lie between 0 and 1, not {args.tol:g}.")
     transient = _transient_options(args)
@@ -150,6 +160,9 @@ def _run_simulate(args: argparse.Namespace) -> int:
     if not is_image and (args.spacing or args.exclude or args.refine):
         raise ValueError("--spacing, --exclude and --refine apply to a label image; a mesh "
                          "file already has its coordinates, materials and elements.")
+    if not is_image and adapt not in ("auto", 0):
+        raise ValueError("--adapt meshes the labels again: it needs a label image, not a mesh "
+                         "file (simulate the labels, or leave --adapt out).")
     from ..mesh._lattice import check_refine
 
     check_refine(args.refine)
@@ -180,19 +193,20 @@ def _run_simulate(args: argparse.Namespace) -> int:
         mesh = prepare_mesh(source, spacing=spacing if is_image else None,
                             exclude=tuple(args.exclude), material_names=names,
                             refine=args.refine)
-        result = solve_boundary_value(mesh, conductivity, order=args.order, tol=args.tol,
+        result = solve_boundary_value(mesh, conductivity, order=fixed_order, tol=args.tol,
                                       **boundary)
     elif transient is not None:
         from ._transient import simulate_transient
 
         result = simulate_transient(source, conductivity, spacing=spacing,
-                                    order=args.order, tol=args.tol,
+                                    order=fixed_order, tol=args.tol,
                                     exclude=tuple(args.exclude), material_names=names,
                                     **transient)
     else:
-        result = simulate(source, conductivity, spacing=spacing, order=args.order,
+        result = simulate(source, conductivity, spacing=spacing, order=order,
                           axes=args.axes, tol=args.tol, exclude=tuple(args.exclude),
-                          material_names=names, refine=args.refine, protocol=args.protocol)
+                          material_names=names, refine=args.refine, protocol=args.protocol,
+                          adapt=adapt if is_image else 0)
     table = None
     if signatures is not None or args.report:
         table = simulation_report(result, conductivity, signatures)

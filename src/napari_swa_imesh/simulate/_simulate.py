@@ -12,10 +12,13 @@ from numbers import Real
 import numpy as np
 
 from ..mesh import Mesh, mesh_labels
+from ..mesh._adapt import refine_marked
+from ._adapt import AUTO, auto_settings, check_adapt, doerfler, flux_jump_indicator
 from ._assembly import cell_fluxes, fe_space, p1_embedding, stiffness_matrix
 from ._conductivity import axis_names, conductivity_tensors
 from ._fe import vertex_values
 from ._periodic import PeriodicProblem
+from ._hashin import HashinShtrikman, two_isotropic_phases
 from ._protocols import check_within_bounds, mixed_boundary, voigt_reuss
 from ._solve import DEFAULT_TOLERANCE, SolverInfo, connected_parts
 
@@ -58,6 +61,14 @@ class SimulationResult:
         Periodic protocol: the full effective tensor in x, y(, z) order (column i: the
         mean flux, as a conductivity, under a unit mean gradient along axis i; NaN for
         axes not solved).
+    hashin_shtrikman : HashinShtrikman or None
+        Two isotropic materials filling the box: their Hashin-Shtrikman bounds, and with
+        the periodic protocol on every axis the trace inequalities of ``tensor`` (the form
+        that holds for anisotropic microstructures; :mod:`._hashin`).
+    adapt : int
+        Adaptive refinement steps taken before the final solve (:mod:`._adapt`).
+    choice : str
+        The elements and steps used, and why when the default chose them.
     """
 
     k_eff: dict[str, float]
@@ -72,6 +83,9 @@ class SimulationResult:
     seconds: dict[str, float] = field(default_factory=dict)
     protocol: str = "mixed"
     tensor: np.ndarray | None = None
+    hashin_shtrikman: HashinShtrikman | None = None
+    adapt: int = 0
+    choice: str = ""
 
     def summary(self) -> dict:
         """Plain-JSON summary (what ``swa-imesh simulate --json`` prints)."""
@@ -80,6 +94,8 @@ class SimulationResult:
             "bounds": {a: {"reuss": lo, "voigt": hi} for a, (lo, hi) in self.bounds.items()},
             "volume_fractions": {str(k): v for k, v in self.volume_fractions.items()},
             "order": self.order,
+            "adapt": self.adapt,
+            "choice": self.choice,
             "dofs": self.dofs,
             "elements": self.mesh.n_cells,
             "iterations": {a: s.iterations for a, s in self.solver.items()},
@@ -88,12 +104,15 @@ class SimulationResult:
             "protocol": self.protocol,
             **({"tensor": [[None if np.isnan(v) else float(v) for v in row]
                            for row in self.tensor]} if self.tensor is not None else {}),
+            **({"hashin_shtrikman": self.hashin_shtrikman.to_dict()}
+               if self.hashin_shtrikman is not None else {}),
         }
 
     def describe(self) -> str:
         """A few lines for people: k_eff per axis within its bounds, the solve's cost."""
         lines = [f"steady diffusion, P{self.order} on {self.mesh.n_cells} elements, "
-                 f"{self.dofs} unknowns, {self.protocol} protocol"]
+                 f"{self.dofs} unknowns, {self.protocol} protocol"
+                 + (f" ({self.choice})" if self.choice else "")]
         for a, k in self.k_eff.items():
             lo, hi = self.bounds[a]
             s = self.solver[a]
@@ -105,6 +124,16 @@ class SimulationResult:
         if self.tensor is not None:
             lines.append("tensor (x, y(, z)):")
             lines += ["  " + "  ".join(f"{v:11.6g}" for v in row) for row in self.tensor]
+        hs = self.hashin_shtrikman
+        if hs is not None:
+            line = (f"Hashin-Shtrikman (two phases, for an isotropic microstructure): "
+                    f"{hs.lower:.4g} .. {hs.upper:.4g}")
+            if hs.trace_holds is not None:
+                line += ("; trace bounds of the tensor: lower "
+                         + ("holds" if hs.trace_holds[0] else "FAIL") + ", upper "
+                         + ("holds" if hs.trace_holds[1] else "crossed (discretisation "
+                            "error near an optimal microstructure)"))
+            lines.append(line)
         return "\n".join(lines)
 
 
@@ -191,17 +220,17 @@ def check_tolerance(tol) -> None:
         raise ValueError(f"tol must be a relative residual between 0 and 1, not {tol!r}.")
 
 
-def simulate_steps(mesh_or_labels, conductivity: Mapping, *, spacing=None, order: int = 1,
-                   axes=None, tol: float = DEFAULT_TOLERANCE, exclude=(),
-                   material_names: Mapping[int, str] | None = None, refine: int = 0,
-                   protocol: str = "mixed",
-                   ) -> Generator[tuple[int, int, str], None, SimulationResult]:
+def simulate_steps(mesh_or_labels, conductivity: Mapping, *, spacing=None,
+                   order: int | str = AUTO, axes=None, tol: float = DEFAULT_TOLERANCE,
+                   exclude=(), material_names: Mapping[int, str] | None = None,
+                   refine: int = 0, protocol: str = "mixed", adapt: int | str = AUTO,
+                   labels=None) -> Generator[tuple[int, int, str], None, SimulationResult]:
     """Run :func:`simulate` step by step, for a progress bar.
 
     Parameters
     ----------
     mesh_or_labels, conductivity, spacing, order, axes, tol, exclude, material_names, refine,
-    protocol
+    protocol, adapt, labels
         As for :func:`simulate`.
 
     Yields
@@ -214,8 +243,9 @@ def simulate_steps(mesh_or_labels, conductivity: Mapping, *, spacing=None, order
     SimulationResult
         As the generator's return value (``StopIteration.value``).
     """
-    if order not in ORDERS:
-        raise ValueError(f"order must be 1 or 2 (P1 or P2 elements), not {order!r}.")
+    if order != AUTO and (isinstance(order, bool) or order not in ORDERS):
+        raise ValueError(f"order must be 1 or 2 (P1 or P2 elements) or 'auto', not {order!r}.")
+    adapt = check_adapt(adapt)
     check_tolerance(tol)
     if protocol not in PROTOCOLS:
         raise ValueError(f"protocol must be one of {', '.join(PROTOCOLS)}, not {protocol!r}.")
@@ -227,9 +257,24 @@ def simulate_steps(mesh_or_labels, conductivity: Mapping, *, spacing=None, order
     names = _check_axes(axes, mesh.ndim)
     materials, cell_material = np.unique(mesh.material, return_inverse=True)
     tensors = conductivity_tensors(conductivity, materials, mesh.ndim, mesh.material_names)
+    source = labels if isinstance(mesh_or_labels, Mesh) else mesh_or_labels
+    order, adapt, choice = auto_settings(mesh, order, adapt, source is not None)
     seconds["mesh"] = time.perf_counter() - t0
-    total = 2 + len(names)
-    yield 1, total, f"assembling P{order} on {mesh.n_cells} elements"
+    total = 2 + len(names) + adapt
+    for step in range(adapt):
+        yield 1 + step, total, (f"adaptive step {step + 1}: P1 on {mesh.n_cells} elements, "
+                                "refining where the flux jumps most")
+        t0 = time.perf_counter()
+        first = simulate(mesh, conductivity, order=1, adapt=0, axes=names, tol=tol,
+                         protocol=protocol)
+        # mark whole leaves (the unit the mesher splits) by their summed indicator
+        leaf = np.asarray(mesh.cell_data["leaf"])
+        indicator = flux_jump_indicator(mesh, [first.flux[a] for a in names])
+        marked = doerfler(np.bincount(leaf, indicator))[leaf]
+        mesh = refine_marked(source, mesh, marked)
+        materials, cell_material = np.unique(mesh.material, return_inverse=True)
+        seconds[f"adapt {step + 1}"] = time.perf_counter() - t0
+    yield 1 + adapt, total, f"assembling P{order} on {mesh.n_cells} elements"
 
     t0 = time.perf_counter()
     space = fe_space(mesh, order)
@@ -265,7 +310,7 @@ def simulate_steps(mesh_or_labels, conductivity: Mapping, *, spacing=None, order
         periodic = PeriodicProblem(matrix, doflocs, lo, hi, tol=tol)
         tensor = np.full((mesh.ndim, mesh.ndim), np.nan)
         seconds["solve"] += time.perf_counter() - t0
-    for step, name in enumerate(names, start=2):
+    for step, name in enumerate(names, start=2 + adapt):
         yield step, total, f"solving along {name} ({matrix.shape[0]} unknowns)"
         t0 = time.perf_counter()
         axis = image_axes[name]
@@ -291,18 +336,25 @@ def simulate_steps(mesh_or_labels, conductivity: Mapping, *, spacing=None, order
     seconds["setup"] = sum(info.setup for info in solver.values())
     if tensor is not None:
         check_symmetric(tensor)
+    hashin = None
+    phases = two_isotropic_phases(tensors, fractions)
+    if phases is not None:
+        full = tensor is not None and not np.isnan(tensor).any()
+        hashin = HashinShtrikman.of(*phases, mesh.ndim, tensor if full else None)
     yield total, total, "done"
     return SimulationResult(
         k_eff=k_eff, bounds=bounds, potential=potential, flux=flux, solver=solver,
         volume_fractions={int(m): float(f) for m, f in zip(materials, fractions)},
         mesh=mesh, order=order, dofs=int(matrix.shape[0]), seconds=seconds,
-        protocol=protocol, tensor=None if tensor is None else tensor[::-1, ::-1].copy())
+        protocol=protocol, tensor=None if tensor is None else tensor[::-1, ::-1].copy(),
+        hashin_shtrikman=hashin, adapt=adapt, choice=choice)
 
 
-def simulate(mesh_or_labels, conductivity: Mapping, *, spacing=None, order: int = 1,
-             axes=None, tol: float = DEFAULT_TOLERANCE, exclude=(),
+def simulate(mesh_or_labels, conductivity: Mapping, *, spacing=None,
+             order: int | str = AUTO, axes=None, tol: float = DEFAULT_TOLERANCE, exclude=(),
              material_names: Mapping[int, str] | None = None,
-             refine: int = 0, protocol: str = "mixed") -> SimulationResult:
+             refine: int = 0, protocol: str = "mixed", adapt: int | str = AUTO,
+             labels=None) -> SimulationResult:
     """Steady diffusion on an IMESH mesh: effective conductivity of the image box.
 
     For each axis asked, the mixed-boundary protocol: potential 0 and 1 on the two faces
@@ -319,8 +371,10 @@ def simulate(mesh_or_labels, conductivity: Mapping, *, spacing=None, order: int 
         meshed material needs one; excluded materials conduct nothing.
     spacing : float or sequence of float, optional
         Voxel size per axis (labels only).
-    order : {1, 2}
-        Lagrange element degree. P2 is the more accurate per unknown on these meshes.
+    order : {"auto", 1, 2}
+        Lagrange element degree. P2 is the more accurate per unknown on these meshes;
+        ``"auto"`` (the default) takes P2 while its unknowns stay within
+        :data:`~._adapt.P2_BUDGET`, else P1 (``result.choice`` says which and why).
     axes : sequence of {"x", "y", "z"}, optional
         Axes to solve along (x = column, y = row, z = plane); default all.
     tol : float
@@ -338,6 +392,12 @@ def simulate(mesh_or_labels, conductivity: Mapping, *, spacing=None, order: int 
         labels are meshed with ``periodic=True``, a mesh must have matching faces); gives
         the full tensor (``result.tensor``) and k_eff as its diagonal. For an image that
         is not periodic the two bracket the answer less tightly than either alone.
+    adapt : {"auto", 0, 1, 2}
+        Adaptive steps before the final solve: a P1 solve, its flux-jump indicator, and
+        the labels meshed again one level finer where it is largest (:mod:`._adapt`).
+        ``"auto"``: one step with P2 when the labels are at hand and the budget allows.
+    labels : (M, N[, P]) array_like of int, optional
+        With a mesh: the label image it was made from, so that it can be adapted.
 
     Returns
     -------
@@ -355,7 +415,7 @@ def simulate(mesh_or_labels, conductivity: Mapping, *, spacing=None, order: int 
     """
     steps = simulate_steps(mesh_or_labels, conductivity, spacing=spacing, order=order,
                            axes=axes, tol=tol, exclude=exclude, material_names=material_names,
-                           refine=refine, protocol=protocol)
+                           refine=refine, protocol=protocol, adapt=adapt, labels=labels)
     while True:
         try:
             next(steps)

@@ -1,0 +1,121 @@
+"""Adaptive refinement: mesh a label image again, one lattice level finer where asked.
+
+A solver marks the elements where its error indicator is largest (simulate's flux-jump
+indicator); :func:`refine_marked` meshes the labels as the first mesh was (its lattice,
+exclusions, size cap, periodic faces) on a lattice twice as fine, each leaf that holds a
+marked element cut once into 2^d. The
+tree is balanced again and cut by the same templates, so conformity, exact material volumes
+and the quality bound of the lattice all hold as for any other IMESH mesh.
+"""
+
+from __future__ import annotations
+
+import itertools
+import time
+
+import numpy as np
+
+from .._tree import RegionTree
+from ._balance import balance_tree
+from ._imesh import _mesh_arguments, _mesh_tree, _names
+from ._lattice import MAX_REFINE, Lattice, lattice_tree, split_leaves
+from ._types import Mesh
+
+__all__ = ["refine_marked"]
+
+
+def refine_marked(labels, mesh: Mesh, marked: np.ndarray) -> Mesh:
+    """The IMESH mesh of `labels`, refined once more in the cells of marked elements.
+
+    Parameters
+    ----------
+    labels : (M, N[, P]) array_like of int
+        The label image `mesh` was made from (checked again here).
+    mesh : Mesh
+        A template mesh of `labels` from :func:`mesh_labels` (its ``info`` records the
+        lattice, exclusions, size cap and periodic faces), in index space (no coarsening).
+    marked : (n_cells,) array_like of bool
+        Elements of `mesh` to refine.
+
+    Returns
+    -------
+    Mesh
+        On the lattice one refine level finer; ``info["adapted"]`` counts the marked
+        elements and lattice cells.
+
+    Raises
+    ------
+    ValueError
+        For a mesh that is not a template mesh of these labels, a wrong-length mask, or a
+        lattice already at the finest refine level.
+    """
+    info = mesh.info
+    if info.get("method") != "template" or "lattice" not in info or info.get("coarsen"):
+        raise ValueError("adaptive refinement needs a template mesh made from the labels by "
+                         "mesh_labels (not read from a file, not coarsened).")
+    marked = np.asarray(marked, dtype=bool)
+    if marked.shape != (mesh.n_cells,):
+        raise ValueError(f"marked needs one flag per element ({mesh.n_cells}), not shape "
+                         f"{marked.shape}.")
+    spacing = tuple(float(s) for s in info["spacing"])
+    lab, _, exclude = _mesh_arguments(labels, method="template", exclude=info["exclude"],
+                                      spacing=spacing)
+    if tuple(lab.shape) != tuple(mesh.shape):
+        raise ValueError(f"the labels have shape {lab.shape} but the mesh was made from "
+                         f"{tuple(mesh.shape)}: pass the labels the mesh was made from.")
+    described = info["lattice"]
+    if described["refine"] >= MAX_REFINE:
+        raise ValueError(f"the mesh is at refine level {MAX_REFINE} already, the finest; "
+                         "it cannot be refined further.")
+    coarse = Lattice(spacing, tuple(described["factors"]), described["refine"])
+    fine = Lattice(spacing, coarse.factors, coarse.refine + 1)
+    max_size, periodic = info.get("max_size"), bool(info.get("periodic", False))
+
+    t0 = time.perf_counter()
+    tree = lattice_tree(lab, coarse, exclude=exclude, max_size=max_size, periodic=periodic)
+    # the balanced tree the mesh was cut from (balancing is deterministic): its leaves are
+    # what the elements' "leaf" numbers index
+    bal = balance_tree(tree, connectivity=max(1, lab.ndim - 1))
+    leaf = np.asarray(mesh.cell_data["leaf"])
+    if (leaf.max(initial=-1) >= len(bal.level)
+            or not np.array_equal(bal.label[leaf], mesh.material)):
+        raise ValueError("the mesh does not match the tree of these labels: pass the labels "
+                         "the mesh was made from, and a mesh that was not modified.")
+    split = np.zeros(len(bal.level), dtype=bool)
+    split[leaf[marked]] = True
+    tree = _split_once(bal, split, periodic)
+    seconds = {"tree": time.perf_counter() - t0}
+    out = _mesh_tree(tree, method="template", exclude=exclude, spacing=fine.step,
+                     material_names=_names(mesh.material_names), connectivity=None,
+                     report_face_balance=False, seconds=seconds)
+    out.shape, out.spacing = tuple(lab.shape), spacing
+    out.info["spacing"] = list(spacing)
+    out.info["shape"] = list(lab.shape)
+    out.info["lattice"] = fine.describe()
+    if max_size is not None:
+        out.info["max_size"] = max_size
+    out.info["periodic"] = periodic
+    out.info["adapted"] = {"marked_elements": int(marked.sum()),
+                           "split_leaves": int(split.sum()),
+                           "from_refine": coarse.refine}
+    return out
+
+
+def _split_once(bal: RegionTree, split: np.ndarray, periodic: bool) -> RegionTree:
+    """`bal` on the lattice twice as fine, each leaf in `split` cut once into 2^d."""
+    d = bal.ndim
+    corners = np.array(list(itertools.product((0, 1), repeat=d)), dtype=np.int64)
+    origin, level = bal.origin << 1, (bal.level + 1).astype(np.int8)
+    half = np.left_shift(np.int64(1), level[split].astype(np.int64) - 1)
+    kids = (origin[split][:, None, :] + corners[None] * half[:, None, None]).reshape(-1, d)
+    finer = RegionTree(
+        np.concatenate([origin[~split], kids]),
+        np.concatenate([level[~split], np.repeat(level[split] - 1, len(corners))]).astype(np.int8),
+        np.concatenate([bal.label[~split], np.repeat(bal.label[split], len(corners))]),
+        tuple(n << 1 for n in bal.shape), tuple(n << 1 for n in bal.padded_shape),
+        bal.top_level + 1)
+    if periodic:  # box faces stay one cell thick, as lattice_tree made them
+        extent = np.asarray(finer.shape, dtype=np.int64)
+        finer = split_leaves(finer, lambda origin, size: (
+            (origin == 0) | (origin + size[:, None] >= extent)).any(axis=1))
+    return finer
