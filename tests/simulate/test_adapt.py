@@ -119,6 +119,12 @@ def test_adapting_moves_k_eff_towards_a_much_finer_solution():
     assert default.dofs < 2 * p2.dofs
     # conforming: every discretisation lies above the exact value, the finer the lower
     assert fine < default.k_eff["x"] < p2.k_eff["x"]
+    # a second step refines the adapted mesh, not the labels' own tree
+    two = simulate(labels, k, order=2, adapt=2, axes="x")
+    assert two.mesh.info["adapted"]["steps"] == 2 and check_mesh(two.mesh, labels).all_passed
+    assert fine < two.k_eff["x"] < default.k_eff["x"]
+    with pytest.raises(ValueError, match="adapted before"):
+        refine_marked(labels, default.mesh, np.ones(default.mesh.n_cells, bool))
 
 
 def test_the_default_is_the_same_for_the_transposed_and_relabelled_image():

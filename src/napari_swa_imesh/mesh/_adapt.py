@@ -46,9 +46,18 @@ def refine_marked(labels, mesh: Mesh, marked: np.ndarray) -> Mesh:
     Raises
     ------
     ValueError
-        For a mesh that is not a template mesh of these labels, a wrong-length mask, or a
-        lattice already at the finest refine level.
+        For a mesh that is not a template mesh of these labels, a wrong-length mask, a
+        mesh adapted before (refine it with the tree :func:`_refine_marked` returned), or
+        a lattice already at the finest refine level.
     """
+    return _refine_marked(labels, mesh, marked)[0]
+
+
+def _refine_marked(labels, mesh: Mesh, marked: np.ndarray, tree: RegionTree | None = None
+                   ) -> tuple[Mesh, RegionTree]:
+    """:func:`refine_marked`, with the (unbalanced) tree `mesh` was cut from when known
+    (required for a mesh adapted before: its tree is not the labels' own); returns the
+    new mesh and its tree, for the next step."""
     info = mesh.info
     if info.get("method") != "template" or "lattice" not in info or info.get("coarsen"):
         raise ValueError("adaptive refinement needs a template mesh made from the labels by "
@@ -72,7 +81,12 @@ def refine_marked(labels, mesh: Mesh, marked: np.ndarray) -> Mesh:
     max_size, periodic = info.get("max_size"), bool(info.get("periodic", False))
 
     t0 = time.perf_counter()
-    tree = lattice_tree(lab, coarse, exclude=exclude, max_size=max_size, periodic=periodic)
+    if tree is None:
+        if "adapted" in info:
+            raise ValueError("this mesh was adapted before, so its tree is not the labels' "
+                             "own: pass the tree the last step returned.")
+        tree = lattice_tree(lab, coarse, exclude=exclude, max_size=max_size,
+                            periodic=periodic)
     # the balanced tree the mesh was cut from (balancing is deterministic): its leaves are
     # what the elements' "leaf" numbers index
     bal = balance_tree(tree, connectivity=max(1, lab.ndim - 1))
@@ -95,10 +109,12 @@ def refine_marked(labels, mesh: Mesh, marked: np.ndarray) -> Mesh:
     if max_size is not None:
         out.info["max_size"] = max_size
     out.info["periodic"] = periodic
-    out.info["adapted"] = {"marked_elements": int(marked.sum()),
+    steps = info.get("adapted", {}).get("steps", 0) + 1
+    out.info["adapted"] = {"steps": steps, "marked_elements": int(marked.sum()),
                            "split_leaves": int(split.sum()),
-                           "from_refine": coarse.refine}
-    return out
+                           "from_refine": info.get("adapted", {}).get("from_refine",
+                                                                      coarse.refine)}
+    return out, tree
 
 
 def _split_once(bal: RegionTree, split: np.ndarray, periodic: bool) -> RegionTree:

@@ -12,7 +12,7 @@ from numbers import Real
 import numpy as np
 
 from ..mesh import Mesh, mesh_labels
-from ..mesh._adapt import refine_marked
+from ..mesh._adapt import _refine_marked
 from ._adapt import AUTO, auto_settings, check_adapt, doerfler, flux_jump_indicator
 from ._assembly import cell_fluxes, fe_space, p1_embedding, stiffness_matrix
 from ._conductivity import axis_names, conductivity_tensors
@@ -261,6 +261,7 @@ def simulate_steps(mesh_or_labels, conductivity: Mapping, *, spacing=None,
     order, adapt, choice = auto_settings(mesh, order, adapt, source is not None)
     seconds["mesh"] = time.perf_counter() - t0
     total = 2 + len(names) + adapt
+    tree = None                # the tree of the last adapted mesh, for the next step
     for step in range(adapt):
         yield 1 + step, total, (f"adaptive step {step + 1}: P1 on {mesh.n_cells} elements, "
                                 "refining where the flux jumps most")
@@ -271,7 +272,7 @@ def simulate_steps(mesh_or_labels, conductivity: Mapping, *, spacing=None,
         leaf = np.asarray(mesh.cell_data["leaf"])
         indicator = flux_jump_indicator(mesh, [first.flux[a] for a in names])
         marked = doerfler(np.bincount(leaf, indicator))[leaf]
-        mesh = refine_marked(source, mesh, marked)
+        mesh, tree = _refine_marked(source, mesh, marked, tree)
         materials, cell_material = np.unique(mesh.material, return_inverse=True)
         seconds[f"adapt {step + 1}"] = time.perf_counter() - t0
     yield 1 + adapt, total, f"assembling P{order} on {mesh.n_cells} elements"
