@@ -154,5 +154,6 @@ def test_the_default_falls_back_within_its_budget_and_says_why(monkeypatch, tmp_
                  "--json"]) == 0
     out = json.loads(capsys.readouterr().out)
     assert out["order"] == 1 and "budget" in out["choice"]
-    # asked for explicitly, the budget does not apply
+    # P2 asked for: adapting stays within the budget unless asked for too
+    assert simulate(labels, k, axes="x", order=2).adapt == 0
     assert simulate(labels, k, axes="x", order=2, adapt=1).adapt == 1

@@ -58,7 +58,8 @@ def auto_settings(mesh: Mesh, order, adapt, from_labels: bool) -> tuple[int, int
     else:
         why = f"P{order} (asked)"
     if adapt == AUTO:
-        adapt = 1 if (can_adapt and order == 2) else 0
+        # the adaptive step belongs to P2's default, within the same budget
+        adapt = 1 if (can_adapt and order == 2 and p2 * ADAPT_GROWTH <= P2_BUDGET) else 0
     if adapt and not can_adapt:
         raise ValueError("adaptive refinement needs a label image to mesh again (a mesh "
                          "read from a file or coarsened cannot be refined): pass adapt=0, "
