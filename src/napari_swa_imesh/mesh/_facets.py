@@ -19,6 +19,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ._common import material_names
+from ._leaf_facets import material_codes, template_group_rows
 from ._types import Mesh
 
 __all__ = ["FacetGroup", "facet_groups", "paired_facets", "FACE_CORNERS"]
@@ -412,49 +413,83 @@ def facet_groups(mesh: Mesh) -> dict[str, FacetGroup]:
     >>> {name: len(g) for name, g in groups.items()}
     {'xmin': 1, 'xmax': 1, 'ymin': 2, 'ymax': 2, 'interface_material_1_material_2': 1}
     """
+    cells = np.asarray(mesh.cells, dtype=np.intp)
+    material = np.asarray(mesh.material)
+    fast = template_group_rows(mesh)
+    if fast is not None:
+        owner, opposite, across = fast
+        order = _lexicographic(cells, owner, opposite)
+        owner, opposite, across = owner[order], opposite[order], across[order]
+        boundary = across < 0
+        return _named_groups(mesh, cells, material, owner[boundary], opposite[boundary],
+                             owner[~boundary], opposite[~boundary], across[~boundary])
+    return _sorted_groups(mesh)
+
+
+def _sorted_groups(mesh: Mesh) -> dict[str, FacetGroup]:
+    """:func:`facet_groups` for any mesh: every facet occurrence paired by one sort."""
     d = mesh.ndim
     cells = np.asarray(mesh.cells, dtype=np.intp)
     material = np.asarray(mesh.material)
     # the pairs inside one material name no group: dropped pass by pass, never stored
-    facets, owners, opposite = _paired_result(cells, *_pair_rows(
+    _, owners, opposite = _paired_result(cells, *_pair_rows(
         cells, lambda one, two: material[one // (d + 1)] != material[two // (d + 1)]))
+    boundary = owners[:, 1] < 0
+    shared = np.flatnonzero(~boundary)
+    # each interface facet as seen from material A, the lower label
+    ma, mb = material[owners[shared, 0]], material[owners[shared, 1]]
+    side = (ma > mb).astype(np.intp)
+    return _named_groups(mesh, cells, material, owners[boundary, 0], opposite[boundary, 0],
+                         owners[shared, side], opposite[shared, side],
+                         np.maximum(ma, mb))
 
+
+def _lexicographic(cells: np.ndarray, owner: np.ndarray, opposite: np.ndarray) -> np.ndarray:
+    """Order of facets by their sorted vertex ids (the order of :func:`paired_facets`)."""
+    d = cells.shape[1] - 1
+    corners = FACE_CORNERS[d][opposite]
+    cols, _ = _sorted_facet([cells[owner, corners[:, j]] for j in range(d)])
+    return np.lexsort(cols[::-1])
+
+
+def _named_groups(mesh: Mesh, cells, material, b_owner, b_opposite, i_owner, i_opposite,
+                  i_other) -> dict[str, FacetGroup]:
+    """The groups of :func:`facet_groups` from boundary facets (owner, opposite corner)
+    and interface facets (owner of material A, its opposite corner, material B), each
+    in lexicographic order."""
+    d = mesh.ndim
     groups: dict[str, FacetGroup] = {}
 
-    def add(name: str, rows: np.ndarray, side: np.ndarray | int = 0) -> None:
-        # side: which owner (0 or 1, per facet) the facet is seen from
-        if rows.size:
-            owner, corner = owners[rows, side], opposite[rows, side]
+    def add(name: str, owner: np.ndarray, corner: np.ndarray) -> None:
+        if owner.size:
             groups[name] = FacetGroup(cells[owner[:, None], FACE_CORNERS[d][corner]],
                                       owner, corner)
 
-    boundary = np.flatnonzero(owners[:, 1] < 0)
     lo, hi = mesh.image_box()
-    coords = mesh.points[facets[boundary]]                     # (B, d, d)
-    on_side = np.zeros(len(boundary), dtype=bool)
+    coords = mesh.points[cells[b_owner[:, None], FACE_CORNERS[d][b_opposite]]]   # (B, d, d)
+    on_side = np.zeros(len(b_owner), dtype=bool)
     tol = 1e-9 * (hi - lo)
     for axis_name, axis in zip("xyz"[:d], range(d - 1, -1, -1)):
         values = coords[:, :, axis]
         for end, plane in (("min", lo[axis]), ("max", hi[axis])):
             hit = np.all(np.abs(values - plane) <= tol[axis], axis=1) & ~on_side
-            add(f"{axis_name}{end}", boundary[hit])
+            add(f"{axis_name}{end}", b_owner[hit], b_opposite[hit])
             on_side |= hit
+    del coords
 
-    names = material_names(mesh.material_names, np.unique(material))
-    shared = np.flatnonzero(owners[:, 1] >= 0)
-    ma, mb = material[owners[shared, 0]], material[owners[shared, 1]]
-    differ = ma != mb
-    shared, ma, mb = shared[differ], ma[differ], mb[differ]
-    low, high = np.minimum(ma, mb), np.maximum(ma, mb)
-    pairs = np.unique(np.stack([low, high], axis=1), axis=0) if len(low) else []
-    for x, y in pairs:
-        pair = (low == x) & (high == y)
-        # each facet as seen from material A, the lower label
-        add(f"interface_{names[int(x)]}_{names[int(y)]}", shared[pair],
-            side=(ma[pair] != x).astype(np.intp))
+    present, _ = material_codes(material)
+    names = material_names(mesh.material_names, present)
+    # (A, B) pairs by their ranks among the materials: no sort of the facets
+    rank = np.searchsorted(present, np.stack([material[i_owner], i_other]))
+    pair = rank[0] * len(present) + rank[1]
+    for code in np.flatnonzero(np.bincount(pair, minlength=len(present) ** 2)):
+        x, y = present[code // len(present)], present[code % len(present)]
+        mine = pair == code
+        add(f"interface_{names[int(x)]}_{names[int(y)]}", i_owner[mine], i_opposite[mine])
 
-    exterior = boundary[~on_side]
-    outside = material[owners[exterior, 0]]
-    for mat in np.unique(outside):
-        add(f"exterior_{names[int(mat)]}", exterior[outside == mat])
+    b_owner, b_opposite = b_owner[~on_side], b_opposite[~on_side]
+    outside = material[b_owner]
+    for mat in material_codes(outside)[0]:
+        mine = outside == mat
+        add(f"exterior_{names[int(mat)]}", b_owner[mine], b_opposite[mine])
     return groups

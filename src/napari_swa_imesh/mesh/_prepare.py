@@ -21,6 +21,7 @@ import numpy as np
 
 from ._common import export_points, material_names
 from ._facets import FACE_CORNERS, facet_groups
+from ._leaf_facets import material_codes
 from ._order2 import MidEdges, with_mid_nodes
 from ._quality import signed_volumes
 from ._types import Mesh
@@ -156,7 +157,7 @@ class ExportMesh:
         self.points = (corners if self.edges is None
                        else np.concatenate([corners, self.edges.midpoints(corners)]))
         self.material = np.asarray(mesh.material, dtype=np.int64)
-        self.names = material_names(mesh.material_names, np.unique(self.material))
+        self.names = material_names(mesh.material_names, material_codes(self.material)[0])
         chosen = select_facet_groups(facet_groups(mesh), groups) if groups != "none" else {}
         self.groups = {name: self._in_file_frame(k + 1, g)
                        for k, (name, g) in enumerate(chosen.items())}
