@@ -165,9 +165,15 @@ def _lowest(cols: list) -> np.ndarray:
 def _spread_bits(cells: np.ndarray) -> int:
     """Bits of the largest id difference inside one cell (bounds b - a and c - a)."""
     spread = 0
-    for start in range(0, len(cells), _CHUNK):
-        chunk = cells[start:start + _CHUNK]
-        spread = max(spread, int((chunk.max(axis=1) - chunk.min(axis=1)).max()))
+    for start in range(0, len(cells), _CHUNK << 2):
+        cols = [cells[start:start + (_CHUNK << 2), j] for j in range(cells.shape[1])]
+        # column by column: numpy's reductions along a short row axis are slow
+        hi, lo = np.maximum(cols[0], cols[1]), np.minimum(cols[0], cols[1])
+        for c in cols[2:]:
+            np.maximum(hi, c, out=hi)
+            np.minimum(lo, c, out=lo)
+        hi -= lo
+        spread = max(spread, int(hi.max()))
     return max(1, spread.bit_length())
 
 
@@ -193,10 +199,11 @@ class _Packer:
     def __init__(self, w: int, tail: int, lo: int):
         self.w, self.tail, self.lo = w, tail, lo
 
-    def encode(self, cols: list, low_bits: np.ndarray) -> np.ndarray:
-        """int64 keys (the caller keeps them below 2**63) of sorted facet columns."""
-        key = cols[0].astype(np.int64)
-        key -= self.lo
+    def encode(self, cols: list, low_bits: np.ndarray, out: np.ndarray | None = None
+               ) -> np.ndarray:
+        """int64 keys (the caller keeps them below 2**63) of sorted facet columns, into
+        `out` when given."""
+        key = np.subtract(cols[0], self.lo, out=out, dtype=np.int64)
         for c in cols[1:]:
             key <<= self.w
             key |= c - cols[0]
@@ -311,14 +318,16 @@ def _side_passes(cells: np.ndarray, sign: np.ndarray, spread_bits: int,
             if ranked:
                 parts.append((cols, bits))
             else:
-                keys[at:at + len(bits)] = packer.encode(cols, bits)
+                packer.encode(cols, bits, out=keys[at:at + len(bits)])
             at += len(bits)
         if ranked:
             packer = _Ranked([np.concatenate([c[j] for c, _ in parts]) for j in range(d)],
                              np.concatenate([b for _, b in parts]), 1)
             keys = packer.keys
         else:
-            keys.sort(kind="stable")  # timsort: the keys come in long ordered runs
+            # equal keys are equal integers, so any sort gives the same array: numpy's
+            # default (SIMD quicksort) beat timsort on these keys
+            keys.sort()
         yield keys, packer
 
 
@@ -387,7 +396,7 @@ def _facet_passes(cells: np.ndarray):
         else:
             packer = _Packer(w, max(1, (len(rows) - 1).bit_length()), int(bounds[p]))
             keys = packer.encode(cols, local)
-            keys.sort(kind="stable")  # timsort: the keys come in long ordered runs
+            keys.sort()  # rows make every key distinct: any sort gives one order
         yield keys, _PassRows(rows, packer.tail), packer
 
 
