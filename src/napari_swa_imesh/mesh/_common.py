@@ -21,7 +21,7 @@ import numpy as np
 
 from ._quality import signed_volumes
 
-__all__ = ["CELL_TYPE", "CELL_TYPE_2", "MESH_SUFFIXES", "material_names", "export_points",
+__all__ = ["CELL_TYPE", "CELL_TYPE_2", "FACE_CORNERS", "MESH_SUFFIXES", "material_names", "export_points",
            "export_vectors", "orient_positive"]
 
 #: meshio's name of the simplex of each dimension, linear and of second order.
@@ -37,6 +37,13 @@ MESH_SUFFIXES = {
     ".inp": "Abaqus with element sets and facet surfaces",
     ".node": "Triangle (2-D) / TetGen (3-D) .node + .ele (+ .poly / .face)",
     ".ele": "Triangle (2-D) / TetGen (3-D) .node + .ele (+ .poly / .face)",
+}
+
+#: Corners of the facet opposite corner k of a positively oriented simplex, ordered so
+#: that the facet's normal (right-hand rule) points out of the simplex.
+FACE_CORNERS = {
+    2: np.array([[1, 2], [2, 0], [0, 1]]),
+    3: np.array([[1, 2, 3], [0, 3, 2], [0, 1, 3], [0, 2, 1]]),
 }
 
 

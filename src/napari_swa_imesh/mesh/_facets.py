@@ -18,18 +18,12 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ._common import material_names
+from ._common import FACE_CORNERS, material_names
 from ._leaf_facets import material_codes, template_group_rows
 from ._types import Mesh
 
 __all__ = ["FacetGroup", "facet_groups", "paired_facets", "FACE_CORNERS"]
 
-#: Corners of the facet opposite corner k of a positively oriented simplex, ordered so
-#: that the facet's normal (right-hand rule) points out of the simplex.
-FACE_CORNERS = {
-    2: np.array([[1, 2], [2, 0], [0, 1]]),
-    3: np.array([[1, 2, 3], [0, 3, 2], [0, 1, 3], [0, 2, 1]]),
-}
 
 
 @dataclass(frozen=True)

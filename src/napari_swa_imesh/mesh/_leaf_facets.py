@@ -24,6 +24,7 @@ import math
 
 import numpy as np
 
+from ._common import FACE_CORNERS
 from ._types import Mesh
 
 __all__ = ["material_codes", "template_group_rows"]
@@ -130,8 +131,6 @@ def template_group_rows(mesh: Mesh):
     None when `mesh` is not one the template mesher made as it made it (see the module
     docstring); the facets then have to be paired by sorting.
     """
-    from ._facets import FACE_CORNERS
-
     info, cd = mesh.info, mesh.cell_data
     m, d = mesh.n_cells, mesh.ndim
     if (info.get("method") != "template" or "leaf" not in cd or "level" not in cd
