@@ -33,6 +33,12 @@ _CHUNK = 1 << 17                  # elements per pass (their corners stay in cac
 _PAINT = 1 << 22                  # lattice cells painted at once
 _MAX_CELLS_PER_ELEMENT = 16       # a bigger lattice image (deep --refine) is not worth it
 OUTSIDE, EMPTY = -2, -1           # probe results: beyond the image box, no element there
+#: face bit (2a: low end of axis a, 2a+1: high end) -> axis, and the step out of the leaf
+#: to the lattice cell across (-1 below the low end, 0 from the high end)
+_FACE_AXIS = np.zeros(64, dtype=np.int8)
+_FACE_STEP = np.zeros(64, dtype=np.int64)
+for _bit in range(6):
+    _FACE_AXIS[1 << _bit], _FACE_STEP[1 << _bit] = _bit // 2, -1 + (_bit & 1)
 
 
 def material_codes(material: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -71,7 +77,8 @@ def _lattice_coords(mesh: Mesh) -> tuple[np.ndarray, tuple[int, ...]] | None:
         return None
     u = mesh.points / step
     coords = np.rint(u).astype(np.int32)
-    if not np.allclose(u, coords, rtol=0, atol=1e-6):
+    u -= coords
+    if not len(u) or np.abs(u, out=u).max() > 1e-6:
         return None
     return coords, shape
 
@@ -162,8 +169,9 @@ def template_group_rows(mesh: Mesh):
         n = len(cc)
         p = [[x[cc[:, j]] for x in axes] for j in range(d + 1)]   # p[corner][axis]: (n,)
         shift = level[start:start + _CHUNK].astype(np.int32)
-        # on which face of its leaf (aligned to its side) each corner lies, per axis
-        low, high = [], []
+        # which faces of its leaf (aligned to its side) each corner lies on: bit 2a for
+        # the low end along axis a, bit 2a+1 for the high end
+        faces = [np.zeros(n, dtype=np.uint8) for _ in range(d + 1)]
         for a in range(d):
             lo = p[0][a].copy()
             for j in range(1, d + 1):
@@ -171,26 +179,24 @@ def template_group_rows(mesh: Mesh):
             lo >>= shift
             lo <<= shift
             hi = lo + (np.int32(1) << shift)
-            low.append([p[j][a] == lo for j in range(d + 1)])
-            high.append([p[j][a] == hi for j in range(d + 1)])
+            for j in range(d + 1):
+                faces[j] |= (p[j][a] == lo).view(np.uint8) << np.uint8(2 * a)
+                faces[j] |= (p[j][a] == hi).view(np.uint8) << np.uint8(2 * a + 1)
         for k in range(d + 1):
             rest = [j for j in range(d + 1) if j != k]
-            # the face a facet lies on: axis and end (low end: -1 step out, high: +0)
-            axis = np.full(n, -1, dtype=np.int8)
-            out = np.zeros(n, dtype=np.int64)
-            for a in range(d):
-                for flags, step in ((low[a], -1), (high[a], 0)):
-                    on = flags[rest[0]].copy()
-                    for j in rest[1:]:
-                        on &= flags[j]
-                    axis[on] = a
-                    out[on] = step
-            hit = np.flatnonzero(axis >= 0)
+            # the face the facet lies on (the bits all its corners share: one at most)
+            shared = faces[rest[0]].copy()
+            for j in rest[1:]:
+                shared &= faces[j]
+            hit = np.flatnonzero(shared)
             if not len(hit):
                 continue
+            bits = shared[hit]
+            if (bits & (bits - 1)).any():        # on two faces: a flat facet, not ours
+                return None
+            ax, out = _FACE_AXIS[bits], _FACE_STEP[bits]
             # the lattice cell across the face: one step out along the face's axis, the
             # facet's centroid (strictly inside the neighbour's face) along the others
-            ax, out = axis[hit], out[hit]
             flat = np.zeros(len(hit), dtype=np.int64)
             inside = np.ones(len(hit), dtype=bool)
             for a in range(d):
