@@ -21,8 +21,8 @@ import numpy as np
 
 from ._quality import signed_volumes
 
-__all__ = ["CELL_TYPE", "CELL_TYPE_2", "FACE_CORNERS", "MESH_SUFFIXES", "material_names", "export_points",
-           "export_vectors", "orient_positive"]
+__all__ = ["CELL_TYPE", "CELL_TYPE_2", "FACE_CORNERS", "MESH_SUFFIXES", "material_names",
+           "export_points", "export_vectors", "orient_positive"]
 
 #: meshio's name of the simplex of each dimension, linear and of second order.
 CELL_TYPE = {2: "triangle", 3: "tetra"}

@@ -14,39 +14,15 @@ Material names are those of the material groups (``material_<id>`` without a nam
 
 from __future__ import annotations
 
-from dataclasses import dataclass
-
 import numpy as np
 
-from ._common import FACE_CORNERS, material_names
-from ._leaf_facets import material_codes, template_group_rows
+from ._common import FACE_CORNERS
+from ._groups import FacetGroup, named_groups
+from ._leaf_facets import template_group_rows
 from ._types import Mesh
 
 __all__ = ["FacetGroup", "facet_groups", "paired_facets", "FACE_CORNERS"]
 
-
-
-@dataclass(frozen=True)
-class FacetGroup:
-    """The facets of one group.
-
-    Attributes
-    ----------
-    facets : (F, d) ndarray of intp
-        Vertex ids, oriented outward from `owner` (for interfaces: out of material A).
-    owner : (F,) ndarray of intp
-        The element each facet bounds (of material A on an interface).
-    opposite : (F,) ndarray of intp
-        The owner's corner opposite the facet (``0 .. d``), which fixes the element-face
-        number formats such as Abaqus use.
-    """
-
-    facets: np.ndarray
-    owner: np.ndarray
-    opposite: np.ndarray
-
-    def __len__(self) -> int:
-        return len(self.owner)
 
 
 def paired_facets(cells: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -205,6 +181,12 @@ class _Packer:
         key |= low_bits
         return key
 
+    def coefficients(self, d: int) -> list[int]:
+        """Multipliers of the d sorted ids (less `lo`) whose sum is the key less its low
+        bits, e.g. ``[2**(2w+t) - 2**(w+t) - 2**t, 2**(w+t), 2**t]`` in 3-D."""
+        places = [1 << (self.tail + self.w * (d - 1 - q)) for q in range(d)]
+        return [places[0] - sum(places[1:]), *places[1:]]
+
     def decode(self, keys: np.ndarray, d: int) -> list:
         """Sorted vertex ids (d int64 columns) of the facets of `keys`."""
         code = keys >> self.tail
@@ -255,20 +237,22 @@ def _blocks(keys: np.ndarray, tail: int, size: int = _RUN_BLOCK):
 
 
 def _side_passes(cells: np.ndarray, sign: np.ndarray, spread_bits: int,
-                 max_keys: int | None = None):
+                 max_keys: int | None = None, n_points: int | None = None):
     """Sorted keys of every facet occurrence with the side it is seen from as the low bit.
 
     `sign` (M,) is the sign of each cell's volume and `spread_bits` the bits of the
     largest id difference within a cell. The bit is 1 when the cell lies on the positive
     side of its facet taken in sorted order (a flat cell counts as negative), so a facet
     shared from opposite sides is one key ending in 0 followed by the same key ending in 1.
-    Keys are built from chunks of cells straight into the pass's array. Yields (keys,
-    packer) per pass.
+    Keys are built from chunks of cells straight into the pass's array. `n_points`, when
+    given, bounds the ids (else one pass over the cells finds it). Yields (keys, packer)
+    per pass.
     """
     m, n_vert = cells.shape
     d = n_vert - 1
     cap = max_keys or _KEYS_PER_PASS
-    n_points = int(cells.max()) + 1 if m else 1
+    if n_points is None:
+        n_points = int(cells.max()) + 1 if m else 1
     dtype = np.int32 if n_points < 2**31 else np.int64
 
     def chunks():
@@ -305,7 +289,9 @@ def _side_passes(cells: np.ndarray, sign: np.ndarray, spread_bits: int,
         packer = _Packer(spread_bits, 1, lo)
         keys, parts = (None, []) if ranked else (np.empty(size, dtype=np.int64), None)
         at = 0
-        for cols, bits in chunks():
+        if not ranked and len(sizes) == 1:
+            _fill_linear(keys, cells, sign, packer)
+        for cols, bits in (() if keys is not None and len(sizes) == 1 else chunks()):
             if len(sizes) > 1:
                 sel = (cols[0] >= lo) & (cols[0] < hi)
                 cols, bits = [c[sel] for c in cols], bits[sel]
@@ -323,6 +309,35 @@ def _side_passes(cells: np.ndarray, sign: np.ndarray, spread_bits: int,
             # default (SIMD quicksort) beat timsort on these keys
             keys.sort()
         yield keys, packer
+
+
+def _fill_linear(keys: np.ndarray, cells: np.ndarray, sign: np.ndarray, packer) -> None:
+    """The keys of :func:`_side_passes` for one pass from id 0, as a linear form.
+
+    The fields of a key do not overlap, so ``((a << w | b - a) << w | c - a) << 1 | bit``
+    is ``A a + B b + C c + bit`` (A, B, C from :meth:`_Packer.coefficients`): each sorted
+    id times the coefficients of the places it takes in a cell's facets (two at most),
+    then d - 1 additions per key, instead of shifting and masking every key.
+    """
+    m, n_vert = cells.shape
+    d = n_vert - 1
+    coef = packer.coefficients(d)
+    for start in range(0, m, _CHUNK):
+        ids, odd = _sorted_cell([cells[start:start + _CHUNK, j].astype(np.int64, copy=False)
+                                 for j in range(n_vert)])
+        n = len(odd)
+        s = sign[start:start + _CHUNK]
+        positive = [np.where(odd, s < 0, s > 0), np.where(odd, s > 0, s < 0)]
+        # sorted id j sits at place j in the facets without a later corner, j - 1 after
+        term = {(j, q): ids[j] * coef[q] for j in range(n_vert) for q in (j - 1, j)
+                if 0 <= q < d}
+        for i in range(n_vert):
+            out = keys[start * n_vert + i * n:start * n_vert + (i + 1) * n]
+            places = [(j, j if j < i else j - 1) for j in range(n_vert) if j != i]
+            np.add(term[places[0]], term[places[1]], out=out)
+            for place in places[2:]:
+                out += term[place]
+            out += positive[(d - i) % 2]
 
 
 class _PassRows:
@@ -424,7 +439,7 @@ def facet_groups(mesh: Mesh) -> dict[str, FacetGroup]:
         order = _lexicographic(cells, owner, opposite)
         owner, opposite, across = owner[order], opposite[order], across[order]
         boundary = across < 0
-        return _named_groups(mesh, cells, material, owner[boundary], opposite[boundary],
+        return named_groups(mesh, cells, material, owner[boundary], opposite[boundary],
                              owner[~boundary], opposite[~boundary], across[~boundary])
     return _sorted_groups(mesh)
 
@@ -442,7 +457,7 @@ def _sorted_groups(mesh: Mesh) -> dict[str, FacetGroup]:
     # each interface facet as seen from material A, the lower label
     ma, mb = material[owners[shared, 0]], material[owners[shared, 1]]
     side = (ma > mb).astype(np.intp)
-    return _named_groups(mesh, cells, material, owners[boundary, 0], opposite[boundary, 0],
+    return named_groups(mesh, cells, material, owners[boundary, 0], opposite[boundary, 0],
                          owners[shared, side], opposite[shared, side],
                          np.maximum(ma, mb))
 
@@ -453,46 +468,3 @@ def _lexicographic(cells: np.ndarray, owner: np.ndarray, opposite: np.ndarray) -
     corners = FACE_CORNERS[d][opposite]
     cols, _ = _sorted_facet([cells[owner, corners[:, j]] for j in range(d)])
     return np.lexsort(cols[::-1])
-
-
-def _named_groups(mesh: Mesh, cells, material, b_owner, b_opposite, i_owner, i_opposite,
-                  i_other) -> dict[str, FacetGroup]:
-    """The groups of :func:`facet_groups` from boundary facets (owner, opposite corner)
-    and interface facets (owner of material A, its opposite corner, material B), each
-    in lexicographic order."""
-    d = mesh.ndim
-    groups: dict[str, FacetGroup] = {}
-
-    def add(name: str, owner: np.ndarray, corner: np.ndarray) -> None:
-        if owner.size:
-            groups[name] = FacetGroup(cells[owner[:, None], FACE_CORNERS[d][corner]],
-                                      owner, corner)
-
-    lo, hi = mesh.image_box()
-    coords = mesh.points[cells[b_owner[:, None], FACE_CORNERS[d][b_opposite]]]   # (B, d, d)
-    on_side = np.zeros(len(b_owner), dtype=bool)
-    tol = 1e-9 * (hi - lo)
-    for axis_name, axis in zip("xyz"[:d], range(d - 1, -1, -1)):
-        values = coords[:, :, axis]
-        for end, plane in (("min", lo[axis]), ("max", hi[axis])):
-            hit = np.all(np.abs(values - plane) <= tol[axis], axis=1) & ~on_side
-            add(f"{axis_name}{end}", b_owner[hit], b_opposite[hit])
-            on_side |= hit
-    del coords
-
-    present, _ = material_codes(material)
-    names = material_names(mesh.material_names, present)
-    # (A, B) pairs by their ranks among the materials: no sort of the facets
-    rank = np.searchsorted(present, np.stack([material[i_owner], i_other]))
-    pair = rank[0] * len(present) + rank[1]
-    for code in np.flatnonzero(np.bincount(pair, minlength=len(present) ** 2)):
-        x, y = present[code // len(present)], present[code % len(present)]
-        mine = pair == code
-        add(f"interface_{names[int(x)]}_{names[int(y)]}", i_owner[mine], i_opposite[mine])
-
-    b_owner, b_opposite = b_owner[~on_side], b_opposite[~on_side]
-    outside = material[b_owner]
-    for mat in material_codes(outside)[0]:
-        mine = outside == mat
-        add(f"exterior_{names[int(mat)]}", b_owner[mine], b_opposite[mine])
-    return groups

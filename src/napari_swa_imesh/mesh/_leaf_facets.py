@@ -24,7 +24,6 @@ import math
 
 import numpy as np
 
-from ._common import FACE_CORNERS
 from ._types import Mesh
 
 __all__ = ["material_codes", "template_group_rows"]
