@@ -356,8 +356,8 @@ def _elements(points, cells, material, lab: np.ndarray, exclude: np.ndarray,
     coords = [np.ascontiguousarray(points[:, a]) for a in range(d)]
     shape = lab.shape
     strides = [math.prod(shape[a + 1:]) for a in range(d)]
-    leaf_map = tree.to_image(values=np.arange(len(tree)))
-    leaf_map = leaf_map.astype(np.int32 if len(tree) < 2**31 else np.int64).reshape(-1)
+    leaf_map = tree.to_image(values=np.arange(len(tree)), fill=-1,
+                             dtype=np.int32 if len(tree) < 2**31 else np.int64).reshape(-1)
     lab_flat = lab.reshape(-1)  # a copy only for a non-contiguous image
     m = len(cells)
     sign = np.empty(m, dtype=np.int8)
