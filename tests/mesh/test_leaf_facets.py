@@ -3,6 +3,7 @@ of the general path (every facet occurrence paired by a sort), and steps aside f
 meshes it cannot vouch for."""
 
 import numpy as np
+import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
@@ -66,3 +67,18 @@ def test_material_codes_rank_large_ids_too():
     materials, code = material_codes(np.array([3, 3, 1], np.uint8))
     assert materials.tolist() == [1, 3] and code.tolist() == [1, 1, 0]
     assert materials.dtype == np.uint8 and code.dtype == np.int16
+
+
+@pytest.mark.parametrize("world", [None, np.diag([-2.0, 1.0, 0.5, 1.0]), np.diag([2.0, 1, 1, 1]),
+                                   np.array([[0.0, 1, 0, 3], [1, 0, 0, -1], [0, 0, 2, 0],
+                                             [0, 0, 0, 1]])])
+def test_orientation_from_the_leaf_path_is_the_computed_one(world):
+    from napari_swa_imesh.mesh._prepare import ExportMesh
+
+    labels = np.random.default_rng(5).integers(0, 3, (6, 7, 5))
+    mesh = mesh_labels(labels, exclude=[0], spacing=(2.5, 1.0, 1.0))
+    mesh.world = world
+    leaf, computed = ExportMesh(mesh), ExportMesh(mesh, groups="none")
+    assert np.array_equal(leaf.flip, computed.flip)
+    turns = world is None or np.linalg.det(world[:3, :3]) < 0   # the mesher's cells are positive
+    assert leaf.flip.all() if turns else not leaf.flip.any()

@@ -431,17 +431,24 @@ def facet_groups(mesh: Mesh) -> dict[str, FacetGroup]:
     >>> {name: len(g) for name, g in groups.items()}
     {'xmin': 1, 'xmax': 1, 'ymin': 2, 'ymax': 2, 'interface_material_1_material_2': 1}
     """
+    return groups_and_signs(mesh)[0]
+
+
+def groups_and_signs(mesh: Mesh, signs: bool = False):
+    """:func:`facet_groups`, and with `signs` which elements have a negative volume in
+    the points' frame when the leaf path found it on the way (else None)."""
     cells = np.asarray(mesh.cells, dtype=np.intp)
     material = np.asarray(mesh.material)
-    fast = template_group_rows(mesh)
-    if fast is not None:
-        owner, opposite, across = fast
-        order = _lexicographic(cells, owner, opposite)
-        owner, opposite, across = owner[order], opposite[order], across[order]
-        boundary = across < 0
-        return named_groups(mesh, cells, material, owner[boundary], opposite[boundary],
-                             owner[~boundary], opposite[~boundary], across[~boundary])
-    return _sorted_groups(mesh)
+    fast = template_group_rows(mesh, signs=signs)
+    if fast is None:
+        return _sorted_groups(mesh), None
+    owner, opposite, across = fast[:3]
+    order = _lexicographic(cells, owner, opposite)
+    owner, opposite, across = owner[order], opposite[order], across[order]
+    boundary = across < 0
+    return named_groups(mesh, cells, material, owner[boundary], opposite[boundary],
+                        owner[~boundary], opposite[~boundary],
+                        across[~boundary]), (fast[3] if signs else None)
 
 
 def _sorted_groups(mesh: Mesh) -> dict[str, FacetGroup]:

@@ -24,6 +24,7 @@ import math
 
 import numpy as np
 
+from ._quality import _corner_det
 from ._types import Mesh
 
 __all__ = ["material_codes", "template_group_rows"]
@@ -120,8 +121,12 @@ def _paint(coords, cells, code, leaf, level, shape, dtype) -> np.ndarray | None:
     return image
 
 
-def template_group_rows(mesh: Mesh):
+def template_group_rows(mesh: Mesh, *, signs: bool = False):
     """The group facets of a template mesh as (owner, opposite, across), or None.
+
+    With `signs`, a fourth array: (M,) bool, which elements have a negative volume (in
+    the lattice, whose axes are the points' scaled by positive steps), from the corners
+    this pass gathers anyway.
 
     Returns
     -------
@@ -163,10 +168,14 @@ def template_group_rows(mesh: Mesh):
     n_pairs = len(materials) ** 2
     seen_from_a = np.zeros(n_pairs, dtype=np.int64)
     seen_from_b = np.zeros(n_pairs, dtype=np.int64)
+    negative = np.zeros(m if signs else 0, dtype=bool)
     for start in range(0, m, _CHUNK):
         cc = cells[start:start + _CHUNK]
         n = len(cc)
         p = [[x[cc[:, j]] for x in axes] for j in range(d + 1)]   # p[corner][axis]: (n,)
+        if signs:
+            det = _corner_det([[x.astype(np.int64) for x in corner] for corner in p])
+            np.less(det, 0, out=negative[start:start + n])
         shift = level[start:start + _CHUNK].astype(np.int32)
         # which faces of its leaf (aligned to its side) each corner lies on: bit 2a for
         # the low end along axis a, bit 2a+1 for the high end
@@ -222,7 +231,7 @@ def template_group_rows(mesh: Mesh):
                                      across[lower]))
     if not np.array_equal(seen_from_a, seen_from_b):
         return None
-    if not owners:
-        return np.zeros(0, np.intp), np.zeros(0, np.intp), np.zeros(0, np.int64)
-    return (np.concatenate(owners).astype(np.intp), np.concatenate(opposites),
-            np.concatenate(acrosses).astype(np.int64))
+    rows = ((np.concatenate(owners).astype(np.intp), np.concatenate(opposites),
+             np.concatenate(acrosses).astype(np.int64)) if owners
+            else (np.zeros(0, np.intp), np.zeros(0, np.intp), np.zeros(0, np.int64)))
+    return (*rows, negative) if signs else rows
