@@ -82,3 +82,17 @@ def test_orientation_from_the_leaf_path_is_the_computed_one(world):
     assert np.array_equal(leaf.flip, computed.flip)
     turns = world is None or np.linalg.det(world[:3, :3]) < 0   # the mesher's cells are positive
     assert leaf.flip.all() if turns else not leaf.flip.any()
+
+
+@pytest.mark.parametrize("big_leaf", [1, 64])
+def test_big_leaves_painted_one_by_one_give_the_same_groups(monkeypatch, big_leaf):
+    from napari_swa_imesh.mesh import _leaf_facets
+
+    labels = np.zeros((40, 36, 30), np.uint8)                  # leaves up to 16^3
+    labels[10:17, 20:23, 5:12] = 1
+    labels[30, 3, 25] = 2
+    mesh = mesh_labels(labels)
+    expected = _sorted_groups(mesh)
+    monkeypatch.setattr(_leaf_facets, "_BIG_LEAF", big_leaf)
+    assert template_group_rows(mesh) is not None
+    _assert_same(facet_groups(mesh), expected)

@@ -14,12 +14,12 @@ several times the meshing at volume size.
 Only meshes the template mesher made qualify (:func:`template_group_rows` returns None
 for the rest, and the caller takes the general path): method ``"template"``, element and
 vertex counts as the mesher recorded them (a mesh cut down afterwards fails this), points
-on the lattice, and the two sides of every interface counted alike.
+on the lattice, and the two sides of every interface counted alike. A lattice of more
+than 16 cells per element (deep ``--refine`` on a coarse mesh) is not painted either.
 """
 
 from __future__ import annotations
 
-import itertools
 import math
 
 import numpy as np
@@ -31,6 +31,7 @@ __all__ = ["material_codes", "template_group_rows"]
 
 _CHUNK = 1 << 17                  # elements per pass (their corners stay in cache-ish)
 _PAINT = 1 << 22                  # lattice cells painted at once
+_BIG_LEAF = 1 << 12               # leaves of more lattice cells are painted one by one
 _MAX_CELLS_PER_ELEMENT = 16       # a bigger lattice image (deep --refine) is not worth it
 OUTSIDE, EMPTY = -2, -1           # probe results: beyond the image box, no element there
 #: face bit (2a: low end of axis a, 2a+1: high end) -> axis, and the step out of the leaf
@@ -109,10 +110,16 @@ def _paint(coords, cells, code, leaf, level, shape, dtype) -> np.ndarray | None:
     strides = np.array([math.prod(shape[a + 1:]) for a in range(d)], dtype=np.int64)
     okey = origin @ strides
     values = code[rep]
+    box = image.reshape(shape)
     for lv in np.unique(lev):
         sel = np.flatnonzero(lev == lv)
         side = 1 << int(lv)
-        offsets = np.array(list(itertools.product(range(side), repeat=d)), np.int64) @ strides
+        if side ** d > _BIG_LEAF:
+            # big leaves are few (the volume over their size): a block each
+            for i in sel:
+                box[tuple(slice(o, o + side) for o in origin[i])] = values[i]
+            continue
+        offsets = np.indices((side,) * d).reshape(d, -1).T.astype(np.int64) @ strides
         step = max(1, _PAINT // len(offsets))
         for s in range(0, len(sel), step):
             part = sel[s:s + step]
