@@ -78,15 +78,18 @@ class RegionTree:
                           self.shape, self.padded_shape, self.top_level)
 
     def to_image(self, *, fill: int = PAD_LABEL, values: np.ndarray | None = None,
-                 crop: bool = True) -> np.ndarray:
+                 crop: bool = True, dtype=None) -> np.ndarray:
         """Paint every leaf's label (or ``values``) back into an array.
 
         Used by tests to prove the leaves tile the image exactly. Costs one loop per
-        level, not per leaf.
+        level, not per leaf. `dtype` (default: int64 for integer values) must hold the
+        values and `fill`.
         """
         vals = self.label if values is None else np.asarray(values)
-        out = np.full(self.padded_shape, fill, dtype=np.result_type(vals.dtype, np.int64)
-                      if vals.dtype.kind in "iub" else vals.dtype)
+        if dtype is None:
+            dtype = (np.result_type(vals.dtype, np.int64) if vals.dtype.kind in "iub"
+                     else vals.dtype)
+        out = np.full(self.padded_shape, fill, dtype=dtype)
         d = self.ndim
         for lev in np.unique(self.level):
             sel = self.level == lev

@@ -16,7 +16,7 @@ import numpy as np
 
 from .._tree import RegionTree, _build_tree
 from .._validation import as_labels
-from ._facets import _blocks, _runs, _side_passes, _spread_bits
+from ._facets import _blocks, _runs, _side_passes
 from ._lattice import labels_on_lattice
 from ._quality import _corner_det, _det
 from ._types import Mesh
@@ -325,25 +325,17 @@ def _check_on_lattice(mesh: Mesh, lab: np.ndarray, exclude: np.ndarray,
     n_excluded = count_excluded(lab, exclude)
     if tree is None or tuple(tree.shape) != lab.shape:
         tree = _build_tree(lab)
-    elements, sign = _elements(points, cells, np.asarray(mesh.material), lab, exclude, tree,
-                               lab.size - n_excluded)
+    elements, sign, spread_bits = _elements(points, cells, np.asarray(mesh.material), lab,
+                                            exclude, tree, lab.size - n_excluded)
     voxel = float(np.prod(mesh.spacing)) / float(np.prod(repeats)) if mesh.spacing else 1.0
     for key in ("min_volume", "volume_error"):
         elements[key] *= voxel
     parts = {
-        "n_unused_points": _unused_points(cells, len(points)),
         **elements,
-        **_facets(points, cells, sign, lab, exclude),
+        **_facets(points, cells, sign, lab, exclude, spread_bits),
         **_finite(mesh),
     }
     return MeshChecks(**{name: parts[name] for name in MeshChecks.__dataclass_fields__})
-
-
-def _unused_points(cells: np.ndarray, n_points: int) -> int:
-    used = np.zeros(n_points, dtype=bool)
-    for start in range(0, len(cells), _CELLS_PER_CHUNK):
-        used[cells[start:start + _CELLS_PER_CHUNK]] = True
-    return int(n_points - np.count_nonzero(used))
 
 
 def _elements(points, cells, material, lab: np.ndarray, exclude: np.ndarray,
@@ -357,22 +349,27 @@ def _elements(points, cells, material, lab: np.ndarray, exclude: np.ndarray,
       volumes add up to the leaf's; zero for an excluded leaf). With the facets checked
       (no overlap, no hole) this is the label image recovered at every pixel centre.
 
-    Returns the flags and counts (volumes in pixel units), and the sign of each volume.
+    Returns the flags and counts (volumes in pixel units, unused points too), the sign of
+    each volume and the bits of the largest id difference in a cell (for the facet keys).
     """
     d = lab.ndim
     coords = [np.ascontiguousarray(points[:, a]) for a in range(d)]
     shape = lab.shape
     strides = [math.prod(shape[a + 1:]) for a in range(d)]
-    leaf_map = tree.to_image(values=np.arange(len(tree)))
-    leaf_map = leaf_map.astype(np.int32 if len(tree) < 2**31 else np.int64).reshape(-1)
+    leaf_map = tree.to_image(values=np.arange(len(tree)), fill=-1,
+                             dtype=np.int32 if len(tree) < 2**31 else np.int64).reshape(-1)
     lab_flat = lab.reshape(-1)  # a copy only for a non-contiguous image
     m = len(cells)
     sign = np.empty(m, dtype=np.int8)
     leaf_volume = np.zeros(len(tree))
     wrong_leaf = np.zeros(len(tree), dtype=bool)
     total, min_volume, n_flat, outside = 0.0, math.inf, 0, 0
+    used = np.zeros(len(points), dtype=bool)
+    spread = 0
     for start in range(0, m, _CELLS_PER_CHUNK):
         ids = cells[start:start + _CELLS_PER_CHUNK]
+        used[ids] = True
+        spread = max(spread, _spread(ids))
         p = [[x[ids[:, k]] for x in coords] for k in range(d + 1)]  # p[corner][axis]: (n,)
         det = _corner_det(p)
         vol = det / math.factorial(d)
@@ -380,21 +377,27 @@ def _elements(points, cells, material, lab: np.ndarray, exclude: np.ndarray,
         total += float(det.sum())  # exact for integer corners, whatever the chunks
         min_volume = min(min_volume, float(vol.min()))
         n_flat += int(np.count_nonzero(vol <= _TOL))
-        # pixels at the low and high corner of the bounding box, flat
+        # pixels at the low and high corner of the bounding box, flat (in place: the
+        # chunk's temporaries are most of the time here)
         in_image = np.ones(len(vol), dtype=bool)
         flat_lo = np.zeros(len(vol), dtype=np.int64)
         flat_hi = np.zeros(len(vol), dtype=np.int64)
         for a in range(d):
             axis = [p[k][a] for k in range(d + 1)]
-            lo, hi = axis[0].copy(), axis[0].copy()
-            for x in axis[1:]:
+            lo, hi = np.minimum(axis[0], axis[1]), np.maximum(axis[0], axis[1])
+            for x in axis[2:]:
                 np.minimum(lo, x, out=lo)
                 np.maximum(hi, x, out=hi)
-            lo = np.floor(lo + _TOL).astype(np.int64)
-            hi = np.maximum(np.ceil(hi - _TOL).astype(np.int64) - 1, lo)
+            lo += _TOL
+            np.floor(lo, out=lo)
+            hi -= _TOL
+            np.ceil(hi, out=hi)
+            hi -= 1
+            np.maximum(hi, lo, out=hi)
             in_image &= (lo >= 0) & (hi < shape[a])
-            flat_lo += np.clip(lo, 0, shape[a] - 1) * strides[a]
-            flat_hi += np.clip(hi, 0, shape[a] - 1) * strides[a]
+            for bound, flat in ((lo, flat_lo), (hi, flat_hi)):
+                np.clip(bound, 0, shape[a] - 1, out=bound)
+                flat += bound.astype(np.int64) * strides[a]
         del p
         leaf = leaf_map[flat_lo]
         inside = in_image & (leaf == leaf_map[flat_hi])
@@ -415,10 +418,23 @@ def _elements(points, cells, material, lab: np.ndarray, exclude: np.ndarray,
             "volume_error": total - n_included,
             "volume_sum": abs(total - n_included) <= 1e-9 * max(1, n_included),
             "n_outside_leaf": outside, "inside_one_leaf": outside == 0,
-            "n_pixels_wrong": n_wrong, "labels_recovered": n_wrong == 0}, sign
+            "n_pixels_wrong": n_wrong, "labels_recovered": n_wrong == 0,
+            "n_unused_points": int(len(points) - np.count_nonzero(used)),
+            }, sign, max(1, spread.bit_length())
 
 
-def _facets(points, cells, sign, lab: np.ndarray, exclude: np.ndarray) -> dict:
+def _spread(ids: np.ndarray) -> int:
+    """Largest id difference inside one cell of `ids`, column by column."""
+    hi, lo = np.maximum(ids[:, 0], ids[:, 1]), np.minimum(ids[:, 0], ids[:, 1])
+    for k in range(2, ids.shape[1]):
+        np.maximum(hi, ids[:, k], out=hi)
+        np.minimum(lo, ids[:, k], out=lo)
+    hi -= lo
+    return int(hi.max()) if len(hi) else 0
+
+
+def _facets(points, cells, sign, lab: np.ndarray, exclude: np.ndarray,
+            spread_bits: int) -> dict:
     """Facets shared by at most two cells, from opposite sides; the rest on the boundary.
 
     One sort of integer keys (:func:`._facets._side_passes`): a facet seen from both sides
@@ -427,7 +443,7 @@ def _facets(points, cells, sign, lab: np.ndarray, exclude: np.ndarray) -> dict:
     d = lab.ndim
     box = np.array(lab.shape, dtype=float)
     shared_3plus = misoriented = off_box = unmatched = 0
-    for keys, packer in _side_passes(cells, sign, _spread_bits(cells)):
+    for keys, packer in _side_passes(cells, sign, spread_bits, n_points=len(points)):
         once = []
         for block in _blocks(keys, 1):
             k = keys[block]
@@ -463,9 +479,11 @@ def _facets(points, cells, sign, lab: np.ndarray, exclude: np.ndarray) -> dict:
 
 def _finite(mesh: Mesh) -> dict:
     """A NaN compares false everywhere above, so it must fail on its own."""
-    bad = int(np.count_nonzero(~np.isfinite(mesh.points)))
-    for values in mesh.cell_data.values():
+    bad = 0
+    for values in (mesh.points, *mesh.cell_data.values()):
         values = np.asarray(values)
-        if values.dtype.kind in "fc":
+        # a finite sum proves every value finite (NaN and inf carry through a sum) at a
+        # third of the cost of testing each; only a non-finite sum needs the count
+        if values.dtype.kind in "fc" and not np.isfinite(values.sum()):
             bad += int(np.count_nonzero(~np.isfinite(values)))
     return {"n_nonfinite_values": bad, "finite": bad == 0}

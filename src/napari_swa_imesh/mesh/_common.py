@@ -21,8 +21,8 @@ import numpy as np
 
 from ._quality import signed_volumes
 
-__all__ = ["CELL_TYPE", "CELL_TYPE_2", "MESH_SUFFIXES", "material_names", "export_points",
-           "export_vectors", "orient_positive"]
+__all__ = ["CELL_TYPE", "CELL_TYPE_2", "FACE_CORNERS", "MESH_SUFFIXES", "material_names",
+           "export_points", "export_turns", "export_vectors", "orient_positive"]
 
 #: meshio's name of the simplex of each dimension, linear and of second order.
 CELL_TYPE = {2: "triangle", 3: "tetra"}
@@ -37,6 +37,13 @@ MESH_SUFFIXES = {
     ".inp": "Abaqus with element sets and facet surfaces",
     ".node": "Triangle (2-D) / TetGen (3-D) .node + .ele (+ .poly / .face)",
     ".ele": "Triangle (2-D) / TetGen (3-D) .node + .ele (+ .poly / .face)",
+}
+
+#: Corners of the facet opposite corner k of a positively oriented simplex, ordered so
+#: that the facet's normal (right-hand rule) points out of the simplex.
+FACE_CORNERS = {
+    2: np.array([[1, 2], [2, 0], [0, 1]]),
+    3: np.array([[1, 2, 3], [0, 3, 2], [0, 1, 3], [0, 2, 1]]),
 }
 
 
@@ -66,6 +73,22 @@ def export_points(mesh) -> np.ndarray:
     out = np.einsum("nk,jk->nj", points, world[:d, :d])
     out += world[:d, d]
     return out
+
+
+def export_turns(mesh) -> bool:
+    """Whether the map of :func:`export_points` reverses orientation (its linear part has
+    a negative determinant): the axes reversed, or ``mesh.world``.
+
+    Examples
+    --------
+    >>> from napari_swa_imesh.mesh import Mesh
+    >>> m = Mesh([[0, 0], [0, 2], [1, 0]], [[0, 2, 1]], [1])
+    >>> export_turns(m)
+    True
+    """
+    d = mesh.ndim
+    linear = np.eye(d)[::-1] if mesh.world is None else np.asarray(mesh.world)[:d, :d]
+    return bool(np.linalg.det(linear) < 0)
 
 
 def export_vectors(mesh, vectors) -> np.ndarray:

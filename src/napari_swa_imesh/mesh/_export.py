@@ -283,7 +283,7 @@ def _write(ex: ExportMesh, temps: list[Path], *, abaqus_elements: str, binary: b
 
     suffix = temps[0].suffix.lower()
     if suffix == ".vtu":
-        write_vtu(temps[0], ex.points, ex.all_cells(),
+        write_vtu(temps[0], ex.points, ex.cell_blocks(),
                   cell_data={"material": ex.material, **ex.mesh.cell_data})
     elif suffix == ".msh":
         write_gmsh(ex, temps[0], binary=binary)

@@ -10,48 +10,24 @@ boundary facet and each facet between two materials belongs to exactly one group
   material left out of the mesh).
 
 Material names are those of the material groups (``material_<id>`` without a name).
+
+Two ways to the same groups: a mesh the template mesher made is read leaf by leaf
+(``_leaf_facets``: no sort, a few times faster at volume size); any other mesh pairs
+every facet occurrence by one sort of integer keys (below, shared with the checks).
+Tests compare the two on random label images.
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass
-
 import numpy as np
 
-from ._common import material_names
+from ._common import FACE_CORNERS
+from ._groups import FacetGroup, named_groups
+from ._leaf_facets import template_group_rows
 from ._types import Mesh
 
 __all__ = ["FacetGroup", "facet_groups", "paired_facets", "FACE_CORNERS"]
 
-#: Corners of the facet opposite corner k of a positively oriented simplex, ordered so
-#: that the facet's normal (right-hand rule) points out of the simplex.
-FACE_CORNERS = {
-    2: np.array([[1, 2], [2, 0], [0, 1]]),
-    3: np.array([[1, 2, 3], [0, 3, 2], [0, 1, 3], [0, 2, 1]]),
-}
-
-
-@dataclass(frozen=True)
-class FacetGroup:
-    """The facets of one group.
-
-    Attributes
-    ----------
-    facets : (F, d) ndarray of intp
-        Vertex ids, oriented outward from `owner` (for interfaces: out of material A).
-    owner : (F,) ndarray of intp
-        The element each facet bounds (of material A on an interface).
-    opposite : (F,) ndarray of intp
-        The owner's corner opposite the facet (``0 .. d``), which fixes the element-face
-        number formats such as Abaqus use.
-    """
-
-    facets: np.ndarray
-    owner: np.ndarray
-    opposite: np.ndarray
-
-    def __len__(self) -> int:
-        return len(self.owner)
 
 
 def paired_facets(cells: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -164,9 +140,15 @@ def _lowest(cols: list) -> np.ndarray:
 def _spread_bits(cells: np.ndarray) -> int:
     """Bits of the largest id difference inside one cell (bounds b - a and c - a)."""
     spread = 0
-    for start in range(0, len(cells), _CHUNK):
-        chunk = cells[start:start + _CHUNK]
-        spread = max(spread, int((chunk.max(axis=1) - chunk.min(axis=1)).max()))
+    for start in range(0, len(cells), _CHUNK << 2):
+        cols = [cells[start:start + (_CHUNK << 2), j] for j in range(cells.shape[1])]
+        # column by column: numpy's reductions along a short row axis are slow
+        hi, lo = np.maximum(cols[0], cols[1]), np.minimum(cols[0], cols[1])
+        for c in cols[2:]:
+            np.maximum(hi, c, out=hi)
+            np.minimum(lo, c, out=lo)
+        hi -= lo
+        spread = max(spread, int(hi.max()))
     return max(1, spread.bit_length())
 
 
@@ -192,16 +174,23 @@ class _Packer:
     def __init__(self, w: int, tail: int, lo: int):
         self.w, self.tail, self.lo = w, tail, lo
 
-    def encode(self, cols: list, low_bits: np.ndarray) -> np.ndarray:
-        """int64 keys (the caller keeps them below 2**63) of sorted facet columns."""
-        key = cols[0].astype(np.int64)
-        key -= self.lo
+    def encode(self, cols: list, low_bits: np.ndarray, out: np.ndarray | None = None
+               ) -> np.ndarray:
+        """int64 keys (the caller keeps them below 2**63) of sorted facet columns, into
+        `out` when given."""
+        key = np.subtract(cols[0], self.lo, out=out, dtype=np.int64)
         for c in cols[1:]:
             key <<= self.w
             key |= c - cols[0]
         key <<= self.tail
         key |= low_bits
         return key
+
+    def coefficients(self, d: int) -> list[int]:
+        """Multipliers of the d sorted ids (less `lo`) whose sum is the key less its low
+        bits, e.g. ``[2**(2w+t) - 2**(w+t) - 2**t, 2**(w+t), 2**t]`` in 3-D."""
+        places = [1 << (self.tail + self.w * (d - 1 - q)) for q in range(d)]
+        return [places[0] - sum(places[1:]), *places[1:]]
 
     def decode(self, keys: np.ndarray, d: int) -> list:
         """Sorted vertex ids (d int64 columns) of the facets of `keys`."""
@@ -253,20 +242,22 @@ def _blocks(keys: np.ndarray, tail: int, size: int = _RUN_BLOCK):
 
 
 def _side_passes(cells: np.ndarray, sign: np.ndarray, spread_bits: int,
-                 max_keys: int | None = None):
+                 max_keys: int | None = None, n_points: int | None = None):
     """Sorted keys of every facet occurrence with the side it is seen from as the low bit.
 
     `sign` (M,) is the sign of each cell's volume and `spread_bits` the bits of the
     largest id difference within a cell. The bit is 1 when the cell lies on the positive
     side of its facet taken in sorted order (a flat cell counts as negative), so a facet
     shared from opposite sides is one key ending in 0 followed by the same key ending in 1.
-    Keys are built from chunks of cells straight into the pass's array. Yields (keys,
-    packer) per pass.
+    Keys are built from chunks of cells straight into the pass's array. `n_points`, when
+    given, bounds the ids (else one pass over the cells finds it). Yields (keys, packer)
+    per pass.
     """
     m, n_vert = cells.shape
     d = n_vert - 1
     cap = max_keys or _KEYS_PER_PASS
-    n_points = int(cells.max()) + 1 if m else 1
+    if n_points is None:
+        n_points = int(cells.max()) + 1 if m else 1
     dtype = np.int32 if n_points < 2**31 else np.int64
 
     def chunks():
@@ -303,22 +294,55 @@ def _side_passes(cells: np.ndarray, sign: np.ndarray, spread_bits: int,
         packer = _Packer(spread_bits, 1, lo)
         keys, parts = (None, []) if ranked else (np.empty(size, dtype=np.int64), None)
         at = 0
-        for cols, bits in chunks():
+        if not ranked and len(sizes) == 1:
+            _fill_linear(keys, cells, sign, packer)
+        for cols, bits in (() if keys is not None and len(sizes) == 1 else chunks()):
             if len(sizes) > 1:
                 sel = (cols[0] >= lo) & (cols[0] < hi)
                 cols, bits = [c[sel] for c in cols], bits[sel]
             if ranked:
                 parts.append((cols, bits))
             else:
-                keys[at:at + len(bits)] = packer.encode(cols, bits)
+                packer.encode(cols, bits, out=keys[at:at + len(bits)])
             at += len(bits)
         if ranked:
             packer = _Ranked([np.concatenate([c[j] for c, _ in parts]) for j in range(d)],
                              np.concatenate([b for _, b in parts]), 1)
             keys = packer.keys
         else:
-            keys.sort(kind="stable")  # timsort: the keys come in long ordered runs
+            # equal keys are equal integers, so any sort gives the same array: numpy's
+            # default (SIMD quicksort) beat timsort on these keys
+            keys.sort()
         yield keys, packer
+
+
+def _fill_linear(keys: np.ndarray, cells: np.ndarray, sign: np.ndarray, packer) -> None:
+    """The keys of :func:`_side_passes` for one pass from id 0, as a linear form.
+
+    The fields of a key do not overlap, so ``((a << w | b - a) << w | c - a) << 1 | bit``
+    is ``A a + B b + C c + bit`` (A, B, C from :meth:`_Packer.coefficients`): each sorted
+    id times the coefficients of the places it takes in a cell's facets (two at most),
+    then d - 1 additions per key, instead of shifting and masking every key.
+    """
+    m, n_vert = cells.shape
+    d = n_vert - 1
+    coef = packer.coefficients(d)
+    for start in range(0, m, _CHUNK):
+        ids, odd = _sorted_cell([cells[start:start + _CHUNK, j].astype(np.int64, copy=False)
+                                 for j in range(n_vert)])
+        n = len(odd)
+        s = sign[start:start + _CHUNK]
+        positive = [np.where(odd, s < 0, s > 0), np.where(odd, s > 0, s < 0)]
+        # sorted id j sits at place j in the facets without a later corner, j - 1 after
+        term = {(j, q): ids[j] * coef[q] for j in range(n_vert) for q in (j - 1, j)
+                if 0 <= q < d}
+        for i in range(n_vert):
+            out = keys[start * n_vert + i * n:start * n_vert + (i + 1) * n]
+            places = [(j, j if j < i else j - 1) for j in range(n_vert) if j != i]
+            np.add(term[places[0]], term[places[1]], out=out)
+            for place in places[2:]:
+                out += term[place]
+            out += positive[(d - i) % 2]
 
 
 class _PassRows:
@@ -386,7 +410,7 @@ def _facet_passes(cells: np.ndarray):
         else:
             packer = _Packer(w, max(1, (len(rows) - 1).bit_length()), int(bounds[p]))
             keys = packer.encode(cols, local)
-            keys.sort(kind="stable")  # timsort: the keys come in long ordered runs
+            keys.sort()  # rows make every key distinct: any sort gives one order
         yield keys, _PassRows(rows, packer.tail), packer
 
 
@@ -412,49 +436,47 @@ def facet_groups(mesh: Mesh) -> dict[str, FacetGroup]:
     >>> {name: len(g) for name, g in groups.items()}
     {'xmin': 1, 'xmax': 1, 'ymin': 2, 'ymax': 2, 'interface_material_1_material_2': 1}
     """
+    return groups_and_signs(mesh)[0]
+
+
+def groups_and_signs(mesh: Mesh, signs: bool = False):
+    """:func:`facet_groups`, and with `signs` which elements have a negative volume in
+    the points' frame when the leaf path found it on the way (else None)."""
+    cells = np.asarray(mesh.cells, dtype=np.intp)
+    material = np.asarray(mesh.material)
+    fast = template_group_rows(mesh, signs=signs)
+    if fast is None:
+        return _sorted_groups(mesh), None
+    owner, opposite, across = fast[:3]
+    order = _lexicographic(cells, owner, opposite)
+    owner, opposite, across = owner[order], opposite[order], across[order]
+    boundary = across < 0
+    return named_groups(mesh, cells, material, owner[boundary], opposite[boundary],
+                        owner[~boundary], opposite[~boundary],
+                        across[~boundary]), (fast[3] if signs else None)
+
+
+def _sorted_groups(mesh: Mesh) -> dict[str, FacetGroup]:
+    """:func:`facet_groups` for any mesh: every facet occurrence paired by one sort."""
     d = mesh.ndim
     cells = np.asarray(mesh.cells, dtype=np.intp)
     material = np.asarray(mesh.material)
     # the pairs inside one material name no group: dropped pass by pass, never stored
-    facets, owners, opposite = _paired_result(cells, *_pair_rows(
+    _, owners, opposite = _paired_result(cells, *_pair_rows(
         cells, lambda one, two: material[one // (d + 1)] != material[two // (d + 1)]))
-
-    groups: dict[str, FacetGroup] = {}
-
-    def add(name: str, rows: np.ndarray, side: np.ndarray | int = 0) -> None:
-        # side: which owner (0 or 1, per facet) the facet is seen from
-        if rows.size:
-            owner, corner = owners[rows, side], opposite[rows, side]
-            groups[name] = FacetGroup(cells[owner[:, None], FACE_CORNERS[d][corner]],
-                                      owner, corner)
-
-    boundary = np.flatnonzero(owners[:, 1] < 0)
-    lo, hi = mesh.image_box()
-    coords = mesh.points[facets[boundary]]                     # (B, d, d)
-    on_side = np.zeros(len(boundary), dtype=bool)
-    tol = 1e-9 * (hi - lo)
-    for axis_name, axis in zip("xyz"[:d], range(d - 1, -1, -1)):
-        values = coords[:, :, axis]
-        for end, plane in (("min", lo[axis]), ("max", hi[axis])):
-            hit = np.all(np.abs(values - plane) <= tol[axis], axis=1) & ~on_side
-            add(f"{axis_name}{end}", boundary[hit])
-            on_side |= hit
-
-    names = material_names(mesh.material_names, np.unique(material))
-    shared = np.flatnonzero(owners[:, 1] >= 0)
+    boundary = owners[:, 1] < 0
+    shared = np.flatnonzero(~boundary)
+    # each interface facet as seen from material A, the lower label
     ma, mb = material[owners[shared, 0]], material[owners[shared, 1]]
-    differ = ma != mb
-    shared, ma, mb = shared[differ], ma[differ], mb[differ]
-    low, high = np.minimum(ma, mb), np.maximum(ma, mb)
-    pairs = np.unique(np.stack([low, high], axis=1), axis=0) if len(low) else []
-    for x, y in pairs:
-        pair = (low == x) & (high == y)
-        # each facet as seen from material A, the lower label
-        add(f"interface_{names[int(x)]}_{names[int(y)]}", shared[pair],
-            side=(ma[pair] != x).astype(np.intp))
+    side = (ma > mb).astype(np.intp)
+    return named_groups(mesh, cells, material, owners[boundary, 0], opposite[boundary, 0],
+                         owners[shared, side], opposite[shared, side],
+                         np.maximum(ma, mb))
 
-    exterior = boundary[~on_side]
-    outside = material[owners[exterior, 0]]
-    for mat in np.unique(outside):
-        add(f"exterior_{names[int(mat)]}", exterior[outside == mat])
-    return groups
+
+def _lexicographic(cells: np.ndarray, owner: np.ndarray, opposite: np.ndarray) -> np.ndarray:
+    """Order of facets by their sorted vertex ids (the order of :func:`paired_facets`)."""
+    d = cells.shape[1] - 1
+    corners = FACE_CORNERS[d][opposite]
+    cols, _ = _sorted_facet([cells[owner, corners[:, j]] for j in range(d)])
+    return np.lexsort(cols[::-1])

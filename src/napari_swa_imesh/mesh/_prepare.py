@@ -19,11 +19,13 @@ from fnmatch import fnmatchcase
 
 import numpy as np
 
-from ._common import export_points, material_names
-from ._facets import FACE_CORNERS, facet_groups
+from ._common import export_points, export_turns, material_names
+from ._facets import FACE_CORNERS, groups_and_signs
+from ._leaf_facets import material_codes
 from ._order2 import MidEdges, with_mid_nodes
-from ._quality import signed_volumes
+from ._quality import _corner_det
 from ._types import Mesh
+from ._vtu import CellBlocks
 
 __all__ = ["ExportMesh", "FileFacets", "check_facet_selection", "select_facet_groups",
            "box_sides", "ORDERS"]
@@ -147,17 +149,31 @@ class ExportMesh:
         self.order = order
         corners = export_points(mesh)                              # (N, d)
         self.n_corners = len(corners)
-        # (M,) swap corners 0 and 1; in slices, so the corner coordinates of a slice are
-        # all the memory it takes
-        self.flip = np.concatenate([np.zeros(0, bool)] + [
-            signed_volumes(corners, mesh.cells[start:start + _SLICE]) < 0
-            for start in range(0, mesh.n_cells, _SLICE)])
+        # the leaf path of the facet groups gives the volumes' signs on the way (its
+        # corner gathers are most of the cost of either)
+        found, negative = groups_and_signs(mesh, signs=True) if groups != "none" else ({}, None)
+        if negative is not None:
+            # one affine map from the points to the files' frame turns every cell alike
+            self.flip = negative ^ export_turns(mesh)
+        else:
+            # (M,) swap corners 0 and 1; in slices, so the corner coordinates of a slice
+            # are all the memory it takes (gathered axis by axis: a row gather of (N, d)
+            # points took most of the time)
+            axes = [np.ascontiguousarray(corners[:, a]) for a in range(self.ndim)]
+            self.flip = np.empty(mesh.n_cells, dtype=bool)
+            for start in range(0, mesh.n_cells, _SLICE):
+                block = mesh.cells[start:start + _SLICE]
+                det = _corner_det([[x[block[:, k]] for x in axes]
+                                   for k in range(self.ndim + 1)])
+                np.less(det, 0, out=self.flip[start:start + len(block)])
+            del axes
+        self.any_flip = bool(self.flip.any())
         self.edges = MidEdges(mesh.cells, len(corners)) if order == 2 else None
         self.points = (corners if self.edges is None
                        else np.concatenate([corners, self.edges.midpoints(corners)]))
         self.material = np.asarray(mesh.material, dtype=np.int64)
-        self.names = material_names(mesh.material_names, np.unique(self.material))
-        chosen = select_facet_groups(facet_groups(mesh), groups) if groups != "none" else {}
+        self.names = material_names(mesh.material_names, material_codes(self.material)[0])
+        chosen = select_facet_groups(found, groups) if groups != "none" else {}
         self.groups = {name: self._in_file_frame(k + 1, g)
                        for k, (name, g) in enumerate(chosen.items())}
 
@@ -183,8 +199,15 @@ class ExportMesh:
             out[start:start + _SLICE] = self.cells(slice(start, start + _SLICE), family)
         return out
 
+    def cell_blocks(self, family: str = "vtk") -> CellBlocks:
+        """Every cell as :meth:`cells` gives it, block by block for a streaming writer."""
+        return CellBlocks(self.n_cells, self.nodes_per_cell,
+                          lambda start, stop: self.cells(slice(start, stop), family))
+
     def _corners(self, rows) -> np.ndarray:
         cells = np.array(self.mesh.cells[rows], dtype=np.intp, copy=True)
+        if not self.any_flip:
+            return cells
         flip = self.flip[rows]
         cells[flip, 0], cells[flip, 1] = cells[flip, 1], cells[flip, 0].copy()
         return cells

@@ -19,7 +19,7 @@ import numpy as np
 
 from ._quality import _corner_det
 
-__all__ = ["write_vtu"]
+__all__ = ["CellBlocks", "write_vtu"]
 
 #: VTK cell type id by nodes per cell: VTK_TRIANGLE, VTK_TETRA, VTK_QUADRATIC_TRIANGLE,
 #: VTK_QUADRATIC_TETRA (lines, VTK_LINE 3 and VTK_QUADRATIC_EDGE 21, are asked by name).
@@ -45,6 +45,14 @@ def _type_name(dtype: np.dtype) -> str:
     return _VTK_TYPE[f"{dtype.kind}{dtype.itemsize}"]
 
 
+class CellBlocks:
+    """Cells handed over block by block (so the writer never holds them all): `n` rows of
+    `width` ids, ``block(start, stop)`` returns rows ``start:stop``."""
+
+    def __init__(self, n: int, width: int, block):
+        self.n, self.width, self.block = n, width, block
+
+
 class _Chunked:
     """An array written chunk by chunk: dtype, shape and a function yielding the chunks."""
 
@@ -57,8 +65,10 @@ def _connectivity(points: np.ndarray, cells: np.ndarray, dtype, orient: bool):
     """Chunks of the cell ids; with `orient`, corners 0 and 1 swapped where the volume is
     negative, so every cell is positively oriented in the file."""
     coords = [np.ascontiguousarray(points[:, a]) for a in range(points.shape[1])] if orient else []
-    for start in range(0, len(cells), _CHUNK):
-        chunk = cells[start:start + _CHUNK].astype(dtype)
+    blocks = cells if isinstance(cells, CellBlocks) else None
+    for start in range(0, blocks.n if blocks else len(cells), _CHUNK):
+        chunk = (blocks.block(start, start + _CHUNK) if blocks
+                 else cells[start:start + _CHUNK]).astype(dtype)
         if orient:
             det = _corner_det([[x[chunk[:, k]] for x in coords] for k in range(chunk.shape[1])])
             flip = det < 0
@@ -90,8 +100,9 @@ def write_vtu(path, points: np.ndarray, cells: np.ndarray, *,
     path : str or Path
     points : (N, 2) or (N, 3) array_like of float
         In the file's x, y(, z) order; 2-D points get z = 0.
-    cells : (M, 3) or (M, 4) array_like of int
-        Triangles or tetrahedra.
+    cells : (M, k) array_like of int, or CellBlocks
+        Triangles or tetrahedra (any cell of `cell_type`), or the same handed over
+        block by block.
     cell_data, point_data : dict of str to (M,) / (N,) or (M, k) / (N, k) array_like
         Arrays per cell and per point (k components).
     field_data : dict of str to (n,) array_like of int, optional
@@ -105,8 +116,13 @@ def write_vtu(path, points: np.ndarray, cells: np.ndarray, *,
         given.
     """
     points = np.asarray(points, dtype=np.float64)
-    cells = np.asarray(cells)
-    n_cells, corners = cells.shape
+    if isinstance(cells, CellBlocks):
+        if orient:
+            raise ValueError("orient needs the cells as an array, not as CellBlocks.")
+        n_cells, corners = cells.n, cells.width
+    else:
+        cells = np.asarray(cells)
+        n_cells, corners = cells.shape
     n_points = len(points)
     id_type = np.int32 if max(n_points, corners * n_cells) < 2**31 else np.int64
 

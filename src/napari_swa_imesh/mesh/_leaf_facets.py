@@ -1,0 +1,244 @@
+"""The facets of the facet groups of a template mesh, found leaf by leaf without a sort.
+
+A template mesh cuts every leaf of a balanced 2^d-tree on its own, so a material
+interface or a boundary can only run along leaf faces, and every element lies in the
+leaf its ``cell_data["leaf"]`` names (``level`` gives the side, ``2**level`` lattice
+cells). Then a facet belongs to a group exactly when it lies on a face of its element's
+leaf and the lattice cell just across that face is outside the image (a box side), not
+meshed (an exterior) or of another material (an interface). Painting each leaf's material
+into one lattice-sized image and probing it once per element facet finds them all, each
+interface once from its lower material's side, in one pass over the elements: no sort
+of the ``(d+1) * M`` facet occurrences (the general path of ``_facets``), which cost
+several times the meshing at volume size.
+
+Only meshes the template mesher made qualify (:func:`template_group_rows` returns None
+for the rest, and the caller takes the general path): method ``"template"``, element and
+vertex counts as the mesher recorded them (a mesh cut down afterwards fails this), points
+on the lattice, and the two sides of every interface counted alike. A lattice of more
+than 16 cells per element (deep ``--refine`` on a coarse mesh) is not painted either.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from ._quality import _corner_det
+from ._types import Mesh
+
+__all__ = ["material_codes", "template_group_rows"]
+
+_CHUNK = 1 << 17                  # elements per pass (their corners stay in cache-ish)
+_PAINT = 1 << 22                  # lattice cells painted at once
+_BIG_LEAF = 1 << 12               # leaves of more lattice cells are painted one by one
+_MAX_CELLS_PER_ELEMENT = 16       # a bigger lattice image (deep --refine) is not worth it
+OUTSIDE, EMPTY = -2, -1           # probe results: beyond the image box, no element there
+#: face bit (2a: low end of axis a, 2a+1: high end) -> axis, and the step out of the leaf
+#: to the lattice cell across (-1 below the low end, 0 from the high end)
+_FACE_AXIS = np.zeros(64, dtype=np.int8)
+_FACE_STEP = np.zeros(64, dtype=np.int64)
+for _bit in range(6):
+    _FACE_AXIS[1 << _bit], _FACE_STEP[1 << _bit] = _bit // 2, -1 + (_bit & 1)
+
+
+def material_codes(material: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The materials present (sorted) and each element's rank among them (int16 when
+    they fit): a look-up table for label-sized ids, since a sort of tens of millions of
+    elements takes seconds.
+
+    Examples
+    --------
+    >>> materials, code = material_codes(np.array([7, 2, 7]))
+    >>> materials.tolist(), code.tolist()
+    ([2, 7], [1, 0, 1])
+    """
+    material = np.asarray(material)
+    top = int(material.max()) if material.size else 0
+    if material.size and material.min() >= 0 and top < max(1 << 20, material.size):
+        present = np.bincount(material, minlength=top + 1) > 0
+        materials = np.flatnonzero(present).astype(material.dtype)
+        rank = np.cumsum(present) - 1
+        dtype = np.int16 if len(materials) < 2**15 else np.int64
+        return materials, rank.astype(dtype)[material]
+    materials, code = np.unique(material, return_inverse=True)
+    return materials, code.reshape(-1).astype(np.int16 if len(materials) < 2**15 else np.int64)
+
+
+def _lattice_coords(mesh: Mesh) -> tuple[np.ndarray, tuple[int, ...]] | None:
+    """Vertex coordinates in lattice cells (int32) and the lattice shape, or None when
+    the points are not on the lattice the mesh records."""
+    lattice = mesh.info.get("lattice") or {}
+    step = np.asarray(lattice.get("step", mesh.spacing), dtype=np.float64)
+    per_voxel = np.asarray(lattice.get("cells_per_voxel", [1] * mesh.ndim), dtype=np.int64)
+    if step.shape != (mesh.ndim,) or per_voxel.shape != (mesh.ndim,):
+        return None
+    shape = tuple(int(n) for n in np.asarray(mesh.shape, dtype=np.int64) * per_voxel)
+    if max(shape) >= 2**30:
+        return None
+    u = mesh.points / step
+    coords = np.rint(u).astype(np.int32)
+    u -= coords
+    if not len(u) or np.abs(u, out=u).max() > 1e-6:
+        return None
+    return coords, shape
+
+
+def _leaf_origins(coords: np.ndarray, cells: np.ndarray, level: np.ndarray) -> np.ndarray:
+    """(n, d) lowest corner of the leaf of each cell: leaves are aligned to their side,
+    and a simplex of positive volume has a corner below the leaf's far faces."""
+    low = coords[cells[:, 0]]
+    for k in range(1, cells.shape[1]):
+        np.minimum(low, coords[cells[:, k]], out=low)
+    shift = level.astype(np.int32)[:, None]
+    return (low >> shift) << shift
+
+
+def _paint(coords, cells, code, leaf, level, shape, dtype) -> np.ndarray | None:
+    """Flat lattice image of material codes (EMPTY where no leaf was meshed)."""
+    d = len(shape)
+    image = np.full(math.prod(shape), EMPTY, dtype=dtype)
+    n_leaves = int(leaf.max()) + 1
+    rep = np.full(n_leaves, -1, dtype=np.int64)
+    rep[leaf] = np.arange(len(leaf))                 # one element per leaf (any)
+    rep = rep[rep >= 0]
+    lev = level[rep]
+    origin = _leaf_origins(coords, cells[rep], lev).astype(np.int64)
+    if (origin < 0).any() or ((origin + (1 << lev.astype(np.int64))[:, None])
+                              > np.asarray(shape)).any():
+        return None
+    strides = np.array([math.prod(shape[a + 1:]) for a in range(d)], dtype=np.int64)
+    okey = origin @ strides
+    values = code[rep]
+    box = image.reshape(shape)
+    for lv in np.unique(lev):
+        sel = np.flatnonzero(lev == lv)
+        side = 1 << int(lv)
+        if side ** d > _BIG_LEAF:
+            # big leaves are few (the volume over their size): a block each
+            for i in sel:
+                box[tuple(slice(o, o + side) for o in origin[i])] = values[i]
+            continue
+        offsets = np.indices((side,) * d).reshape(d, -1).T.astype(np.int64) @ strides
+        step = max(1, _PAINT // len(offsets))
+        for s in range(0, len(sel), step):
+            part = sel[s:s + step]
+            image[(okey[part, None] + offsets[None]).ravel()] = np.repeat(values[part],
+                                                                          len(offsets))
+    return image
+
+
+def template_group_rows(mesh: Mesh, *, signs: bool = False):
+    """The group facets of a template mesh as (owner, opposite, across), or None.
+
+    With `signs`, a fourth array: (M,) bool, which elements have a negative volume (in
+    the lattice, whose axes are the points' scaled by positive steps), from the corners
+    this pass gathers anyway.
+
+    Returns
+    -------
+    owner : (F,) ndarray of intp
+        The element each group facet bounds: the only one on the boundary, the one of
+        the lower material on an interface.
+    opposite : (F,) ndarray of intp
+        The owner's corner opposite the facet.
+    across : (F,) ndarray of int64
+        What lies across: the material on the other side of an interface, ``OUTSIDE`` on
+        a side of the image box, ``EMPTY`` next to a material left out of the mesh.
+
+    None when `mesh` is not one the template mesher made as it made it (see the module
+    docstring); the facets then have to be paired by sorting.
+    """
+    info, cd = mesh.info, mesh.cell_data
+    m, d = mesh.n_cells, mesh.ndim
+    if (info.get("method") != "template" or "leaf" not in cd or "level" not in cd
+            or info.get("n_elements") != m or info.get("n_vertices") != len(mesh.points)
+            or not mesh.records_box or m == 0 or d not in (2, 3)):
+        return None
+    found = _lattice_coords(mesh)
+    if found is None:
+        return None
+    coords, shape = found
+    if math.prod(shape) > _MAX_CELLS_PER_ELEMENT * m + (1 << 20):
+        return None
+    materials, code = material_codes(mesh.material)
+    dtype = code.dtype
+    cells, leaf, level = mesh.cells, cd["leaf"], cd["level"]
+    image = _paint(coords, cells, code, leaf, level, shape, dtype)
+    if image is None:
+        return None
+    axes = [np.ascontiguousarray(coords[:, a]) for a in range(d)]
+    del coords
+    bound = np.asarray(shape, dtype=np.int64)
+    strides = np.array([math.prod(shape[a + 1:]) for a in range(d)], dtype=np.int64)
+    owners, opposites, acrosses = [], [], []
+    n_pairs = len(materials) ** 2
+    seen_from_a = np.zeros(n_pairs, dtype=np.int64)
+    seen_from_b = np.zeros(n_pairs, dtype=np.int64)
+    negative = np.zeros(m if signs else 0, dtype=bool)
+    for start in range(0, m, _CHUNK):
+        cc = cells[start:start + _CHUNK]
+        n = len(cc)
+        p = [[x[cc[:, j]] for x in axes] for j in range(d + 1)]   # p[corner][axis]: (n,)
+        if signs:
+            det = _corner_det([[x.astype(np.int64) for x in corner] for corner in p])
+            np.less(det, 0, out=negative[start:start + n])
+        shift = level[start:start + _CHUNK].astype(np.int32)
+        # which faces of its leaf (aligned to its side) each corner lies on: bit 2a for
+        # the low end along axis a, bit 2a+1 for the high end
+        faces = [np.zeros(n, dtype=np.uint8) for _ in range(d + 1)]
+        for a in range(d):
+            lo = p[0][a].copy()
+            for j in range(1, d + 1):
+                np.minimum(lo, p[j][a], out=lo)
+            lo >>= shift
+            lo <<= shift
+            hi = lo + (np.int32(1) << shift)
+            for j in range(d + 1):
+                faces[j] |= (p[j][a] == lo).view(np.uint8) << np.uint8(2 * a)
+                faces[j] |= (p[j][a] == hi).view(np.uint8) << np.uint8(2 * a + 1)
+        for k in range(d + 1):
+            rest = [j for j in range(d + 1) if j != k]
+            # the face the facet lies on (the bits all its corners share: one at most)
+            shared = faces[rest[0]].copy()
+            for j in rest[1:]:
+                shared &= faces[j]
+            hit = np.flatnonzero(shared)
+            if not len(hit):
+                continue
+            bits = shared[hit]
+            if (bits & (bits - 1)).any():        # on two faces: a flat facet, not ours
+                return None
+            ax, out = _FACE_AXIS[bits], _FACE_STEP[bits]
+            # the lattice cell across the face: one step out along the face's axis, the
+            # facet's centroid (strictly inside the neighbour's face) along the others
+            flat = np.zeros(len(hit), dtype=np.int64)
+            inside = np.ones(len(hit), dtype=bool)
+            for a in range(d):
+                total = p[rest[0]][a][hit].astype(np.int64)
+                for j in rest[1:]:
+                    total += p[j][a][hit]
+                cell = np.where(ax == a, p[rest[0]][a][hit] + out, total // d)
+                inside &= (cell >= 0) & (cell < bound[a])
+                flat += cell * strides[a]
+            across = np.full(len(hit), OUTSIDE, dtype=np.int64)
+            across[inside] = image[flat[inside]]
+            mine = code[start + hit].astype(np.int64)
+            differ = across != mine
+            hit, across, mine = hit[differ], across[differ], mine[differ]
+            other = across >= 0
+            lower = ~other | (mine < across)
+            # both sides of each interface, counted, must agree (a cheap guard)
+            pair = np.minimum(mine, across) * len(materials) + np.maximum(mine, across)
+            seen_from_a += np.bincount(pair[other & lower], minlength=n_pairs)
+            seen_from_b += np.bincount(pair[other & ~lower], minlength=n_pairs)
+            owners.append(start + hit[lower])
+            opposites.append(np.full(int(lower.sum()), k, dtype=np.intp))
+            acrosses.append(np.where(other[lower], materials[np.maximum(across[lower], 0)],
+                                     across[lower]))
+    if not np.array_equal(seen_from_a, seen_from_b):
+        return None
+    rows = ((np.concatenate(owners).astype(np.intp), np.concatenate(opposites),
+             np.concatenate(acrosses).astype(np.int64)) if owners
+            else (np.zeros(0, np.intp), np.zeros(0, np.intp), np.zeros(0, np.int64)))
+    return (*rows, negative) if signs else rows

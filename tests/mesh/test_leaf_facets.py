@@ -1,0 +1,98 @@
+"""The leaf-by-leaf path to the facet groups of a template mesh gives exactly the groups
+of the general path (every facet occurrence paired by a sort), and steps aside for
+meshes it cannot vouch for."""
+
+import numpy as np
+import pytest
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
+
+from napari_swa_imesh.mesh import Mesh, facet_groups, mesh_labels
+from napari_swa_imesh.mesh._facets import _sorted_groups
+from napari_swa_imesh.mesh._leaf_facets import material_codes, template_group_rows
+
+
+def _assert_same(fast, slow):
+    assert list(fast) == list(slow)                          # names, in order
+    for name in slow:
+        for field in ("facets", "owner", "opposite"):
+            assert np.array_equal(getattr(fast[name], field), getattr(slow[name], field)), \
+                (name, field)
+
+
+@st.composite
+def _cases(draw):
+    d = draw(st.sampled_from([2, 3]))
+    shape = tuple(draw(st.lists(st.integers(1, 9 if d == 3 else 20), min_size=d, max_size=d)))
+    seed = draw(st.integers(0, 2**31))
+    blocky = draw(st.booleans())
+    rng = np.random.default_rng(seed)
+    labels = rng.integers(0, draw(st.integers(1, 4)), size=shape)
+    if blocky:       # big leaves as well as voxel ones
+        labels = np.kron(labels, np.ones((2,) * d, int))[tuple(slice(0, n) for n in shape)]
+    options = draw(st.sampled_from([{}, {"exclude": [0]}, {"refine": 1},
+                                    {"spacing": (2.5,) + (1.0,) * (d - 1)},
+                                    {"periodic": True}, {"max_size": 3.0}]))
+    return labels, options
+
+
+@settings(max_examples=60, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@given(_cases())
+def test_leaf_path_gives_the_groups_of_the_sorting_path(case):
+    labels, options = case
+    try:
+        mesh = mesh_labels(labels, **options)
+    except ValueError:          # everything excluded, or a size cap below the lattice
+        return
+    assert template_group_rows(mesh) is not None             # the fast path was taken
+    _assert_same(facet_groups(mesh), _sorted_groups(mesh))
+
+
+def test_meshes_not_from_the_template_mesher_take_the_sorting_path():
+    labels = np.random.default_rng(3).integers(1, 3, (6, 5, 4))
+    mesh = mesh_labels(labels)
+    cut = Mesh(mesh.points, mesh.cells[::2], mesh.material[::2],
+               {k: v[::2] for k, v in mesh.cell_data.items()}, spacing=mesh.spacing,
+               shape=mesh.shape, info=mesh.info)               # half the elements gone
+    assert template_group_rows(cut) is None
+    _assert_same(facet_groups(cut), _sorted_groups(cut))
+    delaunay = mesh_labels(labels[..., 0], method="delaunay")
+    assert template_group_rows(delaunay) is None
+
+
+def test_material_codes_rank_large_ids_too():
+    materials, code = material_codes(np.array([5, 2**40, 5, 0]))
+    assert materials.tolist() == [0, 5, 2**40]
+    assert code.tolist() == [1, 2, 1, 0]
+    materials, code = material_codes(np.array([3, 3, 1], np.uint8))
+    assert materials.tolist() == [1, 3] and code.tolist() == [1, 1, 0]
+    assert materials.dtype == np.uint8 and code.dtype == np.int16
+
+
+@pytest.mark.parametrize("world", [None, np.diag([-2.0, 1.0, 0.5, 1.0]), np.diag([2.0, 1, 1, 1]),
+                                   np.array([[0.0, 1, 0, 3], [1, 0, 0, -1], [0, 0, 2, 0],
+                                             [0, 0, 0, 1]])])
+def test_orientation_from_the_leaf_path_is_the_computed_one(world):
+    from napari_swa_imesh.mesh._prepare import ExportMesh
+
+    labels = np.random.default_rng(5).integers(0, 3, (6, 7, 5))
+    mesh = mesh_labels(labels, exclude=[0], spacing=(2.5, 1.0, 1.0))
+    mesh.world = world
+    leaf, computed = ExportMesh(mesh), ExportMesh(mesh, groups="none")
+    assert np.array_equal(leaf.flip, computed.flip)
+    turns = world is None or np.linalg.det(world[:3, :3]) < 0   # the mesher's cells are positive
+    assert leaf.flip.all() if turns else not leaf.flip.any()
+
+
+@pytest.mark.parametrize("big_leaf", [1, 64])
+def test_big_leaves_painted_one_by_one_give_the_same_groups(monkeypatch, big_leaf):
+    from napari_swa_imesh.mesh import _leaf_facets
+
+    labels = np.zeros((40, 36, 30), np.uint8)                  # leaves up to 16^3
+    labels[10:17, 20:23, 5:12] = 1
+    labels[30, 3, 25] = 2
+    mesh = mesh_labels(labels)
+    expected = _sorted_groups(mesh)
+    monkeypatch.setattr(_leaf_facets, "_BIG_LEAF", big_leaf)
+    assert template_group_rows(mesh) is not None
+    _assert_same(facet_groups(mesh), expected)
