@@ -129,7 +129,8 @@ def doerfler(indicator: np.ndarray, theta: float = THETA) -> np.ndarray:
     if total <= 0:
         return np.zeros(indicator.shape, dtype=bool)
     ranked = np.sort(indicator)[::-1]
-    count = min(len(ranked), int(np.searchsorted(np.cumsum(ranked), theta * total)) + 1)
+    running = np.cumsum(ranked)      # its last entry is the total, in the same rounding
+    count = min(len(ranked), int(np.searchsorted(running, theta * running[-1])) + 1)
     # every element as large as the last one needed: ties (mirror-image elements, equal
     # up to rounding) are marked together, so a transposed image is refined the same way
     return indicator >= ranked[count - 1] * (1 - TIE)
