@@ -49,7 +49,8 @@ from ._recommended import BIAS_ROUNDS, FIELD_GRID, RecommendedModel
 from ._tiles import block_counts, block_mean, block_sum
 
 __all__ = ["halo", "bytes_per_voxel", "batch_bytes", "plan_chunks", "predict_chunked",
-           "parse_memory", "default_memory", "MRF_REACH", "MIN_CORE"]
+           "parse_memory", "default_memory", "MRF_REACH", "MIN_CORE", "bias_round",
+           "strided_copy", "refuse_flat"]
 
 MRF_REACH = 2 + SWEEPS   # active set (1 px), grown by one (1 px), one px per sweep
 MIN_CORE = 16            # smallest chunk side worth the margin around it
@@ -342,10 +343,11 @@ def _check_contrast(x, compute) -> None:
     import dask
 
     lo, hi = dask.compute(x.min(), x.max(), **compute)
-    _refuse_flat(lo, hi)
+    refuse_flat(lo, hi)
 
 
-def _refuse_flat(lo, hi) -> None:
+def refuse_flat(lo, hi) -> None:
+    """Refuse an image whose minimum `lo` and maximum `hi` say NaN, infinity or one value."""
     if not (np.isfinite(lo) and np.isfinite(hi)):
         raise ValueError("the image has NaN or infinite values; fill or mask them first "
                          "(e.g. numpy.nan_to_num).")
@@ -372,43 +374,62 @@ def _bias_small(model, x, f, core, compute) -> np.ndarray:
     in-memory field (both rounds of :data:`BIAS_ROUNDS`)."""
     import dask
 
-    shape = x.shape
+    sub = None
     if f == 0:
         # the in-memory path labels a strided copy: the same copy, read chunk by chunk
+        sub, lo, hi = dask.compute(strided_copy(x), x.min(), x.max(), **compute)
+    else:
+        lo, hi = dask.compute(x.min(), x.max(), **compute)
+    refuse_flat(lo, hi)
+    small = None
+    for _ in range(BIAS_ROUNDS):
+        small = bias_round(model, x, core, small, sub=sub, **compute)
+    return small
+
+
+def strided_copy(x):
+    """The every-k-th-voxel copy (lazy) that the field of a pixel-value level labels."""
+    step = max(1, min(x.shape) // FIELD_GRID)
+    return x[tuple(slice(None, None, step) for _ in x.shape)]
+
+
+def bias_round(model: RecommendedModel, x, core, small: np.ndarray | None, *,
+               sub: np.ndarray | None = None, **compute) -> np.ndarray:
+    """One estimate of the bias field of the image `x` (Dask), as a small grid whose
+    linear interpolation to ``x.shape`` is :meth:`RecommendedModel._bias_field` of the
+    image corrected by `small` (None: uncorrected), labelled by the finest level.
+
+    Parameters
+    ----------
+    core : tuple of int
+        Chunks of the labelling pass (sides multiples of the grid cell).
+    sub : ndarray, optional
+        :func:`strided_copy` already read (finest level 0).
+    """
+    shape, f = x.shape, model.finest_scale
+    if f == 0:
         step = max(1, min(shape) // FIELD_GRID)
-        idx = [np.arange(0, n, step) for n in shape]
-        sub, lo, hi = dask.compute(x[tuple(slice(None, None, step) for _ in shape)],
-                                   x.min(), x.max(), **compute)
-        _refuse_flat(lo, hi)
+        if sub is None:
+            sub = strided_copy(x).compute(**compute)
         base = model._standardised(np.asarray(sub))
-        work, small = base, None
-        for _ in range(BIAS_ROUNDS):
-            if small is not None:
-                work = base / upsample_linear_at(small, shape, idx)
-            labels = model._predict_level(work, 0)
-            mu = class_mean_image(labels, model.class_means)
-            factor = grid_factor(base.shape)
-            coarse = coarse_bias_field(block_mean(base * mu, factor),
-                                       block_mean(mu * mu, factor))
-            small = coarse if step == 1 else upsample_linear(coarse, base.shape)
-        return small
-    lo, hi = dask.compute(x.min(), x.max(), **compute)
-    _refuse_flat(lo, hi)
+        idx = [np.arange(0, n, step) for n in shape]
+        work = base if small is None else base / upsample_linear_at(small, shape, idx)
+        labels = model._predict_level(work, 0)
+        mu = class_mean_image(labels, model.class_means)
+        factor = grid_factor(base.shape)
+        coarse = coarse_bias_field(block_mean(base * mu, factor), block_mean(mu * mu, factor))
+        return coarse if step == 1 else upsample_linear(coarse, base.shape)
     # a finer level labels every voxel in memory: block sums of I mu and mu^2 over the
     # chunks (chunk sides are multiples of the grid cell, so every cell is in one chunk)
     factor = grid_factor(shape)
-    counts = block_counts(shape, factor)
     template = _template(shape, core)
     out_chunks = ((2,),) + tuple(tuple(-(-c // factor) for c in cs) for cs in template.chunks)
-    window = _Window(x)
-    small = None
-    for _ in range(BIAS_ROUNDS):
-        sums = template.map_blocks(_sums_direct, window=window, model=model, field=small,
-                                   level=f, factor=factor, chunks=out_chunks, new_axis=0,
-                                   dtype=np.float64, meta=np.empty((0,) * (x.ndim + 1)))
-        num, den = sums.compute(**compute)
-        small = coarse_bias_field(num / counts, den / counts)
-    return small
+    sums = template.map_blocks(_sums_direct, window=_Window(x), model=model, field=small,
+                               level=f, factor=factor, chunks=out_chunks, new_axis=0,
+                               dtype=np.float64, meta=np.empty((0,) * (x.ndim + 1)))
+    num, den = sums.compute(**compute)
+    counts = block_counts(shape, factor)
+    return coarse_bias_field(num / counts, den / counts)
 
 
 def _sums_direct(_, window, model, field, level, factor, block_info=None):

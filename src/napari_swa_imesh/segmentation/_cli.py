@@ -199,7 +199,6 @@ def _check_segment_args(args: argparse.Namespace) -> None:
 
 
 def _run_segment(args: argparse.Namespace) -> int:
-    from .._zarr_io import is_zarr
     from ..io import atomic_write, check_label_format, grid_affine, is_nifti, label_array, \
         read_affine, read_image, write_labels_to
     from ._metrics import evaluate
@@ -210,12 +209,8 @@ def _run_segment(args: argparse.Namespace) -> int:
     from ._tiles import tile_placement
 
     timer = StepTimer()
-    if args.model and _chunked_run(args):
+    if _chunked_run(args):
         return 0
-    if args.samples and (is_zarr(args.image) or args.memory or args.workers):
-        raise ValueError("fitting reads the whole image (--memory, --workers and Zarr images "
-                         "go with --model); fit on a crop that fits in memory with "
-                         "--model-out, then apply the model with --model.")
     _check_segment_args(args)
     with timer("read"):
         image, spacing = read_image(args.image, gray=args.gray)
@@ -286,33 +281,50 @@ def _run_segment(args: argparse.Namespace) -> int:
 
 
 def _chunked_run(args: argparse.Namespace) -> bool:
-    """``segment --model`` chunk by chunk when :func:`~._apply.wants_chunks` says so;
-    False to run in memory."""
-    from ._apply import apply_model, wants_chunks
+    """``segment`` chunk by chunk when :func:`~._apply.wants_chunks` says so (``--model``:
+    applied; ``--samples``: fitted on the boxes read from the store, then applied); False
+    to run in memory."""
+    from ._apply import apply_model, fit_apply, wants_chunks
     from ._chunked import parse_memory
     from ._model_io import load_model
+    from ._samples import load_samples
 
     memory = parse_memory(args.memory) if args.memory is not None else None
     if args.workers is not None and args.workers < 1:
         raise ValueError(f"--workers must be 1 or more; got {args.workers}.")
-    model = load_model(args.model)
+    model = load_model(args.model) if args.model else None
     if not wants_chunks(args.image, args.output, model, memory=memory):
         return False
     whole = [f for f, v in (("--sieve", args.sieve), ("--tiles", args.tiles),
                             ("--signatures", args.signatures), ("--truth", args.truth),
-                            ("--model-out", args.model_out), ("--res-plot", args.res_plot),
-                            ("--scale", args.scale is not None), ("--gray", args.gray))
-             if v]
+                            ("--model-out", args.model_out and model is not None),
+                            ("--res-plot", args.res_plot),
+                            ("--scale", args.scale is not None and model is not None),
+                            ("--gray", args.gray)) if v]
     if whole:
         raise ValueError(f"{', '.join(whole)} need(s) the whole image in memory; drop "
                          f"{'them' if len(whole) > 1 else 'it'} to segment chunk by chunk "
                          "(a Zarr image or output, or --memory).")
-    summary = apply_model(args.image, model, args.output, memory=memory,
-                          workers=args.workers, force=args.force, chunked=True)
+    if model is None and args.method != "recommended":
+        raise ValueError("the reference method fits in memory; segment this image with the "
+                         "recommended method (drop --method) or fit on a crop that fits in "
+                         "memory with --model-out, then apply the model with --model.")
+    if model is None:
+        summary = fit_apply(args.image, load_samples(args.samples), args.output,
+                            max_scale=args.scale, memory=memory, workers=args.workers,
+                            force=args.force, model_out=args.model_out)
+    else:
+        summary = apply_model(args.image, model, args.output, memory=memory,
+                              workers=args.workers, force=args.force, chunked=True)
     if args.json:
         print_json(summary)
     else:
         plan = summary["plan"]
+        if "fit" in summary:
+            fit = summary["fit"]
+            print(f"fitted on the sample boxes read from the store in {fit['seconds']:.1f} s:"
+                  f" scales {fit['coarse_scale']}..{fit['finest_scale']}, bias correction "
+                  f"{'on' if fit['bias_correction'] else 'off'}")
         print(f"labels written to {args.output} chunk by chunk: chunks of "
               f"{'x'.join(map(str, plan['chunks']))} voxels with a margin of {plan['halo']} "
               f"px, {plan['workers']} thread(s), budget {plan['memory'] / 1e9:.2f} GB, "
