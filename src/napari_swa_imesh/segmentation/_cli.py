@@ -94,8 +94,15 @@ def add_commands(subparsers) -> None:
     p.add_argument("--mesh", default=None, metavar="SUFFIX",
                    help="also mesh each image's labels into OUTDIR/<stem>_mesh<SUFFIX> "
                         "(.vtu, .msh, .xdmf, .inp, ...)")
+    p.add_argument("--simulate", action="store_true",
+                   help="also run the steady k_eff simulation of each image's labels, as "
+                        "`swa-imesh simulate LABELS -k ...`; k_eff per axis in the table")
+    p.add_argument("--conductivity", "-k", nargs="+", action="extend", default=[],
+                   metavar="MATERIAL=K",
+                   help="with --simulate: conductivity per material, by label or the "
+                        "model's names (1=1 2=10 bone=0.1), as in `swa-imesh simulate`")
     p.add_argument("--exclude", type=int, nargs="*", default=[],
-                   help="materials the meshes leave out")
+                   help="materials the meshes and simulations leave out")
     p.add_argument("--force", action="store_true", help="replace existing labels files")
     p.add_argument("--json", action="store_true", help="print one JSON object")
     p.set_defaults(func=_run_batch)
@@ -345,7 +352,7 @@ def _run_batch(args: argparse.Namespace) -> int:
 
     timer = StepTimer()
     images = expand_inputs(args.images)
-    load_model(args.model)                                   # a bad model fails here
+    model = load_model(args.model)                           # a bad model fails here
     if not os.path.isdir(args.output):
         raise FileNotFoundError(f"output folder {args.output} does not exist; create it "
                                 "first.")
@@ -355,8 +362,10 @@ def _run_batch(args: argparse.Namespace) -> int:
         if args.mesh not in MESH_SUFFIXES:
             raise ValueError(f"--mesh takes a mesh suffix ({', '.join(MESH_SUFFIXES)}); got "
                              f"{args.mesh!r}.")
-    if args.exclude and not args.mesh:
-        raise ValueError("--exclude says what the meshes leave out; add --mesh SUFFIX.")
+    if args.exclude and not (args.mesh or args.simulate):
+        raise ValueError("--exclude says what the meshes and simulations leave out; add "
+                         "--mesh SUFFIX or --simulate.")
+    conductivity = _batch_conductivity(args, model)
     for p in images:
         check_writable(output_for(p, args.output), force=args.force)
         if args.mesh:
@@ -382,6 +391,7 @@ def _run_batch(args: argparse.Namespace) -> int:
             rows = run_batch(images, args.model, args.output, client=client,
                              force=args.force, memory=budget // n, retries=args.retries,
                              mesh=args.mesh, exclude=args.exclude,
+                             conductivity=conductivity,
                              progress=None if args.json else progress)
     finally:
         cluster = client.cluster
@@ -403,14 +413,39 @@ def _run_batch(args: argparse.Namespace) -> int:
     return 0
 
 
+def _batch_conductivity(args: argparse.Namespace, model) -> dict | None:
+    """``--conductivity`` by label, checked against the model's materials (every one not
+    excluded needs a value) before any work; None without ``--simulate``."""
+    if bool(args.simulate) != bool(args.conductivity):
+        raise ValueError("--simulate needs --conductivity MATERIAL=K for each material (and "
+                         "--conductivity goes with --simulate); give both or neither.")
+    if not args.simulate:
+        return None
+    from ..simulate._conductivity import (
+        conductivity_tensors,
+        material_label,
+        parse_conductivity_args,
+    )
+
+    parsed = parse_conductivity_args(args.conductivity)
+    names = {m.label: m.name for m in model.materials}
+    kept = [m for m in model.labels if m not in set(args.exclude)]
+    conductivity_tensors(parsed, kept, model.ndim, names)       # one sentence if wrong
+    return {material_label(k, names): v for k, v in parsed.items()}
+
+
 def _batch_table(rows: list[dict]) -> str:
-    """Per image: labels file, seconds, and every material's volume."""
+    """Per image: labels file, seconds, every material's volume, and k_eff per axis."""
     labels = sorted({int(k) for r in rows for k in r.get("volumes", {})})
-    head = ["image", "labels", "seconds"] + [f"volume {k}" for k in labels]
+    axes = list(dict.fromkeys(a for r in rows for a in r.get("simulate", {}).get("k_eff", {})))
+    head = (["image", "labels", "seconds"] + [f"volume {k}" for k in labels]
+            + [f"k_eff {a}" for a in axes])
     body = [[Path(r["image"]).name, Path(r["output"]).name,
              "failed" if "error" in r else f"{r['seconds']:.2f}"]
             + [f"{r['volumes'][k]['volume']:.6g}" if "volumes" in r else ""
-               for k in labels] for r in rows]
+               for k in labels]
+            + [f"{r['simulate']['k_eff'][a]:.6g}" if "simulate" in r else "" for a in axes]
+            for r in rows]
     widths = [max(len(str(x)) for x in col) for col in zip(head, *body)]
     return "\n".join("  ".join(str(x).ljust(w) for x, w in zip(line, widths))
                      for line in [head, *body])
