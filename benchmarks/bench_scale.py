@@ -17,7 +17,7 @@ Run:  python benchmarks/bench_scale.py [--side 512] [--crop 160] [--memory 2.5GB
    timed inside its command, imports excluded) and their ratio, also with the chunked
    path on one thread as the in-memory one.
    Then fitting on the store (``segment BIG.zarr --samples S.json -o OUT.zarr --memory
-   2.5GB``, the boxes of the training box in the volume's coordinates): the peak RSS of
+   2.5GB``, boxes from the training box, the centre and the far corner): the peak RSS of
    the process tree against the budget, the seconds of the fit and of the whole run, and
    the agreement of its labels with the saved model's (fitted in memory on the training
    box: its intensity minimum and bias field are the box's, not the volume's) and with
@@ -220,11 +220,20 @@ def bench_fit(work: Path, truth, corner, memory: str) -> None:
     from napari_swa_imesh.segmentation import load_model, samples_from_truth, save_samples
     from napari_swa_imesh.segmentation._samples import SampleBox, Samples
 
-    local = samples_from_truth(np.asarray(truth[corner]).astype(np.int32))
-    shift = [c.start for c in corner]
-    boxes = [SampleBox(b.label, tuple(a + o for a, o in zip(b.start, shift)),
-                       tuple(a + o for a, o in zip(b.stop, shift))) for b in local.boxes]
-    save_samples(Samples(local.materials, boxes), work / "s.json", force=True)
+    # boxes from the training box and from two more places (centre, far corner): a user
+    # draws boxes where the volume is, and the "auto" bias rule needs to see the bias
+    side = truth.shape[0]
+    n = corner[0].stop - corner[0].start
+    places = [corner] + [(slice(a, a + n),) * 3 for a in ((side - n) // 2, side - n)]
+    materials, boxes = {}, []
+    for place in places:
+        local = samples_from_truth(np.asarray(truth[place]).astype(np.int32), per_material=2)
+        shift = [c.start for c in place]
+        materials.update({m.label: m for m in local.materials})
+        boxes += [SampleBox(b.label, tuple(a + o for a, o in zip(b.start, shift)),
+                            tuple(a + o for a, o in zip(b.stop, shift))) for b in local.boxes]
+    save_samples(Samples([materials[k] for k in sorted(materials)], boxes), work / "s.json",
+                 force=True)
     voxels = sum(int(np.prod(b.shape)) for b in boxes)
     labels = work / "fit_labels.zarr"
     rc, wall, peak, out, err = run_tree(cli("segment", work / "big.zarr", "--samples",
@@ -244,7 +253,6 @@ def bench_fit(work: Path, truth, corner, memory: str) -> None:
           f"{fit['bias_correction']} (the box-fitted model: "
           f"{load_model(work / 'm.npz').bias_correction})")
     got = zarr.open_array(str(labels), mode="r")
-    side = got.shape[0]
     step = max(1, side // 128)            # every step-th voxel: the comparison fits memory
     sub = (slice(None, None, step),) * 3
     mine, real = got[sub], np.asarray(truth[sub])

@@ -92,6 +92,21 @@ def test_fit_on_the_boxes_of_a_store_equals_the_in_memory_fit(scene, capsys, tmp
     np.testing.assert_array_equal(np.load(tmp_path / "again.npy"), labels)
 
 
+def test_reference_model_on_a_store_equals_the_in_memory_run(scene, capsys, tmp_path):
+    code, _, _ = run(capsys, "segment", scene / "img.npy", "--samples", scene / "s.json",
+                     "--method", "reference", "--scale", 1, "-o", tmp_path / "ref.npy",
+                     "--model-out", tmp_path / "ref.npz")
+    assert code == 0
+    code, out, _ = run(capsys, "segment", scene / "img.zarr", "--model", tmp_path / "ref.npz",
+                       "-o", tmp_path / "lab.zarr", "--memory", "1GB", "--json")
+    assert code == 0
+    summary = json.loads(out)
+    assert summary["chunked"] and summary["plan"]["halo"] == 0
+    assert all(c % 2 == 0 for c in summary["plan"]["chunks"])
+    np.testing.assert_array_equal(zarr.open_array(str(tmp_path / "lab.zarr"), mode="r")[:],
+                                  np.load(tmp_path / "ref.npy"))
+
+
 def test_existing_store_needs_force_and_is_replaced_whole(scene, capsys, tmp_path):
     out = tmp_path / "lab.zarr"
     assert run(capsys, "segment", scene / "img.zarr", "--model", scene / "m.npz",

@@ -4,8 +4,8 @@ What ``swa-imesh segment IMAGE --model M.npz -o LABELS`` does, and each task of 
 batch``: one function, so a cohort's labels equal one-by-one runs.
 
 The chunked path (:mod:`._chunked`) is taken for a Zarr image or a Zarr output, when a
-memory budget is given, or when the in-memory path would not fit the default budget; it
-needs a recommended model. :func:`fit_apply` is ``segment IMAGE --samples S.json`` on
+memory budget is given, or when the in-memory path would not fit the default budget; a
+reference (tile) model works on chunks aligned to its tiles (:mod:`._chunked_reference`). :func:`fit_apply` is ``segment IMAGE --samples S.json`` on
 that path: the model is fitted on the boxes read from the store
 (:func:`~._chunked_fit.fit_chunked`), then applied as a saved one. The labels go to a Zarr store chunk by chunk, or (another
 format) are gathered whole (one or two bytes per voxel, counted in the budget).
@@ -20,6 +20,8 @@ import numpy as np
 from .._validation import label_dtype
 from ._chunked import bytes_per_voxel, default_memory, predict_chunked
 from ._chunked_fit import fit_chunked
+from ._chunked_reference import BYTES_PER_VOXEL as TILE_BYTES_PER_VOXEL
+from ._model import SWAModel
 from ._recommended import RecommendedModel
 
 __all__ = ["apply_model", "fit_apply", "wants_chunks", "material_volumes",
@@ -40,11 +42,11 @@ def wants_chunks(image, output, model, *, memory: int | None = None,
 
     if is_zarr(image) or is_zarr(output) or memory is not None:
         return True
-    if not isinstance(model, (RecommendedModel, type(None))) or not str(
-            image).lower().endswith(".npy"):
+    if not str(image).lower().endswith(".npy"):
         return False
     lazy, _ = open_lazy(image)
-    per_voxel = FIT_BYTES_PER_VOXEL if model is None else bytes_per_voxel(model, lazy.ndim)
+    per_voxel = (FIT_BYTES_PER_VOXEL if model is None else TILE_BYTES_PER_VOXEL
+                 if isinstance(model, SWAModel) else bytes_per_voxel(model, lazy.ndim))
     need = lazy.size * (per_voxel + lazy.dtype.itemsize + 4)
     return need > (default_memory() if budget is None else budget)
 
@@ -66,7 +68,7 @@ def apply_model(image, model, output, *, memory: int | None = None,
         Any image :func:`~napari_swa_imesh.io.read_image` reads, a Zarr array or OME-Zarr
         image, or a ``.npy`` (memory-mapped on the chunked path).
     model : RecommendedModel or SWAModel
-        A fitted or loaded model (chunked: recommended only).
+        A fitted or loaded model.
     output : str or Path
         Labels: ``.zarr`` (chunked) or a label format of
         :func:`~napari_swa_imesh.io.write_labels`; written through
@@ -118,11 +120,6 @@ def apply_model(image, model, output, *, memory: int | None = None,
         img, spacing = read_image(image)
         labels = label_array(model.predict(img))
     else:
-        if not isinstance(model, RecommendedModel):
-            raise ValueError("chunked segmentation applies models of the recommended "
-                             "method; this is a reference (tile) model: apply it in memory "
-                             "to a .npy/.tif/.nii.gz image, without --memory and with a "
-                             ".npy/.tif/.nii.gz output.")
         lazy, spacing = open_lazy(image)
         held = 0 if is_store(output) else lazy.size * np.dtype(
             label_dtype(model.labels)).itemsize

@@ -43,14 +43,16 @@ from ._bias import (
     upsample_linear,
     upsample_linear_at,
 )
+from ._chunked_reference import predict_tiles_chunked
 from ._classifiers import PREDICT_BATCH
+from ._model import SWAModel
 from ._mrf import SWEEPS, potts_mean_field
 from ._recommended import BIAS_ROUNDS, FIELD_GRID, RecommendedModel
 from ._tiles import block_counts, block_mean, block_sum
 
 __all__ = ["halo", "bytes_per_voxel", "batch_bytes", "plan_chunks", "predict_chunked",
            "parse_memory", "default_memory", "MRF_REACH", "MIN_CORE", "bias_round",
-           "strided_copy", "refuse_flat"]
+           "strided_copy", "refuse_flat", "Window", "smallest_dtype"]
 
 MRF_REACH = 2 + SWEEPS   # active set (1 px), grown by one (1 px), one px per sweep
 MIN_CORE = 16            # smallest chunk side worth the margin around it
@@ -205,11 +207,14 @@ def _largest_core(shape, h: int, bpv: int, free: float, multiple: int):
 def predict_chunked(model: RecommendedModel, image, *, memory: int | None = None,
                     workers: int | None = None, reserved: int = 0, chunks=None,
                     **compute):
-    """Labels of a large image by a fitted recommended model, as a lazy Dask array.
+    """Labels of a large image by a fitted model, as a lazy Dask array.
+
+    A reference (tile) model works on chunks aligned to its tiles, without margin
+    (:mod:`._chunked_reference`); the rest of this docstring is about the recommended one.
 
     Parameters
     ----------
-    model : RecommendedModel
+    model : RecommendedModel or SWAModel
         Fitted or loaded (:func:`~._model_io.load_model`).
     image : (M, N[, P]) dask.array.Array or array_like
         Grey-level image (e.g. from :func:`napari_swa_imesh._zarr_io.open_lazy`).
@@ -235,7 +240,7 @@ def predict_chunked(model: RecommendedModel, image, *, memory: int | None = None
     Raises
     ------
     ValueError
-        A reference model, a dimensionality the model was not fitted for, an image of one
+        A dimensionality the model was not fitted for, an image of one
         value or NaN/infinity (found by a pass over the chunks before any labelling), a
         budget too small for one chunk.
 
@@ -253,10 +258,9 @@ def predict_chunked(model: RecommendedModel, image, *, memory: int | None = None
     """
     import dask.array as da
 
-    if not isinstance(model, RecommendedModel):
-        raise ValueError("chunked segmentation applies models of the recommended method; "
-                         "this is a reference (tile) model: apply it in memory, or fit a "
-                         "recommended model.")
+    if not isinstance(model, (RecommendedModel, SWAModel)):
+        raise TypeError(f"model must be a RecommendedModel or SWAModel; got "
+                        f"{type(model).__name__}.")
     if not model.materials:
         raise ValueError("this model is not fitted; call fit() or load a saved model.")
     x = image if isinstance(image, da.Array) else da.from_array(np.asarray(image))
@@ -266,6 +270,11 @@ def predict_chunked(model: RecommendedModel, image, *, memory: int | None = None
     if x.dtype.kind not in "biuf":
         raise TypeError(f"image must hold real numbers; got dtype {x.dtype}.")
     memory = default_memory() if memory is None else int(memory)
+    if isinstance(model, SWAModel):
+        # tiles are local: chunks aligned to them need no margin and no global step
+        return predict_tiles_chunked(model, x, memory=memory, workers=workers,
+                                     reserved=reserved, chunks=chunks,
+                                     check=lambda arr: _check_contrast(arr, compute))
     f = model.finest_scale
     multiple = grid_factor(x.shape) if model.bias_correction and f > 0 else 1
     if chunks is None:
@@ -284,15 +293,15 @@ def predict_chunked(model: RecommendedModel, image, *, memory: int | None = None
     field = _bias_small(model, x, f, core, compute) if model.bias_correction else None
     if field is None:
         _check_contrast(x, compute)
-    window = _Window(image if isinstance(image, np.ndarray) else x)
-    dtype = _smallest_dtype(model.labels)
+    window = Window(image if isinstance(image, np.ndarray) else x)
+    dtype = smallest_dtype(model.labels)
     labels = _template(x.shape, core).map_blocks(
         _labels_direct, window=window, model=model, field=field, margin=h, dtype=dtype,
         meta=np.empty((0,) * x.ndim, dtype))
     return labels, plan
 
 
-class _Window:
+class Window:
     """Reads a padded window of the image inside a task, from the store's own chunks (a
     Dask array is computed there, synchronously: only the chunks the window touches)."""
 
@@ -359,10 +368,10 @@ def refuse_flat(lo, hi) -> None:
 def _labels_block(work, model):
     ll, _ = model._classify_standardised(work)
     cls = potts_mean_field(ll, model.beta, labels_only=True)
-    return model._class_values()[cls].astype(_smallest_dtype(model.labels), copy=False)
+    return model._class_values()[cls].astype(smallest_dtype(model.labels), copy=False)
 
 
-def _smallest_dtype(labels) -> np.dtype:
+def smallest_dtype(labels) -> np.dtype:
     """The dtype labels are written in (as :func:`~napari_swa_imesh.io.label_array`)."""
     from ..io import label_array
 
@@ -424,7 +433,7 @@ def bias_round(model: RecommendedModel, x, core, small: np.ndarray | None, *,
     factor = grid_factor(shape)
     template = _template(shape, core)
     out_chunks = ((2,),) + tuple(tuple(-(-c // factor) for c in cs) for cs in template.chunks)
-    sums = template.map_blocks(_sums_direct, window=_Window(x), model=model, field=small,
+    sums = template.map_blocks(_sums_direct, window=Window(x), model=model, field=small,
                                level=f, factor=factor, chunks=out_chunks, new_axis=0,
                                dtype=np.float64, meta=np.empty((0,) * (x.ndim + 1)))
     num, den = sums.compute(**compute)
