@@ -68,9 +68,9 @@ def test_plan_fits_the_budget_and_bounds_the_measured_peak(scenes):
     block = np.random.default_rng(0).normal(size=(256, 256))
 
     info = [{"array-location": [(0, 256), (0, 256)]}]
-    _labels_tiles(None, lambda lo, hi: block, model, block_info=info)        # warm
+    _labels_tiles(None, lambda lo, hi: block, model, np.uint8, block_info=info)        # warm
     tracemalloc.start()
-    _labels_tiles(None, lambda lo, hi: block, model, block_info=info)
+    _labels_tiles(None, lambda lo, hi: block, model, np.uint8, block_info=info)
     peak = tracemalloc.get_traced_memory()[1]
     tracemalloc.stop()
     assert peak <= BYTES_PER_VOXEL * block.size

@@ -272,7 +272,9 @@ def predict_chunked(model: RecommendedModel, image, *, memory: int | None = None
     memory = default_memory() if memory is None else int(memory)
     if isinstance(model, SWAModel):
         # tiles are local: chunks aligned to them need no margin and no global step
-        return predict_tiles_chunked(model, x, memory=memory, workers=workers,
+        window = Window(image if isinstance(image, np.ndarray) else x)
+        return predict_tiles_chunked(model, x, window, smallest_dtype(model.labels),
+                                     memory=memory, workers=workers,
                                      reserved=reserved, chunks=chunks,
                                      check=lambda arr: _check_contrast(arr, compute))
     f = model.finest_scale

@@ -19,7 +19,6 @@ from __future__ import annotations
 
 import numpy as np
 
-from .._validation import as_image
 from ._bias import grid_factor, upsample_linear_at
 from ._chunked import refuse_flat, bias_round, default_memory, plan_chunks, strided_copy
 from ._recommended import DEFAULT_TOP, RecommendedModel
@@ -37,8 +36,8 @@ def training_bytes(samples: Samples, top: int, itemsize: int = 4) -> int:
     Examples
     --------
     >>> s = Samples.from_dict({"boxes": [{"label": 1, "start": [0, 0], "stop": [10, 10]}]})
-    >>> training_bytes(s, 0)     # 100 px: 4+4 crops, 4*(1+0+6) stack, 8 rows, 8*2 sampled
-    5600
+    >>> training_bytes(s, 0)     # 100 px: 4+4 crops, 4*(1+0+6) stack, 8 rows, 16 sampled
+    6000
     """
     f = len(multiscale_feature_names(top))
     sizes = [int(np.prod(b.shape)) for b in samples.boxes]
@@ -177,7 +176,8 @@ def fit_chunked(model: RecommendedModel, image, samples: Samples, *, spacing=Non
     x = image if isinstance(image, da.Array) else da.from_array(np.asarray(image))
     if x.ndim < 2:
         raise ValueError(f"image must be 2-D or more; got {x.ndim}-D.")
-    as_image(np.zeros((1,) * x.ndim, x.dtype))                  # dtype check only
+    if x.dtype.kind not in "biuf":
+        raise TypeError(f"image must hold real numbers; got dtype {x.dtype}.")
     samples.check(x.shape)
     memory = default_memory() if memory is None else int(memory)
     top = model.max_scale if model.max_scale is not None else DEFAULT_TOP

@@ -87,8 +87,9 @@ def plan_tiles(shape, model: SWAModel, memory: int, *, workers: int | None = Non
     return best[1], best[2]
 
 
-def predict_tiles_chunked(model: SWAModel, x, *, memory: int, workers: int | None = None,
-                          reserved: int = 0, chunks=None, check=None):
+def predict_tiles_chunked(model: SWAModel, x, window, dtype, *, memory: int,
+                          workers: int | None = None, reserved: int = 0, chunks=None,
+                          check=None):
     """Labels of a large image by a fitted reference model, as a lazy Dask array (see
     :func:`~._chunked.predict_chunked`, which checks the arguments and calls this).
 
@@ -97,6 +98,10 @@ def predict_tiles_chunked(model: SWAModel, x, *, memory: int, workers: int | Non
     model : SWAModel
     x : dask.array.Array
         The image, checked for dimension and dtype.
+    window : callable
+        ``window(lo, hi)``: the image's pixels in that box, read inside a task.
+    dtype : numpy.dtype
+        Of the labels.
     memory, workers, reserved
         As for :func:`plan_tiles`.
     chunks : tuple of int, optional
@@ -113,8 +118,6 @@ def predict_tiles_chunked(model: SWAModel, x, *, memory: int, workers: int | Non
     """
     import dask.array as da
 
-    from ._chunked import Window, smallest_dtype
-
     check_scale(model.scale, x.shape)
     side = 1 << model.scale
     if chunks is None:
@@ -125,21 +128,19 @@ def predict_tiles_chunked(model: SWAModel, x, *, memory: int, workers: int | Non
         workers = workers or 1
     if check is not None:
         check(x)
-    dtype = smallest_dtype(model.labels)
     template = da.empty(x.shape, chunks=tile_chunks(x.shape, core, side), dtype=np.uint8)
-    labels = template.map_blocks(_labels_tiles, window=Window(x), model=model, dtype=dtype,
-                                 meta=np.empty((0,) * x.ndim, dtype))
+    labels = template.map_blocks(_labels_tiles, window=window, model=model, out=dtype,
+                                 dtype=dtype, meta=np.empty((0,) * x.ndim, dtype))
     plan = {"chunks": core, "workers": workers, "halo": 0, "memory": memory,
             "bytes_per_voxel": BYTES_PER_VOXEL}
     return labels, plan
 
 
-def _labels_tiles(_, window, model, block_info=None):
-    """Labels of one chunk: its tiles' features, classified, each pixel its tile's label."""
+def _labels_tiles(_, window, model, out, block_info=None):
+    """Labels (dtype `out`) of one chunk: its tiles' features, classified, each pixel its
+    tile's label."""
     loc = block_info[0]["array-location"]
     block = window([a for a, _ in loc], [b for _, b in loc])
     feats, _, _ = feature_stack(block, model.scale, model.feature_set)
     labels = upsample_tiles(model.classify_features(feats), model.scale, block.shape)
-    from ._chunked import smallest_dtype
-
-    return labels.astype(smallest_dtype(model.labels), copy=False)
+    return labels.astype(out, copy=False)
