@@ -63,12 +63,12 @@ def add_commands(subparsers) -> None:
     p.add_argument("--truth", default=None, help="ground truth to report Dice against")
     p.add_argument("--gray", action="store_true", help="convert an RGB picture to grey")
     p.add_argument("-o", "--output", required=True,
-                   help="labels file: .npy, .tif, .nii.gz or .png; with --model also a "
-                        ".zarr store, written chunk by chunk")
+                   help="labels file: .npy, .tif, .nii.gz or .png; or a .zarr store, "
+                        "written chunk by chunk")
     p.add_argument("--memory", default=None,
-                   help="with --model: work chunk by chunk within this budget for the whole "
-                        "process (e.g. 2GB; default half the memory available); Zarr "
-                        "images and outputs are always chunked")
+                   help="work chunk by chunk within this budget for the whole process (e.g. "
+                        "2GB; default half the memory available); with --samples the fit "
+                        "reads only the boxes; Zarr images and outputs are always chunked")
     p.add_argument("--workers", type=int, default=None,
                    help="threads of the chunked path (default: planned from the budget)")
     p.add_argument("--force", action="store_true", help="replace existing output files")
