@@ -2,7 +2,8 @@
 
 Run:  python benchmarks/bench_scale.py [--side 512] [--crop 160] [--memory 2.5GB]
                                       [--cohort 8] [--cohort-side 128] [--workdir DIR]
-                                      [--skip chunked|cohort] [--no-one-thread]
+                                      [--skip chunked|apply|fit|cohort ...]
+                                      [--no-one-thread]
 
 1. A ``side``^3 float32 volume (three materials, noise, a smooth 30 % bias) is generated
    slab by slab into a Zarr store; a model is fitted on its 96^3 corner (or, when a
@@ -15,6 +16,12 @@ Run:  python benchmarks/bench_scale.py [--side 512] [--crop 160] [--memory 2.5GB
    on the crop itself (chunked run of the crop); seconds per voxel of both paths (each
    timed inside its command, imports excluded) and their ratio, also with the chunked
    path on one thread as the in-memory one.
+   Then fitting on the store (``segment BIG.zarr --samples S.json -o OUT.zarr --memory
+   2.5GB``, boxes from the training box, the centre and the far corner): the peak RSS of
+   the process tree against the budget, the seconds of the fit and of the whole run, and
+   the agreement of its labels with the saved model's (fitted in memory on the training
+   box: its intensity minimum and bias field are the box's, not the volume's) and with
+   the truth.
 2. A cohort of ``cohort`` volumes of ``cohort-side``^3 in ``swa-imesh batch`` on a
    2-worker LocalCluster against a plain loop of in-memory runs in one process: wall
    seconds of both, and whether every labels file is equal.
@@ -114,8 +121,8 @@ def cli(*args) -> list[str]:
     return [sys.executable, "-m", "napari_swa_imesh.cli", *map(str, args)]
 
 
-def bench_chunked(work: Path, side: int, crop: int, memory: str, one_thread: bool = True
-                  ) -> None:
+def bench_chunked(work: Path, side: int, crop: int, memory: str, one_thread: bool = True,
+                  skip=()) -> None:
     import zarr
 
     from napari_swa_imesh.segmentation import RecommendedModel, samples_from_truth
@@ -133,6 +140,17 @@ def bench_chunked(work: Path, side: int, crop: int, memory: str, one_thread: boo
     h = halo(model)
     print(f"model: scales {model.scale}..{model.finest_scale}, bias correction "
           f"{model.bias_correction}, margin {h} px")
+    if "apply" not in skip:
+        bench_apply(work, big, truth, side, crop, memory, h, one_thread)
+    if "fit" not in skip:
+        bench_fit(work, truth, corner, memory)
+
+
+def bench_apply(work: Path, big, truth, side: int, crop: int, memory: str, h: int,
+                one_thread: bool) -> None:
+    """The saved model chunk by chunk on the volume, against the in-memory path on a crop."""
+    import zarr
+
     lo = (side - crop) // 2
     box = (slice(lo, lo + crop),) * 3
     np.save(work / "crop.npy", np.asarray(big[box]))
@@ -195,6 +213,57 @@ def bench_chunked(work: Path, side: int, crop: int, memory: str, one_thread: boo
           f"{'met' if ratio1 <= 2.5 else 'NOT MET'}")
 
 
+def bench_fit(work: Path, truth, corner, memory: str) -> None:
+    """``segment BIG.zarr --samples`` within the budget: the fit reads the boxes only."""
+    import zarr
+
+    from napari_swa_imesh.segmentation import load_model, samples_from_truth, save_samples
+    from napari_swa_imesh.segmentation._samples import SampleBox, Samples
+
+    # boxes from the training box and from two more places (centre, far corner): a user
+    # draws boxes where the volume is, and the "auto" bias rule needs to see the bias
+    side = truth.shape[0]
+    n = corner[0].stop - corner[0].start
+    places = [corner] + [(slice(a, a + n),) * 3 for a in ((side - n) // 2, side - n)]
+    materials, boxes = {}, []
+    for place in places:
+        local = samples_from_truth(np.asarray(truth[place]).astype(np.int32), per_material=2)
+        shift = [c.start for c in place]
+        materials.update({m.label: m for m in local.materials})
+        boxes += [SampleBox(b.label, tuple(a + o for a, o in zip(b.start, shift)),
+                            tuple(a + o for a, o in zip(b.stop, shift))) for b in local.boxes]
+    save_samples(Samples([materials[k] for k in sorted(materials)], boxes), work / "s.json",
+                 force=True)
+    voxels = sum(int(np.prod(b.shape)) for b in boxes)
+    labels = work / "fit_labels.zarr"
+    rc, wall, peak, out, err = run_tree(cli("segment", work / "big.zarr", "--samples",
+                                            work / "s.json", "-o", labels, "--model-out",
+                                            work / "fit.npz", "--memory", memory, "--json",
+                                            "--force"))
+    if rc:
+        raise SystemExit(f"fit on the store failed: {err}")
+    run = json.loads(out)
+    budget = run["plan"]["memory"]
+    fit = run["fit"]
+    print(f"fit on the store ({len(boxes)} boxes, {voxels} voxels): peak {peak / 1e9:.2f} GB "
+          f"for the process tree, budget {budget / 1e9:.2f} GB -> "
+          f"{'met' if peak <= budget else 'NOT MET'}; fit {fit['seconds']:.0f} s, with the "
+          f"labelling {run['seconds']:.0f} s ({wall:.0f} s with start-up); scales "
+          f"{fit['coarse_scale']}..{fit['finest_scale']}, bias correction "
+          f"{fit['bias_correction']} (the box-fitted model: "
+          f"{load_model(work / 'm.npz').bias_correction})")
+    got = zarr.open_array(str(labels), mode="r")
+    step = max(1, side // 128)            # every step-th voxel: the comparison fits memory
+    sub = (slice(None, None, step),) * 3
+    mine, real = got[sub], np.asarray(truth[sub])
+    line = f"  its labels against the truth: {100 * float((mine == real).mean()):.2f} %"
+    if (work / "big_labels.zarr").exists():
+        other = zarr.open_array(str(work / "big_labels.zarr"), mode="r")[sub]
+        line += (f"; against the box-fitted model's labels {100 * float((mine == other).mean()):.2f} %"
+                 f" (that model against the truth {100 * float((other == real).mean()):.2f} %)")
+    print(line + f" (every {step}th voxel)")
+
+
 def bench_cohort(work: Path, n: int, side: int) -> None:
     import zarr
 
@@ -238,15 +307,16 @@ def main() -> None:
     ap.add_argument("--cohort", type=int, default=8)
     ap.add_argument("--cohort-side", type=int, default=128)
     ap.add_argument("--workdir", default=None, help="default: a temporary folder")
-    ap.add_argument("--skip", choices=["chunked", "cohort"], default=None)
+    ap.add_argument("--skip", choices=["chunked", "apply", "fit", "cohort"], nargs="*",
+                    default=[])
     ap.add_argument("--no-one-thread", action="store_true",
                     help="skip the second chunked run on one thread (long for 1024^3)")
     args = ap.parse_args()
     with tempfile.TemporaryDirectory(dir=args.workdir) as tmp:
         work = Path(tmp)
-        if args.skip != "chunked":
+        if "chunked" not in args.skip:
             bench_chunked(work, args.side, args.crop, args.memory,
-                          one_thread=not args.no_one_thread)
+                          one_thread=not args.no_one_thread, skip=args.skip)
         else:
             from napari_swa_imesh.segmentation import RecommendedModel, samples_from_truth
 
@@ -257,7 +327,7 @@ def main() -> None:
                                    samples_from_truth(zarr.open_array(
                                        str(work / "t.zarr"))[:].astype(np.int32))).save(
                 work / "m.npz")
-        if args.skip != "cohort":
+        if "cohort" not in args.skip:
             bench_cohort(work, args.cohort, args.cohort_side)
 
 

@@ -1,6 +1,7 @@
 """``swa-imesh batch``: a cohort on a dask.distributed LocalCluster equals one-by-one runs."""
 
 import json
+import re
 import time
 
 import numpy as np
@@ -101,6 +102,40 @@ def test_batch_meshes_each_image_in_its_frame(cohort, capsys, tmp_path):
         assert got == pytest.approx(row["volumes"][str(material)]["volume"])
 
 
+def test_batch_simulates_each_image_as_one_by_one_simulate_runs(cohort, capsys, tmp_path):
+    images = [cohort / "in" / f"scan0{i}.npy" for i in (0, 1)]
+    code, text, _ = run(capsys, "batch", "--model", cohort / "m.npz", "-o", tmp_path,
+                        *images, "--simulate", "-k", "1=1", "2=10", "3=0.1", "--json",
+                        "--workers", 2)
+    assert code == 0
+    rows = {r["image"].rsplit("/", 1)[-1]: r for r in json.loads(text)["images"]}
+    seen = set()
+    for name in ("scan00", "scan01"):
+        code, alone, _ = run(capsys, "simulate", tmp_path / f"{name}_labels.npy", "-k", "1=1",
+                             "2=10", "3=0.1", "--json")
+        assert code == 0
+        alone = json.loads(alone)
+        got = rows[f"{name}.npy"]["simulate"]
+        # one solve, up to the summation order of a single- vs a multi-threaded BLAS
+        assert got["k_eff"] == pytest.approx(alone["k_eff"], rel=1e-12)
+        assert set(got["k_eff"]) == {"x", "y", "z"}
+        assert got["volume_fractions"] == alone["volume_fractions"]
+        seen.add(tuple(got["k_eff"].values()))
+    assert len(seen) == 2                        # two images, two answers
+@pytest.mark.parametrize("extra,message", [
+    (["--simulate"], "--simulate needs --conductivity MATERIAL=K"),
+    (["-k", "1=1"], "--simulate needs --conductivity"),
+    (["--simulate", "-k", "1=1", "2=10"], "material 3 .material 3. has no conductivity"),
+    (["--simulate", "-k", "1=1", "2=1", "3=1", "9=1"], "names material 9, which is not in"),
+])
+def test_batch_simulate_checks_conductivities_before_any_work(cohort, capsys, tmp_path,
+                                                              extra, message):
+    code, _, err = run(capsys, "batch", "--model", cohort / "m.npz", "-o", tmp_path,
+                       cohort / "in" / "scan00.npy", *extra)
+    assert code == 2 and re.search(message, err) and err.count("\n") == 1
+    assert list(tmp_path.iterdir()) == []
+
+
 def test_zarr_inputs_are_labelled_chunk_by_chunk_on_the_workers(cohort, capsys, tmp_path):
     import zarr
 
@@ -131,6 +166,10 @@ def test_summary_table_lists_file_seconds_and_volumes():
     assert lines[0].split() == ["image", "labels", "seconds", "volume", "1", "volume", "3"]
     assert lines[1].split() == ["a.npy", "a_labels.npy", "1.23", "20", "2"]
     assert lines[2].split() == ["b.tif", "b_labels.tif", "failed"]
+    rows[0]["simulate"] = {"k_eff": {"x": 1.5, "y": 2.25}}
+    lines = _batch_table(rows).splitlines()
+    assert lines[0].split()[-4:] == ["k_eff", "x", "k_eff", "y"]
+    assert lines[1].split()[-2:] == ["1.5", "2.25"] and lines[2].split()[-1] == "failed"
 
 
 def test_the_scheduler_retries_a_failed_image(cohort, tmp_path, monkeypatch):

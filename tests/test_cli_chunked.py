@@ -12,7 +12,12 @@ import zarr
 from napari_swa_imesh._zarr_io import open_lazy, open_levels
 from napari_swa_imesh.cli import main
 from napari_swa_imesh.data import tissue_phantom
-from napari_swa_imesh.segmentation import RecommendedModel, samples_from_truth
+from napari_swa_imesh.segmentation import (
+    RecommendedModel,
+    load_model,
+    samples_from_truth,
+    save_samples,
+)
 
 
 @pytest.fixture(scope="module")
@@ -20,6 +25,7 @@ def scene(tmp_path_factory):
     folder = tmp_path_factory.mktemp("chunked")
     image, truth = tissue_phantom((40, 48, 48), noise=0.06, bias=0.3, spacing=(1, 1, 1))
     RecommendedModel().fit(image, samples_from_truth(truth)).save(folder / "m.npz")
+    save_samples(samples_from_truth(truth), folder / "s.json")
     np.save(folder / "img.npy", image)
     z = zarr.create_array(str(folder / "img.zarr"), shape=image.shape, chunks=(16, 16, 16),
                           dtype=image.dtype, attributes={"spacing": [2.0, 1.0, 0.5]})
@@ -73,6 +79,44 @@ def test_memory_mapped_npy_with_a_budget_writes_any_label_format(scene, capsys, 
                                   np.load(tmp_path / "ref.npy"))
 
 
+@pytest.mark.parametrize("image,extra", [("img.zarr", []), ("img.npy", ["--memory", "1GB"])])
+def test_fit_on_the_boxes_of_a_store_equals_the_in_memory_fit(scene, capsys, tmp_path,
+                                                              image, extra):
+    code, _, _ = run(capsys, "segment", scene / "img.npy", "--samples", scene / "s.json",
+                     "-o", tmp_path / "ref.npy", "--model-out", tmp_path / "ref.npz")
+    assert code == 0
+    code, out, _ = run(capsys, "segment", scene / image, "--samples", scene / "s.json",
+                       "-o", tmp_path / "lab.zarr", "--model-out", tmp_path / "m.npz",
+                       "--json", *extra)
+    assert code == 0
+    summary = json.loads(out)
+    ref = np.load(tmp_path / "ref.npy")
+    labels = zarr.open_array(str(tmp_path / "lab.zarr"), mode="r")[:]
+    inner = tuple(slice(8, n - 8) for n in ref.shape)
+    assert (labels[inner] == ref[inner]).mean() >= 0.995
+    assert summary["chunked"] and summary["fit"]["bias_correction"] == load_model(
+        tmp_path / "ref.npz").bias_correction
+    # the saved model is the one that labelled the store
+    code, _, _ = run(capsys, "segment", scene / "img.npy", "--model", tmp_path / "m.npz",
+                     "-o", tmp_path / "again.npy")
+    np.testing.assert_array_equal(np.load(tmp_path / "again.npy"), labels)
+
+
+def test_reference_model_on_a_store_equals_the_in_memory_run(scene, capsys, tmp_path):
+    code, _, _ = run(capsys, "segment", scene / "img.npy", "--samples", scene / "s.json",
+                     "--method", "reference", "--scale", 1, "-o", tmp_path / "ref.npy",
+                     "--model-out", tmp_path / "ref.npz")
+    assert code == 0
+    code, out, _ = run(capsys, "segment", scene / "img.zarr", "--model", tmp_path / "ref.npz",
+                       "-o", tmp_path / "lab.zarr", "--memory", "1GB", "--json")
+    assert code == 0
+    summary = json.loads(out)
+    assert summary["chunked"] and summary["plan"]["halo"] == 0
+    assert all(c % 2 == 0 for c in summary["plan"]["chunks"])
+    np.testing.assert_array_equal(zarr.open_array(str(tmp_path / "lab.zarr"), mode="r")[:],
+                                  np.load(tmp_path / "ref.npy"))
+
+
 def test_existing_store_needs_force_and_is_replaced_whole(scene, capsys, tmp_path):
     out = tmp_path / "lab.zarr"
     assert run(capsys, "segment", scene / "img.zarr", "--model", scene / "m.npz",
@@ -94,7 +138,8 @@ def test_existing_store_needs_force_and_is_replaced_whole(scene, capsys, tmp_pat
     ("group", "is a Zarr group, not an array or an OME-Zarr image"),
     ("budget", "more than the budget of 0.05 GB; give more memory"),
     ("sieve", "--sieve need.s. the whole image in memory"),
-    ("samples", "fitting reads the whole image"),
+    ("samples", "the reference method fits in memory; segment this image with the "
+                "recommended method"),
     ("nothing", "no Zarr store at"),
 ])
 def test_bad_input_exits_2_and_leaves_nothing(scene, capsys, tmp_path, case, message):
@@ -110,7 +155,7 @@ def test_bad_input_exits_2_and_leaves_nothing(scene, capsys, tmp_path, case, mes
     elif case == "nothing":
         image = tmp_path / "missing.zarr"
     before = sorted(tmp_path.iterdir())
-    source = ["--samples", scene / "s.json"] if case == "samples" else [
+    source = ["--samples", scene / "s.json", "--method", "reference"] if case == "samples" else [
         "--model", scene / "m.npz"]
     code, _, err = run(capsys, "segment", image, *source, "-o", tmp_path / "lab.zarr",
                        *extra)

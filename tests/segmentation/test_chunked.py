@@ -129,7 +129,7 @@ def test_budget_text():
         parse_memory("0")
 
 
-def test_nan_and_reference_models_are_refused(model_2d):
+def test_nan_unfitted_and_unknown_models_are_refused(model_2d):
     model = model_2d
     model.scale, model.finest_scale, model.bias_correction = 2, 0, False
     image = _two_textures((64, 64))
@@ -138,5 +138,7 @@ def test_nan_and_reference_models_are_refused(model_2d):
         predict_chunked(model, image, chunks=(32, 32), scheduler="sync")
     from napari_swa_imesh.segmentation import SWAModel
 
-    with pytest.raises(ValueError, match="applies models of the recommended method"):
+    with pytest.raises(ValueError, match="this model is not fitted"):
         predict_chunked(SWAModel(scale=1), image)
+    with pytest.raises(TypeError, match="model must be a RecommendedModel or SWAModel"):
+        predict_chunked(object(), image)

@@ -19,8 +19,9 @@ What each format holds
 ``.msh``  Gmsh 4.1, binary (or ASCII with ``binary=False``); one physical group of
           dimension d per material and one of dimension d-1 per facet group, named
           after them; every per-cell array as ``$ElementData`` (see ``_gmsh``).
-``.xdmf`` XDMF 3 with its arrays in a ``.h5`` beside it (same stem; needs h5py); every
-          array; facet groups in ``<stem>_facets.vtu`` as for ``.vtu``.
+``.xdmf`` XDMF 3 with its arrays in a ``.h5`` beside it (same stem; needs h5py; meshio's
+          layout, written block by block by ``_xdmf``); every array; facet groups in
+          ``<stem>_facets.vtu`` as for ``.vtu``.
 ``.inp``  Abaqus; one ``*ELSET`` per material; ``*NSET`` and element-face ``*SURFACE``
           per facet group; no per-cell arrays (see ``_abaqus``).
 ``.node`` Triangle (2-D; attributes material, quality) or TetGen (3-D; region
@@ -48,7 +49,7 @@ from ._read import read_mesh
 from ._triangle_tetgen import FACET_SUFFIX, write_facet_markers, write_node_ele
 from ._types import Mesh
 from ._vtu import write_vtu
-from ._xdmf import require_h5py, write_xdmf
+from ._xdmf import require_h5py, write_xdmf_blocks
 
 __all__ = ["to_meshio", "write_mesh", "write_mesh_vtu", "read_mesh", "mesh_output_paths",
            "check_write_options", "MESH_SUFFIXES"]
@@ -291,13 +292,12 @@ def _write(ex: ExportMesh, temps: list[Path], *, abaqus_elements: str, binary: b
         write_abaqus(ex, temps[0], elements=abaqus_elements)
     elif suffix in (".node", ".ele"):
         write_node_ele(ex, temps[0], temps[1])
+    elif suffix == ".xdmf":
+        write_xdmf_blocks(ex, temps[0], temps[1])
     else:
         try:
-            m = _meshio_of(ex)
-            if suffix == ".xdmf":
-                write_xdmf(m, str(temps[0]))
-            else:
-                meshio.write(str(temps[0]), _padded(m), file_format="vtk42", binary=True)
+            meshio.write(str(temps[0]), _padded(_meshio_of(ex)), file_format="vtk42",
+                         binary=True)
         except (meshio.WriteError, KeyError) as exc:  # meshio's own failures, in one line
             raise ValueError(f"meshio could not write {temps[0].name}: {exc}") from exc
     facet_file = temps[2 if suffix in (".node", ".ele", ".xdmf") else 1:]

@@ -1,14 +1,32 @@
-"""XDMF 3 with its arrays in an HDF5 ``.h5`` beside it (same stem), through meshio.
+"""XDMF 3 with its arrays in an HDF5 ``.h5`` beside it (same stem), written block by block.
 
-meshio's XDMF support needs h5py, an optional package: without it, reading or writing
-``.xdmf`` is refused with one sentence saying what to install or choose instead. The
-``.h5`` is the second target of an ``.xdmf`` write (both land atomically together); the
-``.xdmf`` names it by the temporary's name, which is the target's (see ``io.atomic_write``).
+The layout is meshio's (``meshio.write(..., file_format="xdmf")``): one ``Grid`` with the
+points as ``data0``, the cells as ``data1`` and every per-cell array after them
+(``material`` first), each a gzip-compressed HDF5 dataset named in the ``.xdmf`` as
+``<stem>.h5:/dataK``, so meshio, ParaView and FEniCS read it as before. What differs is
+how the arrays get there: :func:`write_xdmf_blocks` creates each dataset at its final
+size and fills it :data:`BLOCK` rows at a time, converting each block (cells oriented and
+given their mid-edge nodes, per-cell arrays widened to int64/float64) on its own, so no
+copy of the whole mesh is made: meshio's writer needed the cells, the cell data in int64/
+float64 and its own copies of them in memory at once.
+
+h5py is an optional package: without it, reading or writing ``.xdmf`` is refused with
+one sentence saying what to install or choose instead. The ``.h5`` is the second target
+of an ``.xdmf`` write (both land atomically together); the ``.xdmf`` names it by the
+temporary's name, which is the target's (see ``io.atomic_write``).
 """
 
 from __future__ import annotations
 
-__all__ = ["require_h5py", "write_xdmf"]
+from pathlib import Path
+from xml.etree import ElementTree as ET
+
+import numpy as np
+
+__all__ = ["require_h5py", "write_xdmf_blocks", "BLOCK"]
+
+BLOCK = 1 << 18                   # rows per block written (and per HDF5 chunk)
+_GZIP = 4                         # meshio's compression level: files of the same size
 
 
 def require_h5py(verb: str) -> None:
@@ -22,9 +40,61 @@ def require_h5py(verb: str) -> None:
         ) from None
 
 
-def write_xdmf(m, path: str) -> None:
-    """Write the meshio mesh `m` as ``path`` (.xdmf) and its ``.h5`` twin."""
-    import meshio
+def write_xdmf_blocks(ex, xdmf_path, h5_path) -> None:
+    """Write the export mesh `ex` (``_prepare.ExportMesh``) as XDMF + HDF5, block by block.
 
-    require_h5py("write")
-    meshio.write(path, m, file_format="xdmf", data_format="HDF")
+    Parameters
+    ----------
+    ex : ExportMesh
+        Points and cells in the files' frame, order 1 or 2.
+    xdmf_path, h5_path : str or Path
+        The two files (the ``.xdmf`` names the ``.h5`` by its file name).
+    """
+    import h5py
+    from meshio.xdmf.common import attribute_type, meshio_to_xdmf_type, numpy_to_xdmf_dtype
+
+    from ._common import CELL_TYPE, CELL_TYPE_2
+
+    n = ex.n_cells
+    kind = (CELL_TYPE if ex.order == 1 else CELL_TYPE_2)[ex.ndim]
+    # (name, shape, dtype, block(rows) -> array); per-cell arrays widened as meshio's
+    # writers need them (some reject int8 or bool)
+    arrays = [("points", ex.points.shape, np.dtype(np.float64),
+               lambda rows: ex.points[rows]),
+              ("cells", (n, ex.nodes_per_cell), np.dtype(np.int64),
+               lambda rows: ex.cells(rows)),
+              ("material", (n,), np.dtype(np.int64), lambda rows: ex.material[rows])]
+    for key, values in ex.mesh.cell_data.items():
+        values = np.asarray(values)
+        wide = np.dtype(np.int64 if values.dtype.kind in "biu" else np.float64)
+        arrays.append((str(key), values.shape, wide, lambda rows, v=values: v[rows]))
+
+    grid = ET.Element("Grid", Name="Grid")
+    h5_name = Path(h5_path).name
+    with h5py.File(h5_path, "w") as h5:
+        for k, (name, shape, dtype, block) in enumerate(arrays):
+            rows = max(1, shape[0])
+            ds = h5.create_dataset(f"data{k}", shape=shape, dtype=dtype,
+                                   chunks=(min(BLOCK, rows),) + tuple(shape[1:]),
+                                   compression="gzip", compression_opts=_GZIP)
+            for start in range(0, shape[0], BLOCK):
+                rows = slice(start, min(start + BLOCK, shape[0]))
+                ds[rows] = np.asarray(block(rows), dtype=dtype)
+            if name == "points":
+                parent = ET.SubElement(grid, "Geometry", GeometryType="XYZ"[:shape[1]])
+            elif name == "cells":
+                parent = ET.SubElement(grid, "Topology",
+                                       TopologyType=meshio_to_xdmf_type[kind][0],
+                                       NumberOfElements=str(n),
+                                       NodesPerElement=str(shape[1]))
+            else:
+                parent = ET.SubElement(grid, "Attribute", Name=name, Center="Cell",
+                                       AttributeType=attribute_type(np.empty((0,) + shape[1:])))
+            dt, precision = numpy_to_xdmf_dtype[dtype.name]
+            item = ET.SubElement(parent, "DataItem", DataType=dt, Format="HDF",
+                                 Dimensions=" ".join(map(str, shape)), Precision=precision)
+            item.text = f"{h5_name}:/data{k}"
+    root = ET.Element("Xdmf", Version="3.0")
+    ET.SubElement(root, "Domain").append(grid)
+    ET.indent(root)
+    Path(xdmf_path).write_bytes(b'<?xml version="1.0"?>\n' + ET.tostring(root) + b"\n")

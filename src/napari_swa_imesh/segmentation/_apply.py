@@ -4,8 +4,10 @@ What ``swa-imesh segment IMAGE --model M.npz -o LABELS`` does, and each task of 
 batch``: one function, so a cohort's labels equal one-by-one runs.
 
 The chunked path (:mod:`._chunked`) is taken for a Zarr image or a Zarr output, when a
-memory budget is given, or when the in-memory path would not fit the default budget; it
-needs a recommended model. The labels go to a Zarr store chunk by chunk, or (another
+memory budget is given, or when the in-memory path would not fit the default budget; a
+reference (tile) model works on chunks aligned to its tiles (:mod:`._chunked_reference`). :func:`fit_apply` is ``segment IMAGE --samples S.json`` on
+that path: the model is fitted on the boxes read from the store
+(:func:`~._chunked_fit.fit_chunked`), then applied as a saved one. The labels go to a Zarr store chunk by chunk, or (another
 format) are gathered whole (one or two bytes per voxel, counted in the budget).
 """
 
@@ -17,9 +19,15 @@ import numpy as np
 
 from .._validation import label_dtype
 from ._chunked import bytes_per_voxel, default_memory, predict_chunked
+from ._chunked_fit import fit_chunked
+from ._chunked_reference import BYTES_PER_VOXEL as TILE_BYTES_PER_VOXEL
+from ._model import SWAModel
 from ._recommended import RecommendedModel
 
-__all__ = ["apply_model", "wants_chunks", "material_volumes"]
+__all__ = ["apply_model", "fit_apply", "wants_chunks", "material_volumes",
+           "FIT_BYTES_PER_VOXEL"]
+
+FIT_BYTES_PER_VOXEL = 56    # in-memory fit and prediction of the default method (issue 13)
 
 
 def wants_chunks(image, output, model, *, memory: int | None = None,
@@ -27,16 +35,19 @@ def wants_chunks(image, output, model, *, memory: int | None = None,
     """Whether :func:`apply_model` works chunk by chunk (see the module docstring).
 
     `memory` is a budget the user asked for (then always chunked); `budget` only sets
-    what "too big for memory" means (default :func:`~._chunked.default_memory`).
+    what "too big for memory" means (default :func:`~._chunked.default_memory`). `model`
+    None: fitting (:func:`fit_apply`), at :data:`FIT_BYTES_PER_VOXEL`.
     """
     from .._zarr_io import is_zarr, open_lazy
 
     if is_zarr(image) or is_zarr(output) or memory is not None:
         return True
-    if not isinstance(model, RecommendedModel) or not str(image).lower().endswith(".npy"):
+    if not str(image).lower().endswith(".npy"):
         return False
     lazy, _ = open_lazy(image)
-    need = lazy.size * (bytes_per_voxel(model, lazy.ndim) + lazy.dtype.itemsize + 4)
+    per_voxel = (FIT_BYTES_PER_VOXEL if model is None else TILE_BYTES_PER_VOXEL
+                 if isinstance(model, SWAModel) else bytes_per_voxel(model, lazy.ndim))
+    need = lazy.size * (per_voxel + lazy.dtype.itemsize + 4)
     return need > (default_memory() if budget is None else budget)
 
 
@@ -57,7 +68,7 @@ def apply_model(image, model, output, *, memory: int | None = None,
         Any image :func:`~napari_swa_imesh.io.read_image` reads, a Zarr array or OME-Zarr
         image, or a ``.npy`` (memory-mapped on the chunked path).
     model : RecommendedModel or SWAModel
-        A fitted or loaded model (chunked: recommended only).
+        A fitted or loaded model.
     output : str or Path
         Labels: ``.zarr`` (chunked) or a label format of
         :func:`~napari_swa_imesh.io.write_labels`; written through
@@ -109,11 +120,6 @@ def apply_model(image, model, output, *, memory: int | None = None,
         img, spacing = read_image(image)
         labels = label_array(model.predict(img))
     else:
-        if not isinstance(model, RecommendedModel):
-            raise ValueError("chunked segmentation applies models of the recommended "
-                             "method; this is a reference (tile) model: apply it in memory "
-                             "to a .npy/.tif/.nii.gz image, without --memory and with a "
-                             ".npy/.tif/.nii.gz output.")
         lazy, spacing = open_lazy(image)
         held = 0 if is_store(output) else lazy.size * np.dtype(
             label_dtype(model.labels)).itemsize
@@ -143,6 +149,59 @@ def apply_model(image, model, output, *, memory: int | None = None,
             "chunked": bool(chunked), "plan": plan,
             "volumes": material_volumes(counts, spacing),
             "seconds": time.perf_counter() - t0}
+
+
+def fit_apply(image, samples, output, *, max_scale: int | None = None,
+              memory: int | None = None, workers: int | None = None, force: bool = False,
+              model_out=None, scheduler: str = "threads") -> dict:
+    """Fit a recommended model on the sample boxes of a large image and segment it chunk
+    by chunk, never loading the whole image.
+
+    Parameters
+    ----------
+    image : str or Path
+        A Zarr array, OME-Zarr image or ``.npy`` (any image :func:`apply_model` takes).
+    samples : Samples
+        Materials and boxes (checked against the image).
+    output : str or Path
+        Labels, as in :func:`apply_model`.
+    max_scale : int, optional
+        The model's largest scale (default: the suggested RES of the boxes, capped).
+    memory, workers, force, scheduler
+        As in :func:`apply_model`; the budget covers the fit too.
+    model_out : str or Path, optional
+        Save the fitted model here (``.npz``), after the labels are written.
+
+    Returns
+    -------
+    dict
+        :func:`apply_model`'s summary with ``fit``: seconds and the model's summary.
+    """
+    import psutil
+
+    from .._zarr_io import open_lazy
+    from ..io import check_writable
+
+    t0 = time.perf_counter()
+    check_writable(output, force=force)
+    if model_out is not None:
+        from ._model_base import check_model_path
+
+        check_model_path(model_out)
+        check_writable(model_out, force=force)
+    lazy, spacing = open_lazy(image)
+    model = fit_chunked(RecommendedModel(max_scale=max_scale), lazy, samples,
+                        spacing=spacing, memory=default_memory() if memory is None else memory,
+                        workers=workers, reserved=psutil.Process().memory_info().rss,
+                        scheduler=scheduler)
+    fitted = time.perf_counter() - t0
+    summary = apply_model(image, model, output, memory=memory, workers=workers, force=force,
+                          chunked=True, scheduler=scheduler)
+    if model_out is not None:
+        model.save(model_out, force=force)
+    summary["fit"] = {"seconds": fitted, **model.summary()}
+    summary["seconds"] += fitted
+    return summary
 
 
 def _store_counts(path, labels, compute) -> dict[int, int]:

@@ -9,7 +9,9 @@ Outputs are named after the inputs, in the input's format: ``scan01.npy`` ->
 ``OUTDIR/scan01_labels.npy``, ``a.nii.gz`` -> ``a_labels.nii.gz``, a Zarr store -> a
 ``_labels.zarr`` store; JPEG, which cannot hold labels exactly, gives PNG. With a mesh
 suffix each task also meshes its labels (``OUTDIR/scan01_mesh.vtu``, in the image's
-frame: its spacing, or a NIfTI image's world).
+frame: its spacing, or a NIfTI image's world). With conductivities each task also runs
+the steady k_eff simulation of its labels (``simulate`` of the labels file: what ``swa-imesh
+simulate OUTDIR/scan01_labels.npy -k ...`` gives), k_eff per axis in its row.
 """
 
 from __future__ import annotations
@@ -20,7 +22,7 @@ from collections.abc import Callable, Sequence
 from pathlib import Path
 
 __all__ = ["expand_inputs", "output_for", "mesh_for", "connect", "run_batch", "segment_one",
-           "CONNECT_SECONDS"]
+           "simulate_labels", "CONNECT_SECONDS"]
 
 CONNECT_SECONDS = 5        # an address that does not answer fails after this
 _GLOB = set("*?[")
@@ -148,11 +150,12 @@ def _load_package() -> None:
 
 def segment_one(image: str, model_path: str, output: str, *, force: bool = False,
                 memory: int | None = None, mesh: str | None = None,
-                exclude: Sequence[int] = ()) -> dict:
+                exclude: Sequence[int] = (), conductivity: dict | None = None) -> dict:
     """One task: :func:`~._apply.apply_model` of the model file on one image, chunked when
     a lone ``segment --model`` run would be (Zarr, or too big for `memory`), the chunks on
     this worker's own thread; then, with `mesh` (a mesh file path), the IMESH mesh of the
-    labels (materials in `exclude` left out), written through ``mesh.write_mesh``."""
+    labels (materials in `exclude` left out), written through ``mesh.write_mesh``; with
+    `conductivity` (by label), the steady k_eff run of the labels (:func:`simulate_labels`)."""
     from ._apply import apply_model, wants_chunks
     from ._model_io import load_model
 
@@ -162,21 +165,47 @@ def segment_one(image: str, model_path: str, output: str, *, force: bool = False
                       chunked=chunked, scheduler="sync")
     if mesh:
         row["mesh"] = _mesh_labels_file(image, output, mesh, exclude=exclude, force=force)
+    if conductivity:
+        row["simulate"] = simulate_labels(output, conductivity, exclude=exclude)
     return row
+
+
+def _read_labels(path: str):
+    from .._zarr_io import is_zarr, open_lazy
+    from ..io import read_image
+
+    if is_zarr(path):
+        lazy, spacing = open_lazy(path)
+        return lazy.compute(), spacing
+    return read_image(path)
+
+
+def simulate_labels(path, conductivity: dict, *, exclude: Sequence[int] = ()) -> dict:
+    """The k_eff run of ``swa-imesh simulate PATH -k ...`` (mixed protocol, P1, every
+    axis) on a labels file, with its spacing; its JSON summary.
+
+    `conductivity` maps labels to values; materials an image does not hold are dropped
+    from it (a lone ``simulate`` run refuses a conductivity for an absent material, and a
+    cohort's images need not all hold every material).
+    """
+    import numpy as np
+
+    from ..simulate import simulate
+
+    labels, spacing = _read_labels(str(path))
+    present = set(np.unique(labels).tolist()) - set(exclude)
+    result = simulate(labels, {k: v for k, v in conductivity.items() if int(k) in present},
+                      spacing=spacing, exclude=tuple(exclude))
+    return result.summary()
 
 
 def _mesh_labels_file(image: str, labels_path: str, mesh_path: str, *, exclude,
                       force: bool) -> dict:
     """Mesh a written labels file (placed as the image: spacing, or a NIfTI affine)."""
-    from .._zarr_io import is_zarr, open_lazy
-    from ..io import read_affine, read_image
+    from ..io import read_affine
     from ..mesh import mesh_labels, write_mesh
 
-    if is_zarr(labels_path):
-        lazy, spacing = open_lazy(labels_path)
-        labels = lazy.compute()
-    else:
-        labels, spacing = read_image(labels_path)
+    labels, spacing = _read_labels(labels_path)
     affine = read_affine(image)
     mesh = mesh_labels(labels, exclude=list(exclude), spacing=None if affine is not None
                        else spacing, affine=affine)
@@ -187,7 +216,7 @@ def _mesh_labels_file(image: str, labels_path: str, mesh_path: str, *, exclude,
 
 def run_batch(images: Sequence, model_path, outdir, *, client, force: bool = False,
               memory: int | None = None, retries: int = 2, mesh: str | None = None,
-              exclude: Sequence[int] = (),
+              exclude: Sequence[int] = (), conductivity: dict | None = None,
               progress: Callable[[int, int, dict], None] | None = None) -> list[dict]:
     """Segment every image on the client's cluster; one row per image, in input order.
 
@@ -210,7 +239,10 @@ def run_batch(images: Sequence, model_path, outdir, *, client, force: bool = Fal
         A mesh suffix (``.vtu``, ``.msh``, ...): also mesh each image's labels into
         ``OUTDIR/<stem>_mesh<suffix>`` (:func:`mesh_for`).
     exclude : sequence of int
-        Materials the meshes leave out.
+        Materials the meshes and simulations leave out.
+    conductivity : dict of int to float or list, optional
+        Per label (see :func:`~napari_swa_imesh.simulate.simulate`): also run the steady
+        k_eff simulation of each image's labels (:func:`simulate_labels`).
     progress : callable, optional
         Called as ``progress(done, total, row)`` when each image finishes.
 
@@ -235,7 +267,8 @@ def run_batch(images: Sequence, model_path, outdir, *, client, force: bool = Fal
     # still holds, which would hand back an earlier run's row
     futures = {client.submit(segment_one, str(p), str(model_path), str(out), force=force,
                              memory=memory, mesh=None if m is None else str(m),
-                             exclude=tuple(exclude), retries=retries, pure=False,
+                             exclude=tuple(exclude), conductivity=conductivity,
+                             retries=retries, pure=False,
                              key=f"segment-{Path(p).name}-{uuid.uuid4().hex[:12]}"): i
                for i, (p, out, m) in enumerate(zip(images, outputs, meshes))}
     rows: list[dict | None] = [None] * len(outputs)

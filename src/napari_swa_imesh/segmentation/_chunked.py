@@ -43,13 +43,16 @@ from ._bias import (
     upsample_linear,
     upsample_linear_at,
 )
+from ._chunked_reference import predict_tiles_chunked
 from ._classifiers import PREDICT_BATCH
+from ._model import SWAModel
 from ._mrf import SWEEPS, potts_mean_field
 from ._recommended import BIAS_ROUNDS, FIELD_GRID, RecommendedModel
 from ._tiles import block_counts, block_mean, block_sum
 
 __all__ = ["halo", "bytes_per_voxel", "batch_bytes", "plan_chunks", "predict_chunked",
-           "parse_memory", "default_memory", "MRF_REACH", "MIN_CORE"]
+           "parse_memory", "default_memory", "MRF_REACH", "MIN_CORE", "bias_round",
+           "strided_copy", "refuse_flat", "Window", "smallest_dtype"]
 
 MRF_REACH = 2 + SWEEPS   # active set (1 px), grown by one (1 px), one px per sweep
 MIN_CORE = 16            # smallest chunk side worth the margin around it
@@ -204,11 +207,14 @@ def _largest_core(shape, h: int, bpv: int, free: float, multiple: int):
 def predict_chunked(model: RecommendedModel, image, *, memory: int | None = None,
                     workers: int | None = None, reserved: int = 0, chunks=None,
                     **compute):
-    """Labels of a large image by a fitted recommended model, as a lazy Dask array.
+    """Labels of a large image by a fitted model, as a lazy Dask array.
+
+    A reference (tile) model works on chunks aligned to its tiles, without margin
+    (:mod:`._chunked_reference`); the rest of this docstring is about the recommended one.
 
     Parameters
     ----------
-    model : RecommendedModel
+    model : RecommendedModel or SWAModel
         Fitted or loaded (:func:`~._model_io.load_model`).
     image : (M, N[, P]) dask.array.Array or array_like
         Grey-level image (e.g. from :func:`napari_swa_imesh._zarr_io.open_lazy`).
@@ -234,7 +240,7 @@ def predict_chunked(model: RecommendedModel, image, *, memory: int | None = None
     Raises
     ------
     ValueError
-        A reference model, a dimensionality the model was not fitted for, an image of one
+        A dimensionality the model was not fitted for, an image of one
         value or NaN/infinity (found by a pass over the chunks before any labelling), a
         budget too small for one chunk.
 
@@ -252,10 +258,9 @@ def predict_chunked(model: RecommendedModel, image, *, memory: int | None = None
     """
     import dask.array as da
 
-    if not isinstance(model, RecommendedModel):
-        raise ValueError("chunked segmentation applies models of the recommended method; "
-                         "this is a reference (tile) model: apply it in memory, or fit a "
-                         "recommended model.")
+    if not isinstance(model, (RecommendedModel, SWAModel)):
+        raise TypeError(f"model must be a RecommendedModel or SWAModel; got "
+                        f"{type(model).__name__}.")
     if not model.materials:
         raise ValueError("this model is not fitted; call fit() or load a saved model.")
     x = image if isinstance(image, da.Array) else da.from_array(np.asarray(image))
@@ -265,6 +270,13 @@ def predict_chunked(model: RecommendedModel, image, *, memory: int | None = None
     if x.dtype.kind not in "biuf":
         raise TypeError(f"image must hold real numbers; got dtype {x.dtype}.")
     memory = default_memory() if memory is None else int(memory)
+    if isinstance(model, SWAModel):
+        # tiles are local: chunks aligned to them need no margin and no global step
+        window = Window(image if isinstance(image, np.ndarray) else x)
+        return predict_tiles_chunked(model, x, window, smallest_dtype(model.labels),
+                                     memory=memory, workers=workers,
+                                     reserved=reserved, chunks=chunks,
+                                     check=lambda arr: _check_contrast(arr, compute))
     f = model.finest_scale
     multiple = grid_factor(x.shape) if model.bias_correction and f > 0 else 1
     if chunks is None:
@@ -283,15 +295,15 @@ def predict_chunked(model: RecommendedModel, image, *, memory: int | None = None
     field = _bias_small(model, x, f, core, compute) if model.bias_correction else None
     if field is None:
         _check_contrast(x, compute)
-    window = _Window(image if isinstance(image, np.ndarray) else x)
-    dtype = _smallest_dtype(model.labels)
+    window = Window(image if isinstance(image, np.ndarray) else x)
+    dtype = smallest_dtype(model.labels)
     labels = _template(x.shape, core).map_blocks(
         _labels_direct, window=window, model=model, field=field, margin=h, dtype=dtype,
         meta=np.empty((0,) * x.ndim, dtype))
     return labels, plan
 
 
-class _Window:
+class Window:
     """Reads a padded window of the image inside a task, from the store's own chunks (a
     Dask array is computed there, synchronously: only the chunks the window touches)."""
 
@@ -342,10 +354,11 @@ def _check_contrast(x, compute) -> None:
     import dask
 
     lo, hi = dask.compute(x.min(), x.max(), **compute)
-    _refuse_flat(lo, hi)
+    refuse_flat(lo, hi)
 
 
-def _refuse_flat(lo, hi) -> None:
+def refuse_flat(lo, hi) -> None:
+    """Refuse an image whose minimum `lo` and maximum `hi` say NaN, infinity or one value."""
     if not (np.isfinite(lo) and np.isfinite(hi)):
         raise ValueError("the image has NaN or infinite values; fill or mask them first "
                          "(e.g. numpy.nan_to_num).")
@@ -357,10 +370,10 @@ def _refuse_flat(lo, hi) -> None:
 def _labels_block(work, model):
     ll, _ = model._classify_standardised(work)
     cls = potts_mean_field(ll, model.beta, labels_only=True)
-    return model._class_values()[cls].astype(_smallest_dtype(model.labels), copy=False)
+    return model._class_values()[cls].astype(smallest_dtype(model.labels), copy=False)
 
 
-def _smallest_dtype(labels) -> np.dtype:
+def smallest_dtype(labels) -> np.dtype:
     """The dtype labels are written in (as :func:`~napari_swa_imesh.io.label_array`)."""
     from ..io import label_array
 
@@ -372,43 +385,62 @@ def _bias_small(model, x, f, core, compute) -> np.ndarray:
     in-memory field (both rounds of :data:`BIAS_ROUNDS`)."""
     import dask
 
-    shape = x.shape
+    sub = None
     if f == 0:
         # the in-memory path labels a strided copy: the same copy, read chunk by chunk
+        sub, lo, hi = dask.compute(strided_copy(x), x.min(), x.max(), **compute)
+    else:
+        lo, hi = dask.compute(x.min(), x.max(), **compute)
+    refuse_flat(lo, hi)
+    small = None
+    for _ in range(BIAS_ROUNDS):
+        small = bias_round(model, x, core, small, sub=sub, **compute)
+    return small
+
+
+def strided_copy(x):
+    """The every-k-th-voxel copy (lazy) that the field of a pixel-value level labels."""
+    step = max(1, min(x.shape) // FIELD_GRID)
+    return x[tuple(slice(None, None, step) for _ in x.shape)]
+
+
+def bias_round(model: RecommendedModel, x, core, small: np.ndarray | None, *,
+               sub: np.ndarray | None = None, **compute) -> np.ndarray:
+    """One estimate of the bias field of the image `x` (Dask), as a small grid whose
+    linear interpolation to ``x.shape`` is :meth:`RecommendedModel._bias_field` of the
+    image corrected by `small` (None: uncorrected), labelled by the finest level.
+
+    Parameters
+    ----------
+    core : tuple of int
+        Chunks of the labelling pass (sides multiples of the grid cell).
+    sub : ndarray, optional
+        :func:`strided_copy` already read (finest level 0).
+    """
+    shape, f = x.shape, model.finest_scale
+    if f == 0:
         step = max(1, min(shape) // FIELD_GRID)
-        idx = [np.arange(0, n, step) for n in shape]
-        sub, lo, hi = dask.compute(x[tuple(slice(None, None, step) for _ in shape)],
-                                   x.min(), x.max(), **compute)
-        _refuse_flat(lo, hi)
+        if sub is None:
+            sub = strided_copy(x).compute(**compute)
         base = model._standardised(np.asarray(sub))
-        work, small = base, None
-        for _ in range(BIAS_ROUNDS):
-            if small is not None:
-                work = base / upsample_linear_at(small, shape, idx)
-            labels = model._predict_level(work, 0)
-            mu = class_mean_image(labels, model.class_means)
-            factor = grid_factor(base.shape)
-            coarse = coarse_bias_field(block_mean(base * mu, factor),
-                                       block_mean(mu * mu, factor))
-            small = coarse if step == 1 else upsample_linear(coarse, base.shape)
-        return small
-    lo, hi = dask.compute(x.min(), x.max(), **compute)
-    _refuse_flat(lo, hi)
+        idx = [np.arange(0, n, step) for n in shape]
+        work = base if small is None else base / upsample_linear_at(small, shape, idx)
+        labels = model._predict_level(work, 0)
+        mu = class_mean_image(labels, model.class_means)
+        factor = grid_factor(base.shape)
+        coarse = coarse_bias_field(block_mean(base * mu, factor), block_mean(mu * mu, factor))
+        return coarse if step == 1 else upsample_linear(coarse, base.shape)
     # a finer level labels every voxel in memory: block sums of I mu and mu^2 over the
     # chunks (chunk sides are multiples of the grid cell, so every cell is in one chunk)
     factor = grid_factor(shape)
-    counts = block_counts(shape, factor)
     template = _template(shape, core)
     out_chunks = ((2,),) + tuple(tuple(-(-c // factor) for c in cs) for cs in template.chunks)
-    window = _Window(x)
-    small = None
-    for _ in range(BIAS_ROUNDS):
-        sums = template.map_blocks(_sums_direct, window=window, model=model, field=small,
-                                   level=f, factor=factor, chunks=out_chunks, new_axis=0,
-                                   dtype=np.float64, meta=np.empty((0,) * (x.ndim + 1)))
-        num, den = sums.compute(**compute)
-        small = coarse_bias_field(num / counts, den / counts)
-    return small
+    sums = template.map_blocks(_sums_direct, window=Window(x), model=model, field=small,
+                               level=f, factor=factor, chunks=out_chunks, new_axis=0,
+                               dtype=np.float64, meta=np.empty((0,) * (x.ndim + 1)))
+    num, den = sums.compute(**compute)
+    counts = block_counts(shape, factor)
+    return coarse_bias_field(num / counts, den / counts)
 
 
 def _sums_direct(_, window, model, field, level, factor, block_info=None):

@@ -63,12 +63,12 @@ def add_commands(subparsers) -> None:
     p.add_argument("--truth", default=None, help="ground truth to report Dice against")
     p.add_argument("--gray", action="store_true", help="convert an RGB picture to grey")
     p.add_argument("-o", "--output", required=True,
-                   help="labels file: .npy, .tif, .nii.gz or .png; with --model also a "
-                        ".zarr store, written chunk by chunk")
+                   help="labels file: .npy, .tif, .nii.gz or .png; or a .zarr store, "
+                        "written chunk by chunk")
     p.add_argument("--memory", default=None,
-                   help="with --model: work chunk by chunk within this budget for the whole "
-                        "process (e.g. 2GB; default half the memory available); Zarr "
-                        "images and outputs are always chunked")
+                   help="work chunk by chunk within this budget for the whole process (e.g. "
+                        "2GB; default half the memory available); with --samples the fit "
+                        "reads only the boxes; Zarr images and outputs are always chunked")
     p.add_argument("--workers", type=int, default=None,
                    help="threads of the chunked path (default: planned from the budget)")
     p.add_argument("--force", action="store_true", help="replace existing output files")
@@ -94,8 +94,15 @@ def add_commands(subparsers) -> None:
     p.add_argument("--mesh", default=None, metavar="SUFFIX",
                    help="also mesh each image's labels into OUTDIR/<stem>_mesh<SUFFIX> "
                         "(.vtu, .msh, .xdmf, .inp, ...)")
+    p.add_argument("--simulate", action="store_true",
+                   help="also run the steady k_eff simulation of each image's labels, as "
+                        "`swa-imesh simulate LABELS -k ...`; k_eff per axis in the table")
+    p.add_argument("--conductivity", "-k", nargs="+", action="extend", default=[],
+                   metavar="MATERIAL=K",
+                   help="with --simulate: conductivity per material, by label or the "
+                        "model's names (1=1 2=10 bone=0.1), as in `swa-imesh simulate`")
     p.add_argument("--exclude", type=int, nargs="*", default=[],
-                   help="materials the meshes leave out")
+                   help="materials the meshes and simulations leave out")
     p.add_argument("--force", action="store_true", help="replace existing labels files")
     p.add_argument("--json", action="store_true", help="print one JSON object")
     p.set_defaults(func=_run_batch)
@@ -199,7 +206,6 @@ def _check_segment_args(args: argparse.Namespace) -> None:
 
 
 def _run_segment(args: argparse.Namespace) -> int:
-    from .._zarr_io import is_zarr
     from ..io import atomic_write, check_label_format, grid_affine, is_nifti, label_array, \
         read_affine, read_image, write_labels_to
     from ._metrics import evaluate
@@ -210,12 +216,8 @@ def _run_segment(args: argparse.Namespace) -> int:
     from ._tiles import tile_placement
 
     timer = StepTimer()
-    if args.model and _chunked_run(args):
+    if _chunked_run(args):
         return 0
-    if args.samples and (is_zarr(args.image) or args.memory or args.workers):
-        raise ValueError("fitting reads the whole image (--memory, --workers and Zarr images "
-                         "go with --model); fit on a crop that fits in memory with "
-                         "--model-out, then apply the model with --model.")
     _check_segment_args(args)
     with timer("read"):
         image, spacing = read_image(args.image, gray=args.gray)
@@ -286,33 +288,50 @@ def _run_segment(args: argparse.Namespace) -> int:
 
 
 def _chunked_run(args: argparse.Namespace) -> bool:
-    """``segment --model`` chunk by chunk when :func:`~._apply.wants_chunks` says so;
-    False to run in memory."""
-    from ._apply import apply_model, wants_chunks
+    """``segment`` chunk by chunk when :func:`~._apply.wants_chunks` says so (``--model``:
+    applied; ``--samples``: fitted on the boxes read from the store, then applied); False
+    to run in memory."""
+    from ._apply import apply_model, fit_apply, wants_chunks
     from ._chunked import parse_memory
     from ._model_io import load_model
+    from ._samples import load_samples
 
     memory = parse_memory(args.memory) if args.memory is not None else None
     if args.workers is not None and args.workers < 1:
         raise ValueError(f"--workers must be 1 or more; got {args.workers}.")
-    model = load_model(args.model)
+    model = load_model(args.model) if args.model else None
     if not wants_chunks(args.image, args.output, model, memory=memory):
         return False
     whole = [f for f, v in (("--sieve", args.sieve), ("--tiles", args.tiles),
                             ("--signatures", args.signatures), ("--truth", args.truth),
-                            ("--model-out", args.model_out), ("--res-plot", args.res_plot),
-                            ("--scale", args.scale is not None), ("--gray", args.gray))
-             if v]
+                            ("--model-out", args.model_out and model is not None),
+                            ("--res-plot", args.res_plot),
+                            ("--scale", args.scale is not None and model is not None),
+                            ("--gray", args.gray)) if v]
     if whole:
         raise ValueError(f"{', '.join(whole)} need(s) the whole image in memory; drop "
                          f"{'them' if len(whole) > 1 else 'it'} to segment chunk by chunk "
                          "(a Zarr image or output, or --memory).")
-    summary = apply_model(args.image, model, args.output, memory=memory,
-                          workers=args.workers, force=args.force, chunked=True)
+    if model is None and args.method != "recommended":
+        raise ValueError("the reference method fits in memory; segment this image with the "
+                         "recommended method (drop --method) or fit on a crop that fits in "
+                         "memory with --model-out, then apply the model with --model.")
+    if model is None:
+        summary = fit_apply(args.image, load_samples(args.samples), args.output,
+                            max_scale=args.scale, memory=memory, workers=args.workers,
+                            force=args.force, model_out=args.model_out)
+    else:
+        summary = apply_model(args.image, model, args.output, memory=memory,
+                              workers=args.workers, force=args.force, chunked=True)
     if args.json:
         print_json(summary)
     else:
         plan = summary["plan"]
+        if "fit" in summary:
+            fit = summary["fit"]
+            print(f"fitted on the sample boxes read from the store in {fit['seconds']:.1f} s:"
+                  f" scales {fit['coarse_scale']}..{fit['finest_scale']}, bias correction "
+                  f"{'on' if fit['bias_correction'] else 'off'}")
         print(f"labels written to {args.output} chunk by chunk: chunks of "
               f"{'x'.join(map(str, plan['chunks']))} voxels with a margin of {plan['halo']} "
               f"px, {plan['workers']} thread(s), budget {plan['memory'] / 1e9:.2f} GB, "
@@ -333,7 +352,7 @@ def _run_batch(args: argparse.Namespace) -> int:
 
     timer = StepTimer()
     images = expand_inputs(args.images)
-    load_model(args.model)                                   # a bad model fails here
+    model = load_model(args.model)                           # a bad model fails here
     if not os.path.isdir(args.output):
         raise FileNotFoundError(f"output folder {args.output} does not exist; create it "
                                 "first.")
@@ -343,8 +362,10 @@ def _run_batch(args: argparse.Namespace) -> int:
         if args.mesh not in MESH_SUFFIXES:
             raise ValueError(f"--mesh takes a mesh suffix ({', '.join(MESH_SUFFIXES)}); got "
                              f"{args.mesh!r}.")
-    if args.exclude and not args.mesh:
-        raise ValueError("--exclude says what the meshes leave out; add --mesh SUFFIX.")
+    if args.exclude and not (args.mesh or args.simulate):
+        raise ValueError("--exclude says what the meshes and simulations leave out; add "
+                         "--mesh SUFFIX or --simulate.")
+    conductivity = _batch_conductivity(args, model)
     for p in images:
         check_writable(output_for(p, args.output), force=args.force)
         if args.mesh:
@@ -370,6 +391,7 @@ def _run_batch(args: argparse.Namespace) -> int:
             rows = run_batch(images, args.model, args.output, client=client,
                              force=args.force, memory=budget // n, retries=args.retries,
                              mesh=args.mesh, exclude=args.exclude,
+                             conductivity=conductivity,
                              progress=None if args.json else progress)
     finally:
         cluster = client.cluster
@@ -391,14 +413,39 @@ def _run_batch(args: argparse.Namespace) -> int:
     return 0
 
 
+def _batch_conductivity(args: argparse.Namespace, model) -> dict | None:
+    """``--conductivity`` by label, checked against the model's materials (every one not
+    excluded needs a value) before any work; None without ``--simulate``."""
+    if bool(args.simulate) != bool(args.conductivity):
+        raise ValueError("--simulate needs --conductivity MATERIAL=K for each material (and "
+                         "--conductivity goes with --simulate); give both or neither.")
+    if not args.simulate:
+        return None
+    from ..simulate._conductivity import (
+        conductivity_tensors,
+        material_label,
+        parse_conductivity_args,
+    )
+
+    parsed = parse_conductivity_args(args.conductivity)
+    names = {m.label: m.name for m in model.materials}
+    kept = [m for m in model.labels if m not in set(args.exclude)]
+    conductivity_tensors(parsed, kept, model.ndim, names)       # one sentence if wrong
+    return {material_label(k, names): v for k, v in parsed.items()}
+
+
 def _batch_table(rows: list[dict]) -> str:
-    """Per image: labels file, seconds, and every material's volume."""
+    """Per image: labels file, seconds, every material's volume, and k_eff per axis."""
     labels = sorted({int(k) for r in rows for k in r.get("volumes", {})})
-    head = ["image", "labels", "seconds"] + [f"volume {k}" for k in labels]
+    axes = list(dict.fromkeys(a for r in rows for a in r.get("simulate", {}).get("k_eff", {})))
+    head = (["image", "labels", "seconds"] + [f"volume {k}" for k in labels]
+            + [f"k_eff {a}" for a in axes])
     body = [[Path(r["image"]).name, Path(r["output"]).name,
              "failed" if "error" in r else f"{r['seconds']:.2f}"]
             + [f"{r['volumes'][k]['volume']:.6g}" if "volumes" in r else ""
-               for k in labels] for r in rows]
+               for k in labels]
+            + [f"{r['simulate']['k_eff'][a]:.6g}" if "simulate" in r else "" for a in axes]
+            for r in rows]
     widths = [max(len(str(x)) for x in col) for col in zip(head, *body)]
     return "\n".join("  ".join(str(x).ljust(w) for x, w in zip(line, widths))
                      for line in [head, *body])

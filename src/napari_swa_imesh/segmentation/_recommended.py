@@ -41,6 +41,7 @@ from ._mrf import argmax_first, potts_mean_field
 from ._res import res_statistics_unchecked
 from ._samples import Material, Samples
 from ._tiles import majority_tiles
+from ._training import WholeImage
 from ._window_features import feature_levels, multiscale_features, window
 
 __all__ = ["RecommendedModel", "RECOMMENDED_METHOD", "BIAS_ROUNDS", "FIELD_GRID"]
@@ -171,8 +172,16 @@ class RecommendedModel(SegmentationModel):
             :mod:`._model_base`).
         """
         img = self.checked_training_image(image, samples, check_input)
+        return self._fit_on(WholeImage(img, samples), samples, spacing=spacing,
+                            res_scale=res_scale)
+
+    def _fit_on(self, source, samples: Samples, *, spacing=None,
+                res_scale: int | None = None) -> "RecommendedModel":
+        """:meth:`fit` on a checked training image seen through `source`: the whole
+        image in memory (:class:`~._training.WholeImage`) or a store read box by box
+        (:mod:`._chunked_fit`); everything else is the same code."""
         if res_scale is None and self.max_scale is None:
-            res_scale = res_statistics_unchecked(img, samples).suggested_scale
+            res_scale = res_statistics_unchecked(source.image, samples).suggested_scale
         self.res_scale = res_scale
         top = self.max_scale if self.max_scale is not None else min(
             DEFAULT_TOP, res_scale if res_scale is not None else NO_RES_TOP)
@@ -183,26 +192,25 @@ class RecommendedModel(SegmentationModel):
             # can train is never used (the scale is a maximum), and the user hears which
             # box to enlarge
             notes.append(f"{limit[1]}; using scales up to {limit[0]}.")
-            warnings.warn(notes[-1], UserWarning, stacklevel=2)
+            warnings.warn(notes[-1], UserWarning, stacklevel=3)
             top = limit[0]
         self.materials = list(samples.materials)
-        self.ndim = img.ndim
+        self.ndim = source.image.ndim
         self.spacing = None if spacing is None else tuple(float(s) for s in spacing)
         # intensities in units of the boxes' spread above the image minimum: every result
         # is invariant to x -> a x + b (a > 0), and the bias stays multiplicative
-        inside = np.concatenate([np.asarray(img[b.slices], np.float64).ravel()
-                                 for b in samples.boxes])
-        self.intensity = (float(img.min()),
-                          float(inside.std()) or float(np.std(img, dtype=np.float64)))
-        base = self._standardised(img)
-        work = base
-        field = bias_range = None
+        inside = np.concatenate([np.asarray(c, np.float64).ravel()
+                                 for c in source.raw_crops()])
+        self.intensity = (source.minimum(), float(inside.std()) or source.spread())
+        del inside
+        bias_range = None
         rounds = BIAS_ROUNDS + 1 if self.bias_correction else 1
         first = None
         for r in range(rounds):
             # the first round picks the levels; the bias rounds refit only the level that
             # labels the image for the field, the last round refits every level
-            X, y, names = self._training_rows(work, samples, top if r in (0, rounds - 1)
+            X, y, names = self._training_rows(source.crops(self), samples,
+                                              top if r in (0, rounds - 1)
                                               else self.finest_scale)
             if r in (0, rounds - 1):
                 self._fit_levels(X, y, names)
@@ -211,16 +219,8 @@ class RecommendedModel(SegmentationModel):
             else:
                 self.levels[self.finest_scale] = GaussianClassifier(priors="equal").fit(X, y)
             if r + 1 < rounds:
-                field = self._bias_field(base, work)
-                # keep the intensity scale of the training boxes: b = 1 on them on average
-                in_boxes = np.zeros(img.shape, bool)
-                for b in samples.boxes:
-                    in_boxes[b.slices] = True
-                field /= np.float32(np.median(field[in_boxes]))
-                del in_boxes
-                bias_range = [float(field.min()), float(field.max())]
-                work = self._standardised(img, field, out=field)    # the field is spent
-        del base, work
+                bias_range = source.correct(self)
+        source.release()
         reduction = None
         if rounds > 1:
             reduction = 1.0 - _within_variance(X[:, 0], y) / max(
@@ -228,9 +228,9 @@ class RecommendedModel(SegmentationModel):
             if self.bias_correction == "auto" and reduction < AUTO_GAIN:
                 X, y, names, self.class_means = first
                 self._fit_levels(X, y, names)
-                field = bias_range = None
+                bias_range = None
         if self.bias_correction == "auto":
-            self.bias_correction = field is not None
+            self.bias_correction = bias_range is not None
         self._fisher(X, y, names)
         err = self.level_error[self.scale]
         self.scores = {
@@ -248,15 +248,16 @@ class RecommendedModel(SegmentationModel):
         }
         return self
 
-    def _training_rows(self, image: np.ndarray, samples: Samples, top: int):
+    def _training_rows(self, crops: list[np.ndarray], samples: Samples, top: int):
         """Features of sampled pixels inside the boxes, computed on each box's own crop
-        (windows never see past the box, so no other material leaks in)."""
+        (one per box of `samples`; windows never see past the box, so no other material
+        leaks in)."""
         rng = np.random.default_rng(self.seed)
         X, y, names = [], [], []
         for label in samples.labels:
             rows = []
-            for box in samples.boxes_of(label):
-                feats, names = multiscale_features(image[box.slices], top)
+            for crop in [c for c, b in zip(crops, samples.boxes) if b.label == label]:
+                feats, names = multiscale_features(crop, top)
                 rows.append(feats.reshape(-1, feats.shape[-1]))
             rows = np.concatenate(rows)
             if rows.shape[0] < 4:

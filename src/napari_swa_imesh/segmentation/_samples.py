@@ -23,7 +23,7 @@ from .._tree import build_tree
 from .._validation import as_labels
 
 __all__ = ["Material", "SampleBox", "Samples", "load_samples", "save_samples",
-           "samples_from_truth", "window_scale", "check_contrast"]
+           "samples_from_truth", "window_scale", "check_contrast", "check_box_contrast"]
 
 
 @dataclass(frozen=True)
@@ -274,10 +274,13 @@ def check_contrast(image: np.ndarray, samples: "Samples | None" = None) -> None:
         raise ValueError(
             f"the image holds one value everywhere ({lo:g}); there is nothing to segment. "
             "Check that the right file or channel was given.")
-    if samples is None:
-        return
-    values = {float(image[b.slices].min()) for b in samples.boxes} | {
-        float(image[b.slices].max()) for b in samples.boxes}
+    if samples is not None:
+        check_box_contrast([image[b.slices] for b in samples.boxes])
+
+
+def check_box_contrast(crops) -> None:
+    """Refuse sample boxes (their pixels, one array per box) that all hold one value."""
+    values = {float(c.min()) for c in crops} | {float(c.max()) for c in crops}
     if len(values) == 1:
         raise ValueError(
             f"every sample box holds the one value {values.pop():g}, so the materials cannot "
