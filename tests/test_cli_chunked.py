@@ -195,3 +195,62 @@ def test_npy_is_read_block_by_block(tmp_path):
     lazy, spacing = open_lazy(tmp_path / "a.npy", chunks=(2, 3, 4))
     assert lazy.numblocks == (3, 2, 2) and spacing == (1.0, 1.0, 1.0)
     np.testing.assert_array_equal(lazy.compute(), data)
+
+
+def test_res_on_a_store_reads_the_boxes_only_and_equals_the_loaded_image(scene, capsys,
+                                                                         tmp_path):
+    import tifffile
+
+    from napari_swa_imesh.segmentation import load_samples
+    from napari_swa_imesh.segmentation._res import res_statistics, res_statistics_of_boxes
+
+    image = np.load(scene / "img.npy")
+    tifffile.imwrite(tmp_path / "img.tif", image)
+    truth = tissue_phantom((40, 48, 48), noise=0.06, bias=0.3, spacing=(1, 1, 1))[1]
+    samples = samples_from_truth(truth)
+    save_samples(samples, tmp_path / "s.json")
+    results = []
+    for name in ("img.zarr", "img.npy"):
+        code, out, err = run(capsys, "res", scene / name, "--samples", tmp_path / "s.json",
+                             "--json")
+        assert code == 0, err
+        results.append(json.loads(out))
+    code, out, err = run(capsys, "res", tmp_path / "img.tif", "--samples", tmp_path / "s.json",
+                         "--json")
+    assert code == 0, err
+    loaded = json.loads(out)
+    for r in results:
+        for key in ("suggested_scale", "materials"):
+            assert r[key] == loaded[key]
+    # the library call on a memory-mapped array reads the boxes, not the volume
+    import tracemalloc
+
+    # (the phantom in the corner of a 32 MB volume that is never read)
+    big = np.lib.format.open_memmap(tmp_path / "big.npy", mode="w+", dtype=np.float32,
+                                    shape=(160, 224, 224))
+    big[:40, :48, :48] = image
+    big.flush()
+    del big
+    mapped = np.load(tmp_path / "big.npy", mmap_mode="r")
+    tracemalloc.start()
+    lazy = res_statistics_of_boxes(mapped, load_samples(tmp_path / "s.json"))
+    peak = tracemalloc.get_traced_memory()[1]
+    tracemalloc.stop()
+    full = res_statistics(image, load_samples(tmp_path / "s.json"))
+    np.testing.assert_array_equal(lazy.mean, full.mean)
+    np.testing.assert_array_equal(lazy.n_tiles, full.n_tiles)
+    assert peak < mapped.nbytes / 20
+
+
+def test_res_on_a_store_refuses_nan_in_a_box(scene, capsys, tmp_path):
+    image = np.load(scene / "img.npy").copy()
+    truth = tissue_phantom((40, 48, 48), noise=0.06, bias=0.3, spacing=(1, 1, 1))[1]
+    samples = samples_from_truth(truth)
+    save_samples(samples, tmp_path / "s.json")
+    box = samples.boxes[0]
+    image[tuple(slice(s.start, s.start + 1) for s in box.slices)] = np.nan
+    z = zarr.create_array(str(tmp_path / "nan.zarr"), shape=image.shape, chunks=(16, 16, 16),
+                          dtype=image.dtype)
+    z[:] = image
+    code, _, err = run(capsys, "res", tmp_path / "nan.zarr", "--samples", tmp_path / "s.json")
+    assert code == 2 and "NaN or infinity" in err and err.count("\n") == 1

@@ -32,7 +32,7 @@ import numpy as np
 
 from .._validation import as_image
 from ._moments import MOMENT_NAMES, moment_pyramid_unchecked
-from ._samples import Samples, check_contrast
+from ._samples import Samples, check_box_contrast, check_contrast
 
 __all__ = ["ResStatistics", "res_statistics", "res_statistics_unchecked", "suggest_res",
            "plot_res", "plot_res_scales", "MOMENT_NAMES", "box_tile_moments"]
@@ -143,6 +143,40 @@ def res_statistics(image, samples: Samples, *, max_scale: int | None = None,
     check_contrast(img, samples)
     return res_statistics_unchecked(img, samples, max_scale=max_scale,
                                     change_tol=change_tol, spread_tol=spread_tol)
+
+
+def res_statistics_of_boxes(image, samples: Samples, *, max_scale: int | None = None
+                            ) -> ResStatistics:
+    """:func:`res_statistics` reading only the sample boxes of a large image.
+
+    The statistics are moments of tiles inside the boxes, so nothing else is read: a Zarr
+    or Dask array or a memory-mapped ``.npy`` stays on disk. Equal to
+    :func:`res_statistics` on the loaded image (each box is read as float64 either way).
+
+    Parameters
+    ----------
+    image : (M, N[, P]) array-like with ``shape``, ``dtype`` and slicing
+        Grey-level image of integers or floats.
+    samples : Samples
+
+    Raises
+    ------
+    ValueError
+        For an image of another dimensionality or type, boxes outside it, NaN or infinity
+        in a box, or boxes that all hold one value.
+    """
+    shape, dtype = tuple(int(n) for n in image.shape), np.dtype(image.dtype)
+    if len(shape) not in (2, 3) or dtype.kind not in "iuf":
+        raise ValueError(f"the image must be a 2-D or 3-D array of numbers, not shape {shape} "
+                         f"of {dtype}; give one channel of a grey-level image.")
+    samples.check(shape)
+    crops = [np.asarray(image[b.slices], np.float64) for b in samples.boxes]
+    for box, crop in zip(samples.boxes, crops):
+        if not np.isfinite(crop).all():
+            raise ValueError(f"a sample box of material {box.label} holds NaN or infinity; "
+                             "move it onto valid pixels or fix the image.")
+    check_box_contrast(crops)
+    return res_statistics_unchecked(image, samples, max_scale=max_scale)
 
 
 def res_statistics_unchecked(img: np.ndarray, samples: Samples, *,
