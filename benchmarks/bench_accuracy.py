@@ -363,6 +363,48 @@ def cost_table(with_rf: bool):
                   f"(after loading {r['base_gb']:4.2f} GB)   mean Dice {r['mean_dice']:.3f}")
 
 
+def anatomy_tables(split, ants_python, variants=None):
+    """Per-variant Dice inside the brain, averaged over the split's cases (see anatomy.py)."""
+    import anatomy
+
+    variants = variants or anatomy.VARIANTS
+    print(f"\n## Real-anatomy MR phantoms ({split} split; MNI152 2009 maps, warped; crops "
+          f"{'x'.join(map(str, anatomy.CROP))}; Dice inside the brain, mean of "
+          f"{sum(len(s) for _, _, s in anatomy.SPLITS[split])} cases per variant)")
+    peers = [("recommended", run_recommended), ("k-means", run_kmeans)]
+    names = [n for n, _ in peers] + (["Atropos"] if ants_python else ["Atropos-style"])
+    out = {}
+    for name, (noise, bias), image, truth, brain in anatomy.cases(split, variants):
+        samples = anatomy.samples_for(truth)
+        for method, fn in peers:
+            lab, sec, _ = measure(fn, image, samples, image)
+            rec = out.setdefault(((noise, bias), method), [])
+            rec.append((anatomy.brain_dice(lab, truth, brain), sec))
+            if method == "recommended":
+                m = run_recommended.last.model
+                print(f"  {name} noise {noise:.0%} bias {bias:.0%}: scales {m.scales}, "
+                      f"bias {m.bias_correction}, Dice "
+                      + " ".join(f"{v:.3f}" for v in rec[-1][0].values()))
+        if ants_python:
+            lab, info = run_ants(ants_python, image, samples, image)
+            sec = info["seconds"]
+        else:
+            lab, sec, _ = measure(run_atropos_style, image, samples, image)
+        out.setdefault(((noise, bias), names[-1]), []).append(
+            (anatomy.brain_dice(lab, truth, brain), sec))
+    print(f"\n| variant | " + " | ".join(f"{n} CSF / GM / WM" for n in names) + " |")
+    print("|---|" + "---|" * len(names))
+    for var in variants:
+        cells = []
+        for n in names:
+            runs = out[(var, n)]
+            d = [np.mean([r[0][k] for r in runs]) for k in anatomy.TISSUES]
+            cells.append(" / ".join(f"{v:.3f}"[1:] if v < 1 else "1.00" for v in d)
+                         + f" ({np.mean([r[1] for r in runs]):.1f} s)")
+        print(f"| noise {var[0]:.0%}, bias {var[1]:.0%} | " + " | ".join(cells) + " |")
+    return out
+
+
 def summary(rows):
     print("\n## Summary: mean Dice per dataset")
     methods = []
@@ -380,14 +422,21 @@ def main() -> None:
     ap.add_argument("--skip-cost", action="store_true", help="skip the 256^3 cost lines")
     ap.add_argument("--skip-rf-cost", action="store_true",
                     help="skip the RF's 256^3 cost line (about 5 min and 6 GB)")
+    ap.add_argument("--anatomy", choices=["dev", "val", "both", "none"], default="val",
+                    help="real-anatomy MR split(s) to run (default: the held-out 'val')")
+    ap.add_argument("--only-anatomy", action="store_true",
+                    help="run only the real-anatomy tables")
     ap.add_argument("--ants-python", default=os.environ.get("ANTS_PYTHON"),
                     help="a Python with antspyx installed (default: $ANTS_PYTHON)")
     args = ap.parse_args()
     rows: list = []
-    mosaic_tables(args.quick, rows)
-    phantom_tables(args.quick, rows, args.ants_python)
-    summary(rows)
-    if not args.skip_cost:
+    if not args.only_anatomy:
+        mosaic_tables(args.quick, rows)
+        phantom_tables(args.quick, rows, args.ants_python)
+        summary(rows)
+    for split in {"both": ["dev", "val"], "none": []}.get(args.anatomy, [args.anatomy]):
+        anatomy_tables(split, args.ants_python)
+    if not args.skip_cost and not args.only_anatomy:
         cost_table(with_rf=not (args.quick or args.skip_rf_cost))
 
 
