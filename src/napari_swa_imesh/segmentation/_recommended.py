@@ -321,7 +321,7 @@ class RecommendedModel(SegmentationModel):
         step = max(1, min(base.shape) // FIELD_GRID) if level == 0 else 1
         sub = tuple(slice(None, None, step) for _ in base.shape)
         labels = self._predict_level(work[sub], level)
-        field = estimate_bias_field(base[sub], labels, self.class_means)
+        field = estimate_bias_field(base[sub], labels, self.class_means, corrected=work[sub])
         return field if step == 1 else upsample_linear(field, base.shape)
 
     def _standardised(self, img: np.ndarray, field: np.ndarray | None = None,
