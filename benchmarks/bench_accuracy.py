@@ -75,13 +75,14 @@ def map_by_mean(clusters: np.ndarray, centres: np.ndarray, train, samples) -> np
     return lut[clusters]
 
 
-def run_kmeans(train, samples, test):
+def run_kmeans(train, samples, test, mask=None):
     from sklearn.cluster import KMeans
 
     k = len(samples.labels)
     x = test.reshape(-1, 1).astype(np.float32)
-    step = max(1, x.shape[0] // 200_000)         # fit on a subsample, label every pixel
-    km = KMeans(k, n_init=3, random_state=0).fit(x[::step])
+    fit = x if mask is None else x[mask.ravel()]
+    step = max(1, fit.shape[0] // 200_000)       # fit on a subsample, label every pixel
+    km = KMeans(k, n_init=3, random_state=0).fit(fit[::step])
     return map_by_mean(km.predict(x), km.cluster_centers_.ravel(), train, samples
                        ).reshape(test.shape)
 
@@ -170,7 +171,8 @@ reset_peak()
 base = peak_gb()
 t = time.perf_counter()
 a = ants.from_numpy(img.astype(np.float32))
-mask = ants.from_numpy(np.ones(img.shape, np.float32))
+m = np.load(sys.argv[4]) if len(sys.argv) > 4 else np.ones(img.shape)
+mask = ants.from_numpy(m.astype(np.float32))
 seg = ants.atropos(a=a, x=mask, i=f"kmeans[{k}]", m="[0.2," + "x".join(["1"] * img.ndim) + "]",
                    c="[5,0]")
 lab = seg["segmentation"].numpy().astype(np.int32)
@@ -182,12 +184,17 @@ print(json.dumps({"seconds": sec, "means": means, "peak_mb": (peak_gb() - base) 
 """
 
 
-def run_ants(python: str, train, samples, test):
+def run_ants(python: str, train, samples, test, mask=None):
+    """Atropos on `test` (inside `mask` if given, as it is used on MR: brain-masked)."""
     with tempfile.TemporaryDirectory() as tmp:
         src, dst = os.path.join(tmp, "img.npy"), os.path.join(tmp, "lab.npy")
         np.save(src, test.astype(np.float32))
-        out = subprocess.run([python, "-c", ANTS_SCRIPT, src, dst, str(len(samples.labels))],
-                             capture_output=True, text=True)
+        extra = []
+        if mask is not None:
+            extra = [os.path.join(tmp, "mask.npy")]
+            np.save(extra[0], mask.astype(np.uint8))
+        out = subprocess.run([python, "-c", ANTS_SCRIPT, src, dst, str(len(samples.labels)),
+                              *extra], capture_output=True, text=True)
         if out.returncode != 0:
             raise RuntimeError(out.stderr.strip().splitlines()[-1:])
         info = json.loads(out.stdout.strip().splitlines()[-1])
@@ -371,13 +378,17 @@ def anatomy_tables(split, ants_python, variants=None):
     print(f"\n## Real-anatomy MR phantoms ({split} split; MNI152 2009 maps, warped; crops "
           f"{'x'.join(map(str, anatomy.CROP))}; Dice inside the brain, mean of "
           f"{sum(len(s) for _, _, s in anatomy.SPLITS[split])} cases per variant)")
-    peers = [("recommended", run_recommended), ("k-means", run_kmeans)]
-    names = [n for n, _ in peers] + (["Atropos"] if ants_python else ["Atropos-style"])
+    # the unsupervised peers get the brain mask, as they are used on MR (without it their
+    # darkest cluster is the background); the recommended method gets only the boxes
+    peers = [("recommended", run_recommended), ("k-means (brain mask)", run_kmeans)]
+    names = [n for n, _ in peers] + (["Atropos (brain mask)"] if ants_python else
+                                     ["Atropos-style"])
     out = {}
     for name, (noise, bias), image, truth, brain in anatomy.cases(split, variants):
         samples = anatomy.samples_for(truth)
         for method, fn in peers:
-            lab, sec, _ = measure(fn, image, samples, image)
+            args = (image, samples, image) + ((brain,) if method != "recommended" else ())
+            lab, sec, _ = measure(fn, *args)
             rec = out.setdefault(((noise, bias), method), [])
             rec.append((anatomy.brain_dice(lab, truth, brain), sec))
             if method == "recommended":
@@ -386,7 +397,7 @@ def anatomy_tables(split, ants_python, variants=None):
                       f"bias {m.bias_correction}, Dice "
                       + " ".join(f"{v:.3f}" for v in rec[-1][0].values()))
         if ants_python:
-            lab, info = run_ants(ants_python, image, samples, image)
+            lab, info = run_ants(ants_python, image, samples, image, brain)
             sec = info["seconds"]
         else:
             lab, sec, _ = measure(run_atropos_style, image, samples, image)

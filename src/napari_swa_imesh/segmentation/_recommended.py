@@ -35,6 +35,7 @@ import numpy as np
 from scipy import ndimage as ndi
 
 from ._bias import estimate_bias_field, upsample_linear
+from ._blocked_cv import BLOCKED_CV_METHOD, blocked_cv_errors
 from ._classifiers import GaussianClassifier
 from ._model_base import SegmentationModel
 from ._mrf import argmax_first, potts_mean_field
@@ -220,7 +221,6 @@ class RecommendedModel(SegmentationModel):
                 del in_boxes
                 bias_range = [float(field.min()), float(field.max())]
                 work = self._standardised(img, field, out=field)    # the field is spent
-        del base, work
         reduction = None
         if rounds > 1:
             reduction = 1.0 - _within_variance(X[:, 0], y) / max(
@@ -229,6 +229,12 @@ class RecommendedModel(SegmentationModel):
                 X, y, names, self.class_means = first
                 self._fit_levels(X, y, names)
                 field = bias_range = None
+                work = base
+        del base
+        # the number a user should believe: folds of whole half-boxes, not of pixels
+        blocked = blocked_cv_errors(work, samples, max(self.level_error),
+                                    per_material=self.pixels_per_material, seed=self.seed)
+        del work
         if self.bias_correction == "auto":
             self.bias_correction = field is not None
         self._fisher(X, y, names)
@@ -237,6 +243,11 @@ class RecommendedModel(SegmentationModel):
             "eps_l": err, "eps_l_method": "2-fold cross-validation over sampled pixels of the "
                                           "boxes (pixels are correlated: optimistic)",
             "eps_m": -len(self.feature_names) * err / 100.0,
+            "eps_blocked": None if blocked is None else blocked[self.scale],
+            "eps_blocked_method": BLOCKED_CV_METHOD if blocked is not None else
+            "not computed: some material has only 1-px-thick boxes",
+            "level_error_blocked": None if blocked is None else {
+                str(j): e for j, e in blocked.items()},
             "training_pixels": {int(m): int(np.sum(y == m)) for m in samples.labels},
             "level_error": {str(j): e for j, e in self.level_error.items()},
             "regularized": sorted({int(c) for clf in self.levels.values()
@@ -413,6 +424,7 @@ class RecommendedModel(SegmentationModel):
         return {"method": self.method, "coarse_scale": self.scale,
                 "finest_scale": self.finest_scale, "res_scale": self.res_scale,
                 "level_error": {str(j): round(e, 3) for j, e in self.level_error.items()},
+                "level_error_blocked": self.scores.get("level_error_blocked"),
                 "window_px": {str(j): window(j) for j in self.scales},
                 "top_features_fisher": {k: round(v, 4) for k, v in top},
                 "beta": self.beta, "bias_correction": self.bias_correction}
