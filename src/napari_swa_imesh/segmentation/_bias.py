@@ -5,8 +5,8 @@ The field is the locally weighted least-squares ratio of the image to its class 
 smooth by assumption, so the grid costs nothing in accuracy) and interpolated back.
 
 Only *inliers* enter the sums: pixels whose local mean (5-px window of the currently
-corrected image) is within a quarter of the smallest gap between class means of their own
-class mean. Background that no material describes (dark air around an MR head, labelled
+corrected image) is within half the smallest gap between class means of their own class
+mean (so it is nearer that mean than any other). Background that no material describes (dark air around an MR head, labelled
 as the darkest material) and partial-volume boundaries would otherwise pull the field
 (measured on the real-anatomy phantoms: a field of 0.1..1.08 on an image with no bias).
 """
@@ -25,7 +25,8 @@ __all__ = ["estimate_bias_field", "upsample_linear", "upsample_linear_at", "GRID
 GRID_CELLS = 32         # coarse grid: about this many cells along the shortest side
 _TINY = 1e-12           # relative floor under G*(mu^2) (regions of class mean 0)
 _NONE = 1e-30           # floor of that floor when every class mean is 0
-INLIER_GAP = 0.25       # inlier: local mean within this fraction of the smallest class gap
+INLIER_GAP = 0.5        # inlier: local mean within this fraction of the smallest class gap
+#                         (0.5 against 0.25: +0.01 GM/WM Dice on the dev anatomy split)
 LOCAL_WINDOW = 5        # px per axis of that local mean (2 px reach)
 
 
