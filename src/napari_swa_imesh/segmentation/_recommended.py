@@ -20,7 +20,10 @@ Why each part is here (measured on the texture mosaics and 3-D tissue phantoms o
 * **Spatial regularisation**: a Potts MRF (:mod:`._mrf`, beta 2).
 * **Smooth multiplicative bias** (:mod:`._bias`): the image is divided by the field and
   the classifiers refitted, :data:`BIAS_ROUNDS` times; kept only where it helps
-  (``"auto"``).
+  (``"auto"``). The field is fitted on inlier pixels only, so background that no
+  material describes does not pull it.
+* **Errors a user can believe**: besides the pixel CV, a blocked CV over half-boxes
+  (:mod:`._blocked_cv`) per level.
 
 Explainability: :meth:`RecommendedModel.summary` lists the cross-validated error of every
 level, the scales used (windows in px), and the features with the largest Fisher ratios;
