@@ -234,8 +234,10 @@ class RecommendedModel(SegmentationModel):
                 field = bias_range = None
                 work = base
         del base
-        # the number a user should believe: folds of whole half-boxes, not of pixels
-        blocked = blocked_cv_errors(work, samples, max(self.level_error),
+        # the number a user should believe: folds of whole half-boxes, not of pixels (levels
+        # up to J only: the labels come from no coarser one, and 65-px windows on big boxes
+        # cost seconds on 256^3)
+        blocked = blocked_cv_errors(work, samples, self.scale,
                                     per_material=self.pixels_per_material, seed=self.seed)
         del work
         if self.bias_correction == "auto":
