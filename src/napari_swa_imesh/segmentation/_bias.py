@@ -3,6 +3,12 @@
 The field is the locally weighted least-squares ratio of the image to its class means,
 ``b = G*(I mu) / G*(mu^2)``, with G a wide Gaussian, computed on a coarse grid (the field is
 smooth by assumption, so the grid costs nothing in accuracy) and interpolated back.
+
+Only *inliers* enter the sums: pixels whose local mean (5-px window of the currently
+corrected image) is within half the smallest gap between class means of their own class
+mean (so it is nearer that mean than any other). Background that no material describes (dark air around an MR head, labelled
+as the darkest material) and partial-volume boundaries would otherwise pull the field
+(measured on the real-anatomy phantoms: a field of 0.1..1.08 on an image with no bias).
 """
 
 from __future__ import annotations
@@ -13,11 +19,15 @@ from scipy import ndimage as ndi
 from ._tiles import block_mean
 
 __all__ = ["estimate_bias_field", "upsample_linear", "upsample_linear_at", "GRID_CELLS",
-           "grid_factor", "class_mean_image", "coarse_bias_field"]
+           "grid_factor", "class_mean_image", "coarse_bias_field", "field_terms",
+           "INLIER_GAP", "LOCAL_WINDOW"]
 
 GRID_CELLS = 32         # coarse grid: about this many cells along the shortest side
 _TINY = 1e-12           # relative floor under G*(mu^2) (regions of class mean 0)
 _NONE = 1e-30           # floor of that floor when every class mean is 0
+INLIER_GAP = 0.5        # inlier: local mean within this fraction of the smallest class gap
+#                         (0.5 against 0.25: +0.01 GM/WM Dice on the dev anatomy split)
+LOCAL_WINDOW = 5        # px per axis of that local mean (2 px reach)
 
 
 def upsample_linear(small: np.ndarray, shape: tuple[int, ...]) -> np.ndarray:
@@ -28,7 +38,7 @@ def upsample_linear(small: np.ndarray, shape: tuple[int, ...]) -> np.ndarray:
 
 
 def estimate_bias_field(image, labels, class_means: dict[int, float], *,
-                        smoothness: float = 0.15) -> np.ndarray:
+                        smoothness: float = 0.15, corrected=None) -> np.ndarray:
     """Smooth multiplicative bias b with ``image ~ b * mean(label)``.
 
     Locally weighted least squares: ``b = G*(I mu) / G*(mu^2)`` where mu is the class mean
@@ -45,17 +55,35 @@ def estimate_bias_field(image, labels, class_means: dict[int, float], *,
     smoothness : float
         Gaussian sigma as a fraction of the shortest side (the field varies slowly across
         the image).
+    corrected : (M, N[, P]) ndarray, optional
+        The image as currently corrected (the labels' source), for the inlier test;
+        default `image`.
 
     Returns
     -------
     (M, N[, P]) ndarray of float32
         The field (1 where the image matches the class means).
     """
-    mu = class_mean_image(labels, class_means)
+    image = np.asarray(image, np.float32)
+    num, den = field_terms(image, image if corrected is None else corrected, labels,
+                           class_means)
     factor = grid_factor(image.shape)
-    num = block_mean(np.asarray(image, np.float32) * mu, factor)
-    den = block_mean(mu * mu, factor)
+    num, den = block_mean(num, factor), block_mean(den, factor)
     return upsample_linear(coarse_bias_field(num, den, smoothness), image.shape)
+
+
+def field_terms(image: np.ndarray, corrected: np.ndarray, labels: np.ndarray,
+                class_means: dict[int, float]) -> tuple[np.ndarray, np.ndarray]:
+    """Per-pixel ``I mu`` and ``mu^2`` (float32), zero outside the inliers (module
+    docstring); `image` is the uncorrected I, `corrected` the image the labels came from."""
+    mu = class_mean_image(labels, class_means)
+    means = np.sort(np.fromiter(class_means.values(), float))
+    gap = float(np.diff(means).min()) if means.size > 1 else float(abs(means[0]))
+    local = ndi.uniform_filter(np.asarray(corrected, np.float32), LOCAL_WINDOW,
+                               mode="reflect")
+    keep = np.abs(local - mu) <= INLIER_GAP * gap
+    mu = np.where(keep, mu, np.float32(0))
+    return image * mu, mu * mu
 
 
 def grid_factor(shape: tuple[int, ...]) -> int:

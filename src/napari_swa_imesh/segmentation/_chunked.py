@@ -37,8 +37,9 @@ import os
 import numpy as np
 
 from ._bias import (
-    class_mean_image,
+    LOCAL_WINDOW,
     coarse_bias_field,
+    field_terms,
     grid_factor,
     upsample_linear,
     upsample_linear_at,
@@ -425,10 +426,9 @@ def bias_round(model: RecommendedModel, x, core, small: np.ndarray | None, *,
         base = model._standardised(np.asarray(sub))
         idx = [np.arange(0, n, step) for n in shape]
         work = base if small is None else base / upsample_linear_at(small, shape, idx)
-        labels = model._predict_level(work, 0)
-        mu = class_mean_image(labels, model.class_means)
+        num, den = field_terms(base, work, model._predict_level(work, 0), model.class_means)
         factor = grid_factor(base.shape)
-        coarse = coarse_bias_field(block_mean(base * mu, factor), block_mean(mu * mu, factor))
+        coarse = coarse_bias_field(block_mean(num, factor), block_mean(den, factor))
         return coarse if step == 1 else upsample_linear(coarse, base.shape)
     # a finer level labels every voxel in memory: block sums of I mu and mu^2 over the
     # chunks (chunk sides are multiples of the grid cell, so every cell is in one chunk)
@@ -445,13 +445,13 @@ def bias_round(model: RecommendedModel, x, core, small: np.ndarray | None, *,
 
 def _sums_direct(_, window, model, field, level, factor, block_info=None):
     """Grid-cell sums of ``I mu`` and ``mu^2`` over one chunk, mu the class means of the
-    labels of `level` (margin 2^level: its features' reach) of the image corrected by
-    `field`; I the uncorrected standardised image (as :meth:`_bias_field` takes them)."""
-    lo, hi, inner, shape = _padded(block_info, 1 << level)
+    labels of `level` of the image corrected by `field` (margin 2^level, the features'
+    reach, and at least the inlier window's); I the uncorrected standardised image (as
+    :meth:`_bias_field` takes them)."""
+    lo, hi, inner, shape = _padded(block_info, max(1 << level, LOCAL_WINDOW // 2))
     base = _work_window(window, model, None, lo, hi, shape)
     work = base if field is None else base / upsample_linear_at(
         field, shape, [np.arange(a, b) for a, b in zip(lo, hi)])
-    mu = class_mean_image(model._predict_level(work, level)[inner], model.class_means)
-    base = base[inner]
-    return np.stack([block_sum(base * mu, factor, dtype=np.float64),
-                     block_sum(mu * mu, factor, dtype=np.float64)])
+    num, den = field_terms(base, work, model._predict_level(work, level), model.class_means)
+    return np.stack([block_sum(num[inner], factor, dtype=np.float64),
+                     block_sum(den[inner], factor, dtype=np.float64)])

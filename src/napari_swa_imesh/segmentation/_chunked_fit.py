@@ -104,6 +104,10 @@ class StoreImage:
         small /= np.float32(np.median(values))          # self.small, in place
         return [float(small.min()), float(small.max())]
 
+    def uncorrect(self) -> None:
+        """Back to the uncorrected image (the correction did not help)."""
+        self.small = None
+
     def release(self) -> None:
         self._raw = self._sub = self.small = None
 

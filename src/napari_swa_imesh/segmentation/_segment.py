@@ -116,6 +116,8 @@ class SegmentationResult:
             "materials": [{"label": m.label, "name": m.name} for m in self.model.materials],
             "eps_l": self.eps_l, "eps_l_method": self.model.scores.get("eps_l_method"),
             "eps_m": self.eps_m, "training_tiles": self.model.scores.get("training_tiles"),
+            "eps_blocked": self.model.scores.get("eps_blocked"),
+            "eps_blocked_method": self.model.scores.get("eps_blocked_method"),
             "regularized": self.model.scores.get("regularized"),
             "suggested_scale": None if self.res is None else self.res.suggested_scale,
             "signatures": self.signatures, "seconds": self.seconds, "notes": self.notes,
@@ -150,6 +152,9 @@ class SegmentationResult:
         if self.eps_l is not None:
             lines.append(f"eps_l = {self.eps_l:.2f}% ({model.scores.get('eps_l_method')}), "
                          f"eps_m = {self.eps_m:.3f}")
+        if model.scores.get("eps_blocked") is not None:
+            lines.append(f"blocked CV error = {model.scores['eps_blocked']:.2f}% "
+                         f"({model.scores['eps_blocked_method']})")
         if model.scores.get("regularized"):
             lines.append(f"covariance regularised for material(s) "
                          f"{model.scores['regularized']}")

@@ -59,5 +59,9 @@ class WholeImage:
         self.work = model._standardised(self.image, field, out=field)   # field is spent
         return bias_range
 
+    def uncorrect(self) -> None:
+        """Back to the uncorrected image (the correction did not help)."""
+        self.work = self.base
+
     def release(self) -> None:
         self.base = self.work = None
