@@ -26,16 +26,26 @@ def blobs(shape, sigma=1.5, seed=0, materials=3):
             ).astype(np.uint8)
 
 
-@settings(max_examples=12, deadline=None)
+@settings(max_examples=16, deadline=None)
 @given(st.sampled_from([2, 3]), st.integers(0, 10_000), st.floats(0.02, 0.6),
-       st.sampled_from([(1.0, 1.0, 1.0), (2.5, 1.0, 1.0), (1.0, 1.0, 8.0), (0.7, 1.3, 1.0)]))
-def test_marked_refinement_is_a_conforming_exact_mesh_within_its_bound(d, seed, share, spacing):
+       st.sampled_from([(1.0, 1.0, 1.0), (2.5, 1.0, 1.0), (1.0, 1.0, 8.0), (0.7, 1.3, 1.0)]),
+       st.sampled_from([{}, {"refine": 1}, {"exclude": [1]}, {"max_size": 3.0},
+                        {"periodic": True}]))
+def test_marked_refinement_is_a_conforming_exact_mesh_within_its_bound(d, seed, share, spacing,
+                                                                       options):
     shape = (14, 12, 10)[:d] if d == 3 else (30, 26)
     labels = blobs(shape, seed=seed)
-    mesh = mesh_labels(labels, spacing=spacing[:d])
+    mesh = mesh_labels(labels, spacing=spacing[:d], **options)
     marked = np.random.default_rng(seed).random(mesh.n_cells) < share
     fine = refine_marked(labels, mesh, marked)
-    assert check_mesh(fine, labels).all_passed
+    assert check_mesh(fine, labels, exclude=options.get("exclude", ())).all_passed
+    if "max_size" in options:
+        edges = fine.points[fine.cells][:, :, None] - fine.points[fine.cells][:, None]
+        assert np.linalg.norm(edges, axis=-1).max() <= options["max_size"] * (1 + 1e-9)
+    if options.get("periodic"):
+        _assert_matching_faces(fine)
+    if options.get("exclude"):
+        return
     voxel = float(np.prod(spacing[:d]))
     corners = fine.points[fine.cells]
     edges = corners[:, 1:] - corners[:, :1]
@@ -44,6 +54,23 @@ def test_marked_refinement_is_a_conforming_exact_mesh_within_its_bound(d, seed, 
     bound = quality_bounds(d, spacing[:d])["quality"][1]
     assert fine.quality.max() <= bound * (1 + 1e-9)
     assert fine.n_cells > mesh.n_cells and fine.info["adapted"]["marked_elements"] == marked.sum()
+
+
+def _assert_matching_faces(mesh):
+    from napari_swa_imesh.mesh import facet_groups
+
+    groups = facet_groups(mesh)
+    lo, hi = mesh.image_box()
+    d = mesh.ndim
+    for name, axis in zip("xyz"[:d], range(d - 1, -1, -1)):
+        def facet_set(group, shift):
+            corners = mesh.points[group.facets].copy()
+            corners[:, :, axis] -= shift
+            keys = np.sort(np.round(corners * 1e6).astype(np.int64).view(
+                [("", np.int64)] * d).reshape(len(corners), d), axis=1)
+            return {tuple(row.tolist()) for row in keys}
+        assert facet_set(groups[f"{name}min"], lo[axis]) == facet_set(groups[f"{name}max"],
+                                                                      hi[axis])
 
 
 def test_nothing_marked_keeps_the_elements():
@@ -81,6 +108,11 @@ def test_the_indicator_is_zero_where_the_field_is_exact_and_not_elsewhere():
     layers[:, 6:] = 2
     r = simulate(layers, {1: 1.0, 2: 7.0}, order=1, adapt=0, axes="x")
     assert flux_jump_indicator(r.mesh, [r.flux["x"]]).max() < 1e-20
+    # along the layers too: the tangential flux jumps at the interface and must not count
+    # (it would if the flux components met the normals in the wrong axis order)
+    r = simulate(layers, {1: 1.0, 2: 7.0}, order=1, adapt=0, axes="y")
+    assert flux_jump_indicator(r.mesh, [r.flux["y"]]).max() < 1e-20
+    assert not doerfler(flux_jump_indicator(r.mesh, [r.flux["y"]])).any()
     labels = blobs((16, 16))
     r = simulate(labels, {1: 1.0, 2: 10.0, 3: 0.1}, order=1, adapt=0)
     eta = flux_jump_indicator(r.mesh, [r.flux["x"], r.flux["y"]])
@@ -157,3 +189,31 @@ def test_the_default_falls_back_within_its_budget_and_says_why(monkeypatch, tmp_
     # P2 asked for: adapting stays within the budget unless asked for too
     assert simulate(labels, k, axes="x", order=2).adapt == 0
     assert simulate(labels, k, axes="x", order=2, adapt=1).adapt == 1
+
+
+def test_adapting_keeps_the_world_placement_and_the_periodic_default_does_not_adapt():
+    from napari_swa_imesh.mesh import to_meshio
+
+    labels = blobs((12, 10))
+    affine = np.array([[0.0, -1.5, 4.0], [2.0, 0.0, -3.0], [0.0, 0.0, 1.0]])
+    mesh = mesh_labels(labels, affine=affine)
+    r = simulate(mesh, {1: 1.0, 2: 10.0, 3: 0.1}, labels=labels)
+    assert r.adapt == 1 and r.mesh.world is not None
+    np.testing.assert_allclose(to_meshio(r.mesh).points.min(axis=0),
+                               to_meshio(mesh).points.min(axis=0))
+    np.testing.assert_allclose(to_meshio(r.mesh).points.max(axis=0),
+                               to_meshio(mesh).points.max(axis=0))
+    # periodic: a finer lattice refines whole box faces, so the default does not adapt;
+    # asked for, the adapted mesh keeps its faces matched
+    periodic = simulate(labels, {1: 1.0, 2: 10.0, 3: 0.1}, protocol="periodic")
+    assert periodic.adapt == 0 and periodic.order == 2
+    asked = simulate(labels, {1: 1.0, 2: 10.0, 3: 0.1}, protocol="periodic", adapt=1)
+    assert asked.adapt == 1
+    _assert_matching_faces(asked.mesh)
+
+
+def test_the_finest_refine_level_bounds_the_steps():
+    labels = blobs((6, 6))
+    assert simulate(labels, {1: 1, 2: 2, 3: 3}, refine=4).adapt == 0     # default: none
+    with pytest.raises(ValueError, match="would pass the finest refine level 4"):
+        simulate(labels, {1: 1, 2: 2, 3: 3}, refine=3, adapt=2)

@@ -103,6 +103,7 @@ def _refine_marked(labels, mesh: Mesh, marked: np.ndarray, tree: RegionTree | No
                      material_names=_names(mesh.material_names), connectivity=None,
                      report_face_balance=False, seconds=seconds)
     out.shape, out.spacing = tuple(lab.shape), spacing
+    out.world = mesh.world              # the same image, so the same place in the world
     out.info["spacing"] = list(spacing)
     out.info["shape"] = list(lab.shape)
     out.info["lattice"] = fine.describe()

@@ -25,6 +25,7 @@ from __future__ import annotations
 import numpy as np
 
 from ..mesh._facets import paired_facets
+from ..mesh._lattice import MAX_REFINE
 from ..mesh._types import Mesh
 
 __all__ = ["AUTO", "P2_BUDGET", "THETA", "auto_settings", "doerfler", "flux_jump_indicator"]
@@ -39,33 +40,58 @@ P2_BUDGET = 3_000_000
 P2_PER_VERTEX = {2: 4.0, 3: 7.7}
 ADAPT_GROWTH = 1.8
 TIE = 1e-9  # relative: indicators this close are one value
+#: Indicator total (relative to the flux energy, so scale-free) below which the field is
+#: exact up to round-off (measured 1e-25 on laminates, 1e-3 and more on real images).
+FLOOR = 1e-12
 
 
 def auto_settings(mesh: Mesh, order, adapt, from_labels: bool) -> tuple[int, int, str]:
-    """Resolve ``"auto"`` order and adaptive steps for `mesh`; returns (order, adapt, why)."""
+    """Resolve ``"auto"`` order and adaptive steps for `mesh`; returns (order, adapt, why).
+
+    Raises ValueError for adaptive steps asked of a mesh that cannot take them (no labels,
+    coarsened, or past the finest refine level).
+    """
     p2 = P2_PER_VERTEX[mesh.ndim] * len(mesh.points)
-    can_adapt = from_labels and mesh.info.get("method") == "template" and not mesh.info.get("coarsen")
+    room = MAX_REFINE - int(mesh.info.get("lattice", {}).get("refine", MAX_REFINE))
+    can_adapt = (from_labels and mesh.info.get("method") == "template"
+                 and not mesh.info.get("coarsen"))
+    # periodic faces must match, so a finer lattice refines whole box faces: the default
+    # does not adapt there (its cost is not the growth the budget counts)
+    auto_adapts = can_adapt and room > 0 and not mesh.info.get("periodic")
+    notes = []
     if order == AUTO:
-        if p2 * (ADAPT_GROWTH if (adapt == AUTO and can_adapt) else 1.0) <= P2_BUDGET:
-            order, why = 2, "P2"
+        if p2 * (ADAPT_GROWTH if (adapt == AUTO and auto_adapts) else 1.0) <= P2_BUDGET:
+            order = 2
         elif p2 <= P2_BUDGET:
-            order, why = 2, "P2 (not adapted: it would pass the default's budget of " \
-                            f"{P2_BUDGET:,} unknowns)"
-            adapt = 0 if adapt == AUTO else adapt
+            order = 2
+            if adapt == AUTO and auto_adapts:
+                notes.append(f"not adapted: it would pass the default's budget of "
+                             f"{P2_BUDGET:,} unknowns")
+                adapt = 0
         else:
-            order, why = 1, (f"P1 (P2 would need about {p2:,.0f} unknowns, above the "
-                             f"default's budget of {P2_BUDGET:,}; pass order 2 to insist)")
+            order = 1
+            notes.append(f"P2 would need about {p2:,.0f} unknowns, above the default's "
+                         f"budget of {P2_BUDGET:,}; pass order 2 to insist")
+        why = f"P{order}"
     else:
         why = f"P{order} (asked)"
     if adapt == AUTO:
         # the adaptive step belongs to P2's default, within the same budget
-        adapt = 1 if (can_adapt and order == 2 and p2 * ADAPT_GROWTH <= P2_BUDGET) else 0
+        adapt = 1 if (auto_adapts and order == 2 and p2 * ADAPT_GROWTH <= P2_BUDGET) else 0
+        if not adapt and order == 2 and auto_adapts and not notes:
+            notes.append(f"not adapted: it would pass the default's budget of "
+                         f"{P2_BUDGET:,} unknowns")
     if adapt and not can_adapt:
         raise ValueError("adaptive refinement needs a label image to mesh again (a mesh "
                          "read from a file or coarsened cannot be refined): pass adapt=0, "
                          "or simulate the labels.")
-    return order, int(adapt), why + (f", {adapt} adaptive step" + "s" * (adapt > 1)
-                                     if adapt else "")
+    if adapt > room:
+        raise ValueError(f"{adapt} adaptive step{'s' * (adapt > 1)} would pass the finest "
+                         f"refine level {MAX_REFINE} (the mesh is at "
+                         f"{MAX_REFINE - room}): lower refine or adapt.")
+    if adapt:
+        why += f", {adapt} adaptive step" + "s" * (adapt > 1)
+    return order, int(adapt), why + (f" ({'; '.join(notes)})" if notes else "")
 
 
 def check_adapt(adapt) -> int | str:
@@ -126,7 +152,7 @@ def doerfler(indicator: np.ndarray, theta: float = THETA) -> np.ndarray:
     equal to the smallest of them (bool mask)."""
     indicator = np.asarray(indicator, dtype=float)
     total = indicator.sum()
-    if total <= 0:
+    if total <= FLOOR:        # an exact field: its jumps are round-off, nothing to refine
         return np.zeros(indicator.shape, dtype=bool)
     ranked = np.sort(indicator)[::-1]
     running = np.cumsum(ranked)      # its last entry is the total, in the same rounding
