@@ -8,6 +8,7 @@ import sys
 
 import meshio
 import numpy as np
+import pytest
 import tifffile
 
 from napari_swa_imesh._demo import DEMO_FILES
@@ -46,6 +47,15 @@ def test_demo_runs_the_whole_pipeline_and_refuses_to_overwrite(tmp_path):
     assert area.sum() == labels.size
     assert report["mesh"]["elements"] == len(tri)
     assert report["mesh"]["checks_passed"] is True
+
+    # k_eff of the field left behind: the mesh's, within its bounds, the field readable
+    sim = report["simulate"]
+    for axis, k in sim["k_eff"].items():
+        lo, hi = sim["bounds"][axis]
+        assert lo < k < hi
+    field = meshio.read(out / "field.vtu")
+    assert {"potential_x", "potential_y"} <= set(field.point_data)
+    assert field.point_data["potential_x"].min() == pytest.approx(0, abs=1e-9)
 
     before = _snapshot(out)
     again = _demo(cwd=tmp_path)
