@@ -177,6 +177,8 @@ def phantom_steps(viewer) -> None:
         simulate.table.set_value(label, k)
     for axis in "yz":
         simulate.axis_boxes[axis].value = False
+    # P1 on the 1.65M tetrahedra as shown (the default would take P2: minutes, not one)
+    simulate.order_combo.value = "P1 (linear)"
     simulate.run()
     wait(simulate, timeout=900)
     flow.mesh.surface_layer.visible = False
