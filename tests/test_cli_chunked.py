@@ -85,10 +85,10 @@ def test_fit_on_the_boxes_of_a_store_equals_the_in_memory_fit(scene, capsys, tmp
     code, _, _ = run(capsys, "segment", scene / "img.npy", "--samples", scene / "s.json",
                      "-o", tmp_path / "ref.npy", "--model-out", tmp_path / "ref.npz")
     assert code == 0
-    code, out, _ = run(capsys, "segment", scene / image, "--samples", scene / "s.json",
-                       "-o", tmp_path / "lab.zarr", "--model-out", tmp_path / "m.npz",
-                       "--json", *extra)
-    assert code == 0
+    code, out, err = run_fresh("segment", scene / image, "--samples", scene / "s.json",
+                               "-o", tmp_path / "lab.zarr", "--model-out", tmp_path / "m.npz",
+                               "--json", *extra)
+    assert code == 0, err
     summary = json.loads(out)
     ref = np.load(tmp_path / "ref.npy")
     labels = zarr.open_array(str(tmp_path / "lab.zarr"), mode="r")[:]
@@ -107,9 +107,9 @@ def test_reference_model_on_a_store_equals_the_in_memory_run(scene, capsys, tmp_
                      "--method", "reference", "--scale", 1, "-o", tmp_path / "ref.npy",
                      "--model-out", tmp_path / "ref.npz")
     assert code == 0
-    code, out, _ = run(capsys, "segment", scene / "img.zarr", "--model", tmp_path / "ref.npz",
-                       "-o", tmp_path / "lab.zarr", "--memory", "1GB", "--json")
-    assert code == 0
+    code, out, err = run_fresh("segment", scene / "img.zarr", "--model", tmp_path / "ref.npz",
+                               "-o", tmp_path / "lab.zarr", "--memory", "1GB", "--json")
+    assert code == 0, err
     summary = json.loads(out)
     assert summary["chunked"] and summary["plan"]["halo"] == 0
     assert all(c % 2 == 0 for c in summary["plan"]["chunks"])
