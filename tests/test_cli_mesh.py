@@ -440,3 +440,25 @@ def test_mesh_write_options_fail_before_meshing(tmp_path, capsys, monkeypatch, f
     np.save(tmp_path / "l.npy", three_materials_2d())
     code, _, stderr = run(capsys, "mesh", tmp_path / "l.npy", "-o", tmp_path / "m.vtu", *flags)
     assert code == 2 and re.search(re.escape(match), stderr), stderr
+
+
+def test_checks_beside_the_writer_give_the_files_and_verdict_of_one_after_the_other(
+        tmp_path, capsys):
+    """The command checks on a second thread while it writes: its files are byte for
+    byte those the library writes alone, and its checks those check_mesh gives."""
+    from napari_swa_imesh.mesh._checks import check_mesh
+    from napari_swa_imesh.mesh._export import write_mesh
+    from napari_swa_imesh.mesh._imesh import mesh_labels
+
+    lab = (np.indices((12, 10, 9)).sum(0) // 6 + (np.arange(9) % 4 == 0)).astype(np.uint8)
+    np.save(tmp_path / "lab.npy", lab)
+    code, stdout, _ = run(capsys, "mesh", tmp_path / "lab.npy", "-o", tmp_path / "cmd.vtu",
+                          "--json")
+    assert code == 0
+    mesh = mesh_labels(lab)
+    write_mesh(mesh, tmp_path / "lib.vtu")
+    for a, b in (("cmd.vtu", "lib.vtu"), ("cmd_facets.vtu", "lib_facets.vtu")):
+        assert (tmp_path / a).read_bytes() == (tmp_path / b).read_bytes()
+    report = one_json(stdout)
+    assert report["checks"] == check_mesh(mesh, lab).to_dict()
+    assert report["seconds"]["check"] > 0 and report["seconds"]["write"] > 0

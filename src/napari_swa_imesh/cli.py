@@ -7,35 +7,43 @@ stderr with exit status 2 (never a traceback).
 from __future__ import annotations
 
 import argparse
+import importlib
 import re
 import sys
 import warnings
 
-from .mesh._cli import add_commands as add_mesh_commands
-from .segmentation._cli import add_commands as add_segmentation_commands
-from .simulate._cli import add_commands as add_simulate_commands
-
 __all__ = ["main", "build_parser"]
 
+#: the module registering each group of sub-commands, in the order help lists them, and
+#: the commands it registers: a command imports only its own group (importing the
+#: segmentation package and scipy.ndimage cost ``swa-imesh mesh`` a second or more)
+COMMAND_MODULES = {
+    ".segmentation._cli": ("res", "segment", "batch", "samples-from-truth", "evaluate"),
+    ".mesh._cli": ("mesh", "bounds"),
+    ".simulate._cli": ("simulate",),
+    "._demo": ("demo",),
+}
 
-def build_parser() -> argparse.ArgumentParser:
+
+def build_parser(command: str | None = None) -> argparse.ArgumentParser:
+    """The ``swa-imesh`` parser: every sub-command, or only `command`'s group when it
+    names one (the same parser for that command, without importing the others)."""
     parser = argparse.ArgumentParser(
         prog="swa-imesh",
         description="Image -> SWA segmentation -> IMESH finite-element mesh.",
     )
     sub = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
-    add_segmentation_commands(sub)
-    add_mesh_commands(sub)
-    add_simulate_commands(sub)
-    from ._demo import add_command as add_demo_command
-
-    add_demo_command(sub)
+    groups = [m for m, names in COMMAND_MODULES.items() if command in names]
+    for name in groups or COMMAND_MODULES:
+        module = importlib.import_module(name, __package__)
+        (getattr(module, "add_commands", None) or module.add_command)(sub)
     return parser
 
 
 def main(argv: list[str] | None = None) -> int:
     """Run the command line; return the exit status."""
-    parser = build_parser()
+    argv = sys.argv[1:] if argv is None else list(argv)
+    parser = build_parser(argv[0] if argv else None)
     args = parser.parse_args(argv)
     prefix = f"swa-imesh {args.command}"
 

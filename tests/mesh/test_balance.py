@@ -84,3 +84,18 @@ def test_n_dimensional_and_stronger_balance_costs_leaves(d):
 def test_bad_connectivity():
     with pytest.raises(ValueError, match="connectivity must be 1..2"):
         balance_tree(build_tree(np.ones((4, 4), int)), connectivity=3)
+
+
+@pytest.mark.parametrize("d", [1, 2, 3])
+def test_dilate_is_scipy_binary_dilation(d):
+    """The numpy dilation the balance uses (no scipy.ndimage import) against scipy's."""
+    from scipy import ndimage
+
+    from napari_swa_imesh.mesh._balance import _dilate
+
+    rng = np.random.default_rng(d)
+    for _ in range(20):
+        grid = rng.random(tuple(rng.integers(1, 9, d))) < 0.15
+        for c in range(1, d + 1):
+            expected = ndimage.binary_dilation(grid, ndimage.generate_binary_structure(d, c))
+            np.testing.assert_array_equal(_dilate(grid, c), expected)

@@ -96,3 +96,29 @@ def test_big_leaves_painted_one_by_one_give_the_same_groups(monkeypatch, big_lea
     monkeypatch.setattr(_leaf_facets, "_BIG_LEAF", big_leaf)
     assert template_group_rows(mesh) is not None
     _assert_same(facet_groups(mesh), expected)
+
+
+@pytest.mark.parametrize("d", [2, 3])
+@pytest.mark.parametrize("longest", [1, 1 << 9, (1 << 9) + 1, 1 << 20])
+def test_lattice_det_is_exact_in_int32_and_int64(d, longest):
+    """The orientation determinant of lattice corners, in int32 for short edges (no
+    casts) and int64 beyond, equals the exact integer one; edges of exactly 2**9,
+    all of one sign, are the int32 worst case."""
+    from napari_swa_imesh.mesh._leaf_facets import _lattice_det
+
+    rng = np.random.default_rng(longest)
+    base = rng.integers(1 << 21, 1 << 22, (500, 1, d))
+    edges = rng.integers(-longest, longest + 1, (500, d, d))
+    edges[:4] = longest * np.array([1, -1, 1, -1])[:, None, None] * np.ones((d, d), int)
+    edges[4:8] = longest * (2 * (rng.random((4, d, d)) < 0.5) - 1)
+    edges[8] = longest * np.array([[1, 1, -1], [1, -1, 1], [-1, 1, 1]])[:d, :d]
+    corners = np.concatenate([base, base + edges], axis=1).astype(np.int32)  # (n, d+1, d)
+    p = [[np.ascontiguousarray(corners[:, k, a]) for a in range(d)] for k in range(d + 1)]
+    e = edges.astype(object)                                    # Python integers
+    exact = (e[:, 0, 0] * e[:, 1, 1] - e[:, 0, 1] * e[:, 1, 0] if d == 2 else
+             e[:, 0, 0] * (e[:, 1, 1] * e[:, 2, 2] - e[:, 1, 2] * e[:, 2, 1])
+             + e[:, 0, 1] * (e[:, 1, 2] * e[:, 2, 0] - e[:, 1, 0] * e[:, 2, 2])
+             + e[:, 0, 2] * (e[:, 1, 0] * e[:, 2, 1] - e[:, 1, 1] * e[:, 2, 0]))
+    got = _lattice_det(p)
+    assert got.tolist() == exact.tolist()
+    assert got.dtype == (np.int32 if longest <= 1 << 9 else np.int64)

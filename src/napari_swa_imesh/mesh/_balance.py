@@ -26,8 +26,9 @@ its own size next to it was split.
 
 from __future__ import annotations
 
+import itertools
+
 import numpy as np
-from scipy import ndimage
 
 from .._tree import RegionTree
 
@@ -49,11 +50,24 @@ def _upsample(grid: np.ndarray) -> np.ndarray:
     return view.reshape(tuple(2 * n for n in grid.shape)) if d else grid
 
 
+def _dilate(grid: np.ndarray, connectivity: int) -> np.ndarray:
+    """`grid` dilated by one step to the neighbours sharing a face, (with connectivity 2)
+    an edge or (connectivity d) a corner, nothing beyond the border: scipy's
+    ``binary_dilation`` with ``generate_binary_structure(d, connectivity)``, whose import
+    took longer than the dilations of a whole mesh."""
+    out = grid.copy()
+    for step in itertools.product((-1, 0, 1), repeat=grid.ndim):
+        if not 0 < np.count_nonzero(step) <= connectivity:
+            continue
+        to = tuple(slice(max(s, 0), n + min(s, 0)) for s, n in zip(step, grid.shape))
+        source = tuple(slice(max(-s, 0), n + min(-s, 0)) for s, n in zip(step, grid.shape))
+        out[to] |= grid[source]
+    return out
+
+
 def _split_grids(tree: RegionTree, connectivity: int) -> list[np.ndarray | None]:
     """split[k] for k = 0..top (split[0] is None: pixels are never split)."""
-    d = tree.ndim
     top = tree.top_level
-    structure = ndimage.generate_binary_structure(d, connectivity)
     split: list[np.ndarray | None] = [None]
     for k in range(1, top + 1):
         grid_shape = tuple(n >> k for n in tree.padded_shape)
@@ -63,7 +77,7 @@ def _split_grids(tree: RegionTree, connectivity: int) -> list[np.ndarray | None]
         grid[tuple((tree.origin[sel] >> k).T)] = True
         below = split[k - 1]
         if below is not None and below.any():
-            grid |= _any_children(ndimage.binary_dilation(below, structure))
+            grid |= _any_children(_dilate(below, connectivity))
         split.append(grid)
     return split
 

@@ -24,7 +24,7 @@ import math
 
 import numpy as np
 
-from ._quality import _corner_det
+from ._quality import _edge_det
 from ._types import Mesh
 
 __all__ = ["material_codes", "template_group_rows"]
@@ -128,6 +128,16 @@ def _paint(coords, cells, code, leaf, level, shape, dtype) -> np.ndarray | None:
     return image
 
 
+def _lattice_det(p: list) -> np.ndarray:
+    """det of int32 lattice corners ``p[k][a]``, exact: in int32 when no edge is longer than
+    2**9 (each of the six products then below 2**27, their sum below 2**30; no casts),
+    else in int64. Edges are exact in int32: coordinates lie in [0, 2**30)."""
+    e = [[p[k][a] - p[0][a] for a in range(len(p[0]))] for k in range(1, len(p))]
+    if max(max(int(x.max()), -int(x.min())) for row in e for x in row) > 1 << 9:
+        e = [[x.astype(np.int64) for x in row] for row in e]
+    return _edge_det(e)
+
+
 def template_group_rows(mesh: Mesh, *, signs: bool = False):
     """The group facets of a template mesh as (owner, opposite, across), or None.
 
@@ -181,7 +191,7 @@ def template_group_rows(mesh: Mesh, *, signs: bool = False):
         n = len(cc)
         p = [[x[cc[:, j]] for x in axes] for j in range(d + 1)]   # p[corner][axis]: (n,)
         if signs:
-            det = _corner_det([[x.astype(np.int64) for x in corner] for corner in p])
+            det = _lattice_det(p)
             np.less(det, 0, out=negative[start:start + n])
         shift = level[start:start + _CHUNK].astype(np.int32)
         # which faces of its leaf (aligned to its side) each corner lies on: bit 2a for

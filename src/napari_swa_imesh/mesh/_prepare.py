@@ -209,7 +209,10 @@ class ExportMesh:
         if not self.any_flip:
             return cells
         flip = self.flip[rows]
-        cells[flip, 0], cells[flip, 1] = cells[flip, 1], cells[flip, 0].copy()
+        # a masked copy: boolean fancy indexing of the columns took twice as long
+        first = cells[:, 0].copy()
+        np.copyto(cells[:, 0], cells[:, 1], where=flip)
+        np.copyto(cells[:, 1], first, where=flip)
         return cells
 
     def facet_nodes(self, group: FileFacets) -> np.ndarray:

@@ -87,7 +87,11 @@ def _corner_det(p: list) -> np.ndarray:
     The closed form on flat arrays: gathering coordinates axis by axis keeps chunks of
     elements in cache (callers at volume size use it instead of ``signed_volumes``).
     """
-    e = [[p[k][a] - p[0][a] for a in range(len(p[0]))] for k in range(1, len(p))]
+    return _edge_det([[p[k][a] - p[0][a] for a in range(len(p[0]))] for k in range(1, len(p))])
+
+
+def _edge_det(e: list) -> np.ndarray:
+    """det of the edge vectors ``e[k][a]`` (d = 2, 3), the closed form in their dtype."""
     if len(e) == 2:
         return e[0][0] * e[1][1] - e[0][1] * e[1][0]
     return (e[0][0] * (e[1][1] * e[2][2] - e[1][2] * e[2][1])
