@@ -27,7 +27,10 @@ Without a boundary count the worst case is used.
 The constants were fitted to peak RSS (``ru_maxrss`` of a fresh process running
 ``swa-imesh mesh ... --json``) on brain-like and random-blob uint8 volumes of 64^3 to
 256^3 and on a voxel-noise volume, then rounded up so that the estimate lies above every
-measured peak (``benchmarks/bench_mesh_memory.py`` repeats the measurement).
+measured peak (``benchmarks/bench_mesh_memory.py`` repeats the measurement). Refitted
+after the streamed writers and chunked checks: 120-140 bytes per element measured at 96^3
+and 128^3, refine 0 and 1 (peaks 0.35-0.59 of the estimate on brain and blob volumes;
+128^3 refine 1: 3.2 GB against 7.0 GB, where it was 15 GB before and refused).
 """
 
 from __future__ import annotations
@@ -50,10 +53,10 @@ VOXEL_BYTES = 16
 CHECK_VOXEL_BYTES = 12
 #: Per balanced leaf: two trees (origin, level, label), site flags and keys.
 LEAF_BYTES = 160
-#: Per element while meshing and writing (vertex ids, per-cell data, vertices, meshio's
-#: copies), and added by the checks (sorted ids, facets, volumes).
-ELEMENT_BYTES = 260
-CHECK_ELEMENT_BYTES = 50  # facet keys (4 x int64), the sort's buffer, volume signs
+#: Per element while meshing and writing (vertex ids, per-cell data, vertices, the
+#: streamed writer's blocks), and added by the checks (sorted ids, facets, volumes).
+ELEMENT_BYTES = 150
+CHECK_ELEMENT_BYTES = 40  # facet keys (4 x int64), the sort's buffer, volume signs
 #: Balanced leaves and elements per boundary voxel, ``a * top_level + b`` (at least 1
 #: and d!): every level between the boundary and the roots adds a graded layer, so the
 #: ratios grow with the image (brain-like volumes, elements per boundary voxel: 12.5 at
