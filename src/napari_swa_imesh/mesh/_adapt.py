@@ -10,7 +10,6 @@ and the quality bound of the lattice all hold as for any other IMESH mesh.
 
 from __future__ import annotations
 
-import itertools
 import time
 
 import numpy as np
@@ -18,7 +17,8 @@ import numpy as np
 from .._tree import RegionTree
 from ._balance import balance_tree
 from ._imesh import _mesh_arguments, _mesh_tree, _names
-from ._lattice import MAX_REFINE, Lattice, lattice_tree, split_leaves
+from ._lattice import (MAX_REFINE, Lattice, finer_tree, lattice_tree, split_box_faces,
+                       split_leaves)
 from ._types import Mesh
 
 __all__ = ["refine_marked"]
@@ -120,19 +120,14 @@ def _refine_marked(labels, mesh: Mesh, marked: np.ndarray, tree: RegionTree | No
 
 def _split_once(bal: RegionTree, split: np.ndarray, periodic: bool) -> RegionTree:
     """`bal` on the lattice twice as fine, each leaf in `split` cut once into 2^d."""
-    d = bal.ndim
-    corners = np.array(list(itertools.product((0, 1), repeat=d)), dtype=np.int64)
-    origin, level = bal.origin << 1, (bal.level + 1).astype(np.int8)
-    half = np.left_shift(np.int64(1), level[split].astype(np.int64) - 1)
-    kids = (origin[split][:, None, :] + corners[None] * half[:, None, None]).reshape(-1, d)
-    finer = RegionTree(
-        np.concatenate([origin[~split], kids]),
-        np.concatenate([level[~split], np.repeat(level[split] - 1, len(corners))]).astype(np.int8),
-        np.concatenate([bal.label[~split], np.repeat(bal.label[split], len(corners))]),
-        tuple(n << 1 for n in bal.shape), tuple(n << 1 for n in bal.padded_shape),
-        bal.top_level + 1)
-    if periodic:  # box faces stay one cell thick, as lattice_tree made them
-        extent = np.asarray(finer.shape, dtype=np.int64)
-        finer = split_leaves(finer, lambda origin, size: (
-            (origin == 0) | (origin + size[:, None] >= extent)).any(axis=1))
-    return finer
+    finer = finer_tree(bal, 1)
+    strides = np.cumprod((1,) + finer.padded_shape[:0:-1])[::-1].astype(np.int64)
+
+    def key(origin: np.ndarray, size: np.ndarray) -> np.ndarray:
+        # (origin, side) of a leaf as one integer: a marked leaf's children have its
+        # corner but half its side, so they are not split again
+        return (origin @ strides) * 64 + np.log2(size).astype(np.int64)
+
+    marked = key(finer.origin[split], np.left_shift(1, finer.level[split].astype(np.int64)))
+    finer = split_leaves(finer, lambda origin, size: np.isin(key(origin, size), marked))
+    return split_box_faces(finer) if periodic else finer

@@ -283,21 +283,33 @@ def lattice_tree(lab: np.ndarray, lattice: Lattice, *, exclude: np.ndarray,
     del sub
     k = lattice.refine
     if k:
-        tree = RegionTree(tree.origin << k, (tree.level + k).astype(np.int8), tree.label,
-                          tuple(n << k for n in tree.shape),
-                          tuple(n << k for n in tree.padded_shape), tree.top_level + k)
+        tree = finer_tree(tree, k)
         faces = _InterfaceFaces(lab, exclude)
         cells = np.asarray(lattice.cells_per_voxel, dtype=np.int64)
         tree = split_leaves(tree, lambda origin, size: faces.touches(origin, size, cells))
     if periodic:
-        extent = np.asarray(tree.shape, dtype=np.int64)
-        tree = split_leaves(tree, lambda origin, size: (
-            (origin == 0) | (origin + size[:, None] >= extent)).any(axis=1))
+        tree = split_box_faces(tree)
     if max_size is not None:
         diagonal = float(np.linalg.norm(lattice.step))
         # a leaf of side 2^l cells has edges up to 2^l diagonals long (its Kuhn diagonal)
         tree = split_leaves(tree, lambda origin, size: size * diagonal > max_size)
     return tree
+
+
+def finer_tree(tree: RegionTree, k: int) -> RegionTree:
+    """The same leaves on a lattice 2^k times finer (each leaf 2^k cells wider)."""
+    return RegionTree(tree.origin << k, (tree.level + k).astype(np.int8), tree.label,
+                      tuple(n << k for n in tree.shape),
+                      tuple(n << k for n in tree.padded_shape), tree.top_level + k)
+
+
+def split_box_faces(tree: RegionTree) -> RegionTree:
+    """Every leaf touching the image box split down to one lattice cell. Cells of one
+    cell are always cut the same way (Kuhn), so opposite faces of the box then carry the
+    same vertices and facets, translated: what periodic conditions need."""
+    extent = np.asarray(tree.shape, dtype=np.int64)
+    return split_leaves(tree, lambda origin, size: (
+        (origin == 0) | (origin + size[:, None] >= extent)).any(axis=1))
 
 
 def split_leaves(tree: RegionTree, want) -> RegionTree:
