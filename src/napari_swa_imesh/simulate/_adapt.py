@@ -26,6 +26,7 @@ import numpy as np
 
 from ..mesh._facets import paired_facets
 from ..mesh._lattice import MAX_REFINE
+from ..mesh._quality import signed_volumes
 from ..mesh._types import Mesh
 
 __all__ = ["AUTO", "P2_BUDGET", "THETA", "auto_settings", "doerfler", "flux_jump_indicator"]
@@ -58,29 +59,21 @@ def auto_settings(mesh: Mesh, order, adapt, from_labels: bool) -> tuple[int, int
     # periodic faces must match, so a finer lattice refines whole box faces: the default
     # does not adapt there (its cost is not the growth the budget counts)
     auto_adapts = can_adapt and room > 0 and not mesh.info.get("periodic")
-    notes = []
+    fits_adapted = auto_adapts and p2 * ADAPT_GROWTH <= P2_BUDGET
+    note = ""
     if order == AUTO:
-        if p2 * (ADAPT_GROWTH if (adapt == AUTO and auto_adapts) else 1.0) <= P2_BUDGET:
-            order = 2
-        elif p2 <= P2_BUDGET:
-            order = 2
-            if adapt == AUTO and auto_adapts:
-                notes.append(f"not adapted: it would pass the default's budget of "
-                             f"{P2_BUDGET:,} unknowns")
-                adapt = 0
-        else:
-            order = 1
-            notes.append(f"P2 would need about {p2:,.0f} unknowns, above the default's "
-                         f"budget of {P2_BUDGET:,}; pass order 2 to insist")
+        order = 2 if p2 <= P2_BUDGET else 1
         why = f"P{order}"
+        if order == 1:
+            note = (f"P2 would need about {p2:,.0f} unknowns, above the default's budget of "
+                    f"{P2_BUDGET:,}; pass order 2 to insist")
     else:
         why = f"P{order} (asked)"
     if adapt == AUTO:
         # the adaptive step belongs to P2's default, within the same budget
-        adapt = 1 if (auto_adapts and order == 2 and p2 * ADAPT_GROWTH <= P2_BUDGET) else 0
-        if not adapt and order == 2 and auto_adapts and not notes:
-            notes.append(f"not adapted: it would pass the default's budget of "
-                         f"{P2_BUDGET:,} unknowns")
+        adapt = 1 if (order == 2 and fits_adapted) else 0
+        if order == 2 and auto_adapts and not fits_adapted:
+            note = f"not adapted: it would pass the default's budget of {P2_BUDGET:,} unknowns"
     if adapt and not can_adapt:
         raise ValueError("adaptive refinement needs a label image to mesh again (a mesh "
                          "read from a file or coarsened cannot be refined): pass adapt=0, "
@@ -91,7 +84,7 @@ def auto_settings(mesh: Mesh, order, adapt, from_labels: bool) -> tuple[int, int
                          f"{MAX_REFINE - room}): lower refine or adapt.")
     if adapt:
         why += f", {adapt} adaptive step" + "s" * (adapt > 1)
-    return order, int(adapt), why + (f" ({'; '.join(notes)})" if notes else "")
+    return order, int(adapt), why + (f" ({note})" if note else "")
 
 
 def check_adapt(adapt) -> int | str:
@@ -132,8 +125,7 @@ def flux_jump_indicator(mesh: Mesh, fluxes) -> np.ndarray:
         measure = 0.5 * np.linalg.norm(cross, axis=1)
         normal = cross / (2 * measure)[:, None]
     weight = measure ** (1.0 / (d - 1)) * measure
-    corners = mesh.points[mesh.cells]
-    volume = np.abs(np.linalg.det(corners[:, 1:] - corners[:, :1])) / (2 if d == 2 else 6)
+    volume = signed_volumes(mesh.points, mesh.cells)    # positive: the mesh's orientation
     total = np.zeros(mesh.n_cells)
     for q in fluxes:
         q = np.asarray(q, dtype=float)[:, ::-1]  # x, y(, z) -> the points' array order
