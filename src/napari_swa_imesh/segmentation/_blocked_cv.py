@@ -37,30 +37,13 @@ def _halves(box) -> tuple[tuple[slice, ...], tuple[slice, ...]] | None:
     return tuple(first), tuple(second)
 
 
-class BoxCrops:
-    """Reads inside the sample boxes from the boxes' own crops, as the whole image would
-    give them (a store's fit holds no whole image)."""
-
-    def __init__(self, crops: list[np.ndarray], boxes) -> None:
-        self.crops, self.boxes = crops, list(boxes)
-        self.ndim = crops[0].ndim if crops else 0
-
-    def __getitem__(self, index: tuple) -> np.ndarray:
-        for crop, box in zip(self.crops, self.boxes):
-            if all(lo <= sl.start and sl.stop <= hi
-                   for sl, lo, hi in zip(index, box.start, box.stop)):
-                return crop[tuple(slice(sl.start - lo, sl.stop - lo)
-                                  for sl, lo in zip(index, box.start))]
-        raise IndexError(f"{index} lies in no sample box")
-
-
 def blocked_cv_errors(image: np.ndarray, samples: Samples, top: int, *,
                       per_material: int = 20000, seed: int = 0) -> dict[int, float] | None:
     """Blocked 2-fold CV error (percent) of the GM classifier of every level 0..`top`.
 
     Parameters
     ----------
-    image : (M, N[, P]) ndarray of float32, or BoxCrops
+    image : (M, N[, P]) ndarray of float32, or :class:`~._samples.BoxCrops`
         The standardised (and bias-corrected) image the model was fitted on (only its
         sample boxes are read).
     samples : Samples

@@ -38,12 +38,12 @@ import numpy as np
 from scipy import ndimage as ndi
 
 from ._bias import estimate_bias_field, upsample_linear
-from ._blocked_cv import BLOCKED_CV_METHOD, BoxCrops, blocked_cv_errors
+from ._blocked_cv import BLOCKED_CV_METHOD, blocked_cv_errors
 from ._classifiers import GaussianClassifier
 from ._model_base import SegmentationModel
 from ._mrf import argmax_first, potts_mean_field
 from ._res import res_statistics_unchecked
-from ._samples import Material, Samples
+from ._samples import BoxCrops, Material, Samples
 from ._tiles import majority_tiles
 from ._training import WholeImage
 from ._window_features import feature_levels, multiscale_features, window

@@ -32,7 +32,7 @@ import numpy as np
 
 from .._validation import as_image
 from ._moments import MOMENT_NAMES, moment_pyramid_unchecked
-from ._samples import Samples, check_box_contrast, check_contrast
+from ._samples import BoxCrops, Samples, check_box_contrast, check_contrast
 
 __all__ = ["ResStatistics", "res_statistics", "res_statistics_unchecked", "suggest_res",
            "plot_res", "plot_res_scales", "MOMENT_NAMES", "box_tile_moments"]
@@ -176,7 +176,9 @@ def res_statistics_of_boxes(image, samples: Samples, *, max_scale: int | None = 
             raise ValueError(f"a sample box of material {box.label} holds NaN or infinity; "
                              "move it onto valid pixels or fix the image.")
     check_box_contrast(crops)
-    return res_statistics_unchecked(image, samples, max_scale=max_scale)
+    # the statistics read the boxes only: from these crops, so each is read once
+    return res_statistics_unchecked(BoxCrops(crops, samples.boxes), samples,
+                                    max_scale=max_scale)
 
 
 def res_statistics_unchecked(img: np.ndarray, samples: Samples, *,

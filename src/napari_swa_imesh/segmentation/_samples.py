@@ -23,7 +23,8 @@ from .._tree import build_tree
 from .._validation import as_labels
 
 __all__ = ["Material", "SampleBox", "Samples", "load_samples", "save_samples",
-           "samples_from_truth", "window_scale", "check_contrast", "check_box_contrast"]
+           "samples_from_truth", "window_scale", "check_contrast", "check_box_contrast",
+           "BoxCrops"]
 
 
 @dataclass(frozen=True)
@@ -276,6 +277,24 @@ def check_contrast(image: np.ndarray, samples: "Samples | None" = None) -> None:
             "Check that the right file or channel was given.")
     if samples is not None:
         check_box_contrast([image[b.slices] for b in samples.boxes])
+
+
+class BoxCrops:
+    """Reads inside the sample boxes from the boxes' own crops, as the whole image would
+    give them: what needs only the boxes (a fit on a store, RES statistics of a large
+    image) holds no whole image and reads each box once."""
+
+    def __init__(self, crops: list[np.ndarray], boxes) -> None:
+        self.crops, self.boxes = crops, list(boxes)
+        self.ndim = crops[0].ndim if crops else 0
+
+    def __getitem__(self, index: tuple) -> np.ndarray:
+        for crop, box in zip(self.crops, self.boxes):
+            if all(lo <= sl.start and sl.stop <= hi
+                   for sl, lo, hi in zip(index, box.start, box.stop)):
+                return crop[tuple(slice(sl.start - lo, sl.stop - lo)
+                                  for sl, lo in zip(index, box.start))]
+        raise IndexError(f"{index} lies in no sample box")
 
 
 def check_box_contrast(crops) -> None:
