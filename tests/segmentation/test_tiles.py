@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 from scipy import ndimage as ndi
 
-from napari_swa_imesh.segmentation._bias import upsample_linear
+from napari_swa_imesh.segmentation._bias import upsample_linear, upsample_linear_at
 from napari_swa_imesh.segmentation._tiles import (
     block_mean,
     block_sum,
@@ -79,6 +79,20 @@ def test_zoom_is_the_old_linear_upsampling(small, shape):
     new = upsample_linear(a, shape)
     assert new.shape == shape and new.dtype == np.float32
     np.testing.assert_allclose(new, old_upsample_linear(a, shape), rtol=1e-6)  # 2 ulp
+
+
+@pytest.mark.parametrize("small,shape", [((8, 8), (256, 256)), ((5, 7, 6), (37, 50, 41)),
+                                         ((16, 9, 12), (64, 40, 47)), ((1, 5), (7, 9))])
+def test_upsampling_is_scipys_linear_zoom_and_blocks_are_its_slices(small, shape):
+    """The separable code is ndimage.zoom's grid-mode linear zoom (which it replaced for
+    speed), and a block or strided region equals that slice exactly (chunked runs)."""
+    a = (np.random.default_rng(1).random(small) + 0.5).astype(np.float32)
+    whole = upsample_linear(a, shape)
+    zoom = ndi.zoom(a, [n / m for n, m in zip(shape, small)], order=1, mode="nearest",
+                    grid_mode=True, prefilter=False)
+    np.testing.assert_allclose(whole, zoom, rtol=3e-7)
+    region = [np.arange(n // 3, n - 1) for n in shape[:-1]] + [np.arange(0, shape[-1], 3)]
+    np.testing.assert_array_equal(upsample_linear_at(a, shape, region), whole[np.ix_(*region)])
 
 
 @pytest.mark.parametrize("shape", SHAPES)

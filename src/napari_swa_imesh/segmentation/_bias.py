@@ -28,13 +28,18 @@ _NONE = 1e-30           # floor of that floor when every class mean is 0
 INLIER_GAP = 0.5        # inlier: local mean within this fraction of the smallest class gap
 #                         (0.5 against 0.25: +0.01 GM/WM Dice on the dev anatomy split)
 LOCAL_WINDOW = 5        # px per axis of that local mean (2 px reach)
+_SLAB = 1 << 20         # float64 values per slab of an upsampling (8 MB)
 
 
 def upsample_linear(small: np.ndarray, shape: tuple[int, ...]) -> np.ndarray:
     """Linear interpolation of a coarse grid onto `shape`, cell centre to cell centre
-    (``grid_mode``), edge values held beyond the outer centres; float32 in, float32 out."""
-    zoom = [n / m for n, m in zip(shape, small.shape)]
-    return ndi.zoom(small, zoom, order=1, mode="nearest", grid_mode=True, prefilter=False)
+    (``grid_mode``), edge values held beyond the outer centres; float32 in, float32 out.
+
+    Equal to ``scipy.ndimage.zoom(small, ..., order=1, mode="nearest", grid_mode=True)``
+    (tests), at about a third of its time on a full-size 3-D field; and to
+    :func:`upsample_linear_at` over the whole grid exactly (the same code).
+    """
+    return upsample_linear_at(small, shape, [np.arange(n) for n in shape])
 
 
 def estimate_bias_field(image, labels, class_means: dict[int, float], *,
@@ -124,14 +129,28 @@ def upsample_linear_at(small: np.ndarray, shape: tuple[int, ...], region) -> np.
     Returns
     -------
     ndarray of float32
-        Equal to the slice of :func:`upsample_linear` to float32 rounding (separable
-        weights, the same grid-mode coordinates and held edges).
+        Separable linear weights in float64, the same grid-mode coordinates and held
+        edges as :func:`upsample_linear` (which is this over the whole grid).
     """
-    out = np.asarray(small, np.float64)
-    for axis, (m, n, idx) in enumerate(zip(small.shape, shape, region)):
+    small = np.asarray(small, np.float64)
+    weights = []
+    for m, n, idx in zip(small.shape, shape, region):
         x = np.clip((np.asarray(idx) + 0.5) * (m / n) - 0.5, 0, m - 1)
         lo = np.floor(x).astype(np.intp)
-        hi = np.minimum(lo + 1, m - 1)
-        w = (x - lo).reshape((-1,) + (1,) * (small.ndim - axis - 1))
+        weights.append((lo, np.minimum(lo + 1, m - 1), x - lo))
+    # the last axes first, while the array is small; the first axis last, in slabs of
+    # whole rows (a gather of contiguous rows, and no full-size float64 temporary)
+    out = small
+    for axis in range(small.ndim - 1, 0, -1):
+        lo, hi, w = weights[axis]
+        w = w.reshape((-1,) + (1,) * (small.ndim - axis - 1))
         out = np.take(out, lo, axis) * (1 - w) + np.take(out, hi, axis) * w
-    return out.astype(np.float32)
+    lo, hi, w = weights[0]
+    result = np.empty((lo.size,) + out.shape[1:], np.float32)
+    row = max(1, int(np.prod(out.shape[1:])))
+    step = max(1, _SLAB // row)
+    w = w.reshape((-1,) + (1,) * (small.ndim - 1))
+    for i in range(0, lo.size, step):
+        sl = slice(i, i + step)
+        result[sl] = out[lo[sl]] * (1 - w[sl]) + out[hi[sl]] * w[sl]
+    return result
