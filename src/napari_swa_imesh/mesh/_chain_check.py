@@ -37,6 +37,7 @@ import math
 import numpy as np
 
 from .._tree import RegionTree
+from ._packed import corners, pack_points
 from ._quality import _edge_det
 
 __all__ = ["lattice_checks"]
@@ -44,27 +45,6 @@ __all__ = ["lattice_checks"]
 _CELLS_PER_CHUNK = 1 << 16
 _SEED = 0x5EED_C4A1                  # fixed: the same mesh always gets the same verdict
 _MASK = (1 << 64) - 1
-
-
-def _packed(points: np.ndarray, shape) -> tuple[np.ndarray, int] | None:
-    """Integer points packed in one int64 per vertex (axis 0 highest), and the bits of a
-    field; None when a point is not an integer in ``[0, 2**bits)``."""
-    d = points.shape[1]
-    bits = 63 // d
-    if not len(points) or max(shape) >= 1 << bits:
-        return None
-    packed = np.zeros(len(points), dtype=np.int64)
-    for a in range(d):
-        x = points[:, a]
-        lo, hi = float(x.min()), float(x.max())
-        if not (0 <= lo and hi < 1 << bits):
-            return None
-        xi = x.astype(np.int64)
-        if not np.array_equal(xi, x):          # a NaN, or a point off the lattice
-            return None
-        packed <<= bits
-        packed |= xi
-    return packed, bits
 
 
 def _near_excluded(lab: np.ndarray, exclude: np.ndarray, leaf_map: np.ndarray,
@@ -100,8 +80,8 @@ def lattice_checks(points: np.ndarray, cells: np.ndarray, material: np.ndarray,
     """
     d = lab.ndim
     m = len(cells)
-    found = _packed(points, lab.shape) if m else None
-    if found is None:
+    found = pack_points(points) if m else None
+    if found is None or max(lab.shape) >= 1 << found[1]:
         return None
     packed, bits = found
     shape = lab.shape
@@ -116,14 +96,11 @@ def lattice_checks(points: np.ndarray, cells: np.ndarray, material: np.ndarray,
     leaf_volume = np.zeros(len(tree))
     used = np.zeros(len(points), dtype=bool)
     total, min_det, chain, off_box = 0, None, 0, 0
-    field = (1 << bits) - 1
     for start in range(0, m, _CELLS_PER_CHUNK):
         ids = cells[start:start + _CELLS_PER_CHUNK]
         n = len(ids)
         used[ids] = True
-        q = packed[ids.T]                                # (d+1, n): rows contiguous
-        p = [[(q[k] >> (bits * (d - 1 - a))) & field for a in range(d)] for k in range(d + 1)]
-        del q
+        p = corners(packed, ids, bits, d)
         det = _edge_det([[p[k][a] - p[0][a] for a in range(d)] for k in range(1, d + 1)])
         low = int(det.min())
         if low <= 0:

@@ -24,6 +24,7 @@ import math
 
 import numpy as np
 
+from ._packed import corners, pack_points
 from ._quality import _edge_det
 from ._types import Mesh
 
@@ -177,7 +178,8 @@ def template_group_rows(mesh: Mesh, *, signs: bool = False):
     image = _paint(coords, cells, code, leaf, level, shape, dtype)
     if image is None:
         return None
-    axes = [np.ascontiguousarray(coords[:, a]) for a in range(d)]
+    packed = pack_points(coords)
+    axes = [np.ascontiguousarray(coords[:, a]) for a in range(d)] if packed is None else []
     del coords
     bound = np.asarray(shape, dtype=np.int64)
     strides = np.array([math.prod(shape[a + 1:]) for a in range(d)], dtype=np.int64)
@@ -189,7 +191,8 @@ def template_group_rows(mesh: Mesh, *, signs: bool = False):
     for start in range(0, m, _CHUNK):
         cc = cells[start:start + _CHUNK]
         n = len(cc)
-        p = [[x[cc[:, j]] for x in axes] for j in range(d + 1)]   # p[corner][axis]: (n,)
+        p = (corners(*packed[:1], cc, packed[1], d) if packed is not None   # p[corner][axis]
+             else [[x[cc[:, j]] for x in axes] for j in range(d + 1)])
         if signs:
             det = _lattice_det(p)
             np.less(det, 0, out=negative[start:start + n])
@@ -221,14 +224,17 @@ def template_group_rows(mesh: Mesh, *, signs: bool = False):
                 return None
             ax, out = _FACE_AXIS[bits], _FACE_STEP[bits]
             # the lattice cell across the face: one step out along the face's axis, the
-            # facet's centroid (strictly inside the neighbour's face) along the others
+            # facet's lowest corner along the others (the facet has an extent along
+            # each, and its box lies in one neighbour's face: the templates cut a face
+            # as its smaller neighbours do)
             flat = np.zeros(len(hit), dtype=np.int64)
             inside = np.ones(len(hit), dtype=bool)
             for a in range(d):
-                total = p[rest[0]][a][hit].astype(np.int64)
+                first = p[rest[0]][a][hit].astype(np.int64)
+                low = first.copy()
                 for j in rest[1:]:
-                    total += p[j][a][hit]
-                cell = np.where(ax == a, p[rest[0]][a][hit] + out, total // d)
+                    np.minimum(low, p[j][a][hit], out=low)
+                cell = np.where(ax == a, first + out, low)
                 inside &= (cell >= 0) & (cell < bound[a])
                 flat += cell * strides[a]
             across = np.full(len(hit), OUTSIDE, dtype=np.int64)
