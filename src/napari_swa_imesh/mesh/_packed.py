@@ -41,9 +41,10 @@ def pack_points(coords: np.ndarray) -> tuple[np.ndarray, int] | None:
     return packed, bits
 
 
-def corners(packed: np.ndarray, ids: np.ndarray, bits: int, d: int) -> list:
-    """``p[k][a]``: coordinate `a` of corner `k` of the cells `ids` (n, d+1), int64 (n,)."""
+def corners(packed: np.ndarray, ids: np.ndarray, bits: int, d: int, dtype=np.int64) -> list:
+    """``p[k][a]``: coordinate `a` of corner `k` of the cells `ids` (n, d+1), (n,) of
+    `dtype` (int32 holds every field: half the bytes for the arithmetic that follows)."""
     q = packed[ids.T]                       # (d+1, n): one gather, rows contiguous
     field = (1 << bits) - 1
-    return [[(q[k] >> (bits * (d - 1 - a))) & field for a in range(d)]
-            for k in range(d + 1)]
+    return [[((q[k] >> (bits * (d - 1 - a))) & field).astype(dtype, copy=False)
+             for a in range(d)] for k in range(d + 1)]
