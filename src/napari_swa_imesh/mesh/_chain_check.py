@@ -37,7 +37,7 @@ import math
 import numpy as np
 
 from .._tree import RegionTree
-from ._packed import corners, pack_points
+from ._packed import pack_points, unpack
 from ._quality import _edge_det
 
 __all__ = ["lattice_checks"]
@@ -90,8 +90,14 @@ def lattice_checks(points: np.ndarray, cells: np.ndarray, material: np.ndarray,
                              dtype=np.int32 if len(tree) < 2**31 else np.int64).reshape(-1)
     near = _near_excluded(lab, exclude, leaf_map, len(tree))
     lab_flat = lab.reshape(-1)
-    x = np.random.default_rng(_SEED).integers(0, 1 << 64, size=len(points), dtype=np.uint64,
-                                              endpoint=False)
+    # per vertex, its packed corner and its random value side by side (16 bytes): one
+    # gather per corner brings both
+    both = np.empty((len(points), 2), dtype=np.int64)
+    both[:, 0] = packed
+    both[:, 1] = np.random.default_rng(_SEED).integers(0, 1 << 64, size=len(points),
+                                                       dtype=np.uint64).view(np.int64)
+    both = both.view(np.complex128).reshape(-1)
+    del packed
     rest = [[j for j in range(d + 1) if j != k] for k in range(d + 1)]
     leaf_volume = np.zeros(len(tree))
     used = np.zeros(len(points), dtype=bool)
@@ -100,7 +106,9 @@ def lattice_checks(points: np.ndarray, cells: np.ndarray, material: np.ndarray,
         ids = cells[start:start + _CELLS_PER_CHUNK]
         n = len(ids)
         used[ids] = True
-        p = corners(packed, ids, bits, d)
+        col = np.ascontiguousarray(ids.T)                # (d+1, n)
+        gathered = both[col].view(np.int64)              # (d+1, 2n): corner, value, ...
+        p = unpack(gathered[:, 0::2], bits, d)
         det = _edge_det([[p[k][a] - p[0][a] for a in range(d)] for k in range(1, d + 1)])
         low = int(det.min())
         if low <= 0:
@@ -133,17 +141,20 @@ def lattice_checks(points: np.ndarray, cells: np.ndarray, material: np.ndarray,
         leaf_volume[first:first + len(part)] += part
         # the chain: facet k (without corner k) enters with sign (-1)^k times the parity
         # of its corners' order
-        terms = _facet_products(list(x[ids.T]))
-        col = [ids[:, k] for k in range(d + 1)]
+        terms = _facet_products(list(gathered[:, 1::2].view(np.uint64)))
+        del gathered
         greater = {(i, j): col[i] > col[j] for i in range(d + 1) for j in range(i + 1, d + 1)}
+        odds = []
         for k in range(d + 1):
             pairs = [greater[pair] for pair in greater if k not in pair]
             odd = pairs[0] ^ pairs[1] ^ pairs[2] if d == 3 else pairs[0].copy()
             if k & 1:
                 np.logical_not(odd, out=odd)
-            np.negative(terms[k], out=terms[k], where=odd)
-        for t in terms:
-            chain += int(t.sum(dtype=np.uint64))
+            # the sum less twice the negative terms (a dot with 0/1 is one pass; a
+            # masked negation or sum took five times as long)
+            chain += int(terms[k].sum(dtype=np.uint64)) - 2 * int(
+                np.dot(terms[k], odd.astype(np.uint64)))
+            odds.append(odd)
         # less the facets allowed to stay single, found among elements on the box or in
         # a leaf next to an excluded pixel
         cand = np.flatnonzero(on_box | near[leaf])
@@ -152,7 +163,10 @@ def lattice_checks(points: np.ndarray, cells: np.ndarray, material: np.ndarray,
                 single, exterior = _may_stay_single(
                     [[p[j][a][cand] for a in range(d)] for j in rest[k]],
                     [p[k][a][cand] for a in range(d)], lab, exclude)
-                chain -= int(terms[k][cand[single]].sum(dtype=np.uint64))
+                single = cand[single]
+                term = terms[k][single]
+                np.negative(term, out=term, where=odds[k][single])
+                chain -= int(term.sum(dtype=np.uint64))
                 off_box += exterior
         chain &= _MASK
     if chain:

@@ -98,9 +98,12 @@ def _leaf_origins(coords: np.ndarray, cells: np.ndarray, level: np.ndarray) -> n
 def _leaf_boxes(coords, cells, leaf, level, shape):
     """One element of each leaf (any), the leaf's lowest corner and level; None when a
     leaf leaves the lattice."""
-    rep = np.full(int(leaf.max()) + 1, -1, dtype=np.int64)
-    rep[leaf] = np.arange(len(leaf))
-    rep = rep[rep >= 0]
+    if (leaf[1:] >= leaf[:-1]).all():     # the mesher's order: the last of each run
+        rep = np.flatnonzero(np.append(leaf[1:] != leaf[:-1], True))
+    else:                                  # the last of each leaf, as a scatter leaves it
+        rep = np.full(int(leaf.max()) + 1, -1, dtype=np.int64)
+        rep[leaf] = np.arange(len(leaf))
+        rep = rep[rep >= 0]
     lev = level[rep]
     origin = _leaf_origins(coords, cells[rep], lev).astype(np.int64)
     if (origin < 0).any() or ((origin + (1 << lev.astype(np.int64))[:, None])

@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["pack_points", "corners"]
+__all__ = ["pack_points", "corners", "unpack"]
 
 
 def pack_points(coords: np.ndarray) -> tuple[np.ndarray, int] | None:
@@ -44,7 +44,11 @@ def pack_points(coords: np.ndarray) -> tuple[np.ndarray, int] | None:
 def corners(packed: np.ndarray, ids: np.ndarray, bits: int, d: int, dtype=np.int64) -> list:
     """``p[k][a]``: coordinate `a` of corner `k` of the cells `ids` (n, d+1), (n,) of
     `dtype` (int32 holds every field: half the bytes for the arithmetic that follows)."""
-    q = packed[ids.T]                       # (d+1, n): one gather, rows contiguous
+    return unpack(packed[ids.T], bits, d, dtype)    # (d+1, n): one gather, rows contiguous
+
+
+def unpack(q: np.ndarray, bits: int, d: int, dtype=np.int64) -> list:
+    """``p[k][a]`` from the packed corners `q` (d+1, n)."""
     field = (1 << bits) - 1
     return [[((q[k] >> (bits * (d - 1 - a))) & field).astype(dtype, copy=False)
              for a in range(d)] for k in range(d + 1)]
