@@ -85,19 +85,10 @@ def _lattice_coords(mesh: Mesh) -> tuple[np.ndarray, tuple[int, ...]] | None:
     return coords, shape
 
 
-def _leaf_origins(coords: np.ndarray, cells: np.ndarray, level: np.ndarray) -> np.ndarray:
-    """(n, d) lowest corner of the leaf of each cell: leaves are aligned to their side,
-    and a simplex of positive volume has a corner below the leaf's far faces."""
-    low = coords[cells[:, 0]]
-    for k in range(1, cells.shape[1]):
-        np.minimum(low, coords[cells[:, k]], out=low)
-    shift = level.astype(np.int32)[:, None]
-    return (low >> shift) << shift
-
-
-def _leaf_boxes(coords, cells, leaf, level, shape):
+def _leaf_boxes(packed, axes, cells, leaf, level, shape):
     """One element of each leaf (any), the leaf's lowest corner and level; None when a
-    leaf leaves the lattice."""
+    leaf leaves the lattice. Leaves are aligned to their side, and a simplex of positive
+    volume has a corner below the leaf's far faces: the lowest corner, rounded down."""
     if (leaf[1:] >= leaf[:-1]).all():     # the mesher's order: the last of each run
         rep = np.flatnonzero(np.append(leaf[1:] != leaf[:-1], True))
     else:                                  # the last of each leaf, as a scatter leaves it
@@ -105,9 +96,11 @@ def _leaf_boxes(coords, cells, leaf, level, shape):
         rep[leaf] = np.arange(len(leaf))
         rep = rep[rep >= 0]
     lev = level[rep]
-    origin = _leaf_origins(coords, cells[rep], lev).astype(np.int64)
-    if (origin < 0).any() or ((origin + (1 << lev.astype(np.int64))[:, None])
-                              > np.asarray(shape)).any():
+    p = _gather(packed, axes, cells[rep], len(shape))
+    shift = lev.astype(np.int64)
+    origin = np.stack([(np.minimum.reduce([c[a] for c in p]).astype(np.int64) >> shift) << shift
+                       for a in range(len(shape))], axis=1)
+    if (origin < 0).any() or ((origin + (1 << shift)[:, None]) > np.asarray(shape)).any():
         return None
     return rep, origin, lev
 
@@ -221,7 +214,10 @@ def template_group_rows(mesh: Mesh, *, signs: bool = False):
     materials, code = material_codes(mesh.material)
     dtype = code.dtype
     cells, leaf, level = mesh.cells, cd["leaf"], cd["level"]
-    boxes = _leaf_boxes(coords, cells, leaf, level, shape)
+    packed = pack_points(coords)
+    axes = [np.ascontiguousarray(coords[:, a]) for a in range(d)] if packed is None else []
+    del coords
+    boxes = _leaf_boxes(packed, axes, cells, leaf, level, shape)
     if boxes is None:
         return None
     leaf_code = code[boxes[0]]
@@ -233,9 +229,6 @@ def template_group_rows(mesh: Mesh, *, signs: bool = False):
     leaf_code_of = np.zeros(len(worth), dtype=dtype)
     leaf_code_of[leaf[boxes[0]]] = leaf_code
     del boxes
-    packed = pack_points(coords)
-    axes = [np.ascontiguousarray(coords[:, a]) for a in range(d)] if packed is None else []
-    del coords
     bound = np.asarray(shape, dtype=np.int64)
     strides = np.array([math.prod(shape[a + 1:]) for a in range(d)], dtype=np.int64)
     owners, opposites, acrosses = [], [], []
