@@ -54,11 +54,17 @@ def test_same_verdict_as_the_full_check_and_taken(dim, spy):
                                       full=True), (name, options)
 
 
-def test_periodic_and_refined_meshes_agree_with_the_full_check():
-    lab = LABELS[3]
-    for options in ({"periodic": True}, {"refine": 1}, {"max_size": 2.0}):
+@pytest.mark.parametrize("dim", [2, 3])
+def test_periodic_refined_and_capped_meshes_agree_with_the_full_check(dim, spy):
+    """--refine puts points at 2**-K pixel: checked on that finer lattice, no sort."""
+    lab = LABELS[dim]
+    for options in ({"periodic": True}, {"refine": 1}, {"refine": 2, "exclude": (0,)},
+                    {"max_size": 2.0}, {"refine": 1, "spacing": (0.5, 2.0, 1.0)[:dim]}):
         mesh = mesh_labels(lab, **options)
-        assert check_mesh(mesh, lab) == check_mesh(mesh, lab, full=True)
+        spy.clear()
+        fast = check_mesh(mesh, lab, exclude=options.get("exclude", ()))
+        assert fast.all_passed and spy[-1] is not None, options
+        assert fast == check_mesh(mesh, lab, exclude=options.get("exclude", ()), full=True)
 
 
 @pytest.fixture(params=[2, 3])
@@ -149,6 +155,29 @@ def test_boundary_facet_next_to_an_included_pixel_is_refused():
 def test_points_off_the_lattice_take_the_full_check(spy):
     lab = LABELS[2]
     mesh = mesh_labels(lab)
-    moved = dataclasses.replace(mesh, points=mesh.points + 0.25)
+    moved = dataclasses.replace(mesh, points=mesh.points + 0.3)
     assert check_mesh(moved, lab) == check_mesh(moved, lab, full=True)
     assert spy == [None]
+
+
+def test_refined_mesh_mutations_are_refused():
+    """On the finer lattice too: a vertex split off one element, a facet of the hole left
+    by dropped elements on a pixel plane next to an included pixel."""
+    lab = LABELS[3]
+    mesh = mesh_labels(lab, refine=1)
+    interior = np.bincount(mesh.cells.ravel()).argmax()
+    k = np.flatnonzero((mesh.cells == interior).any(axis=1))[0]
+    cells = mesh.cells.copy()
+    cells[k][cells[k] == interior] = len(mesh.points)
+    points = np.concatenate([mesh.points, mesh.points[interior][None]])
+    broken = dataclasses.replace(mesh, points=points, cells=cells)
+    checks = check_mesh(broken, lab)
+    assert checks == check_mesh(broken, lab, full=True) and not checks["conforming"]
+    keep = mesh.material != 1
+    holed = dataclasses.replace(mesh, cells=mesh.cells[keep], material=mesh.material[keep],
+                                cell_data={})
+    checks = check_mesh(holed, lab, exclude=(1,))
+    assert checks == check_mesh(holed, lab, exclude=(1,), full=True)
+    assert checks["conforming"] and checks["all_passed"]       # 1 excluded: a real hole
+    checks = check_mesh(holed, lab, exclude=(2,))
+    assert not checks["conforming"] and not checks["all_passed"]

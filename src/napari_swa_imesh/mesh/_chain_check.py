@@ -45,6 +45,7 @@ __all__ = ["lattice_checks"]
 _CELLS_PER_CHUNK = 1 << 16
 _SEED = 0x5EED_C4A1                  # fixed: the same mesh always gets the same verdict
 _MASK = (1 << 64) - 1
+_FINEST = 4                          # points at 1/16 pixel at most (--refine 4)
 
 
 def _near_excluded(lab: np.ndarray, exclude: np.ndarray, leaf_map: np.ndarray,
@@ -80,10 +81,15 @@ def lattice_checks(points: np.ndarray, cells: np.ndarray, material: np.ndarray,
     """
     d = lab.ndim
     m = len(cells)
-    found = pack_points(points) if m else None
-    if found is None or max(lab.shape) >= 1 << found[1]:
+    found, fine = None, 0
+    while m and found is None and fine <= _FINEST:
+        # points on a lattice 2**fine times finer than the pixels (--refine)
+        found = pack_points(points * (1 << fine) if fine else points)
+        fine += found is None
+    if found is None or max(lab.shape) << fine >= 1 << found[1]:
         return None
     packed, bits = found
+    unit = (1 << d * fine) * math.factorial(d)         # det per pixel volume
     shape = lab.shape
     strides = [math.prod(shape[a + 1:]) for a in range(d)]
     leaf_map = tree.to_image(values=np.arange(len(tree)), fill=-1,
@@ -125,10 +131,13 @@ def lattice_checks(points: np.ndarray, cells: np.ndarray, material: np.ndarray,
             for k in range(2, d + 1):
                 np.minimum(lo, p[k][a], out=lo)
                 np.maximum(hi, p[k][a], out=hi)
-            if int(hi.max()) > shape[a]:
+            if int(hi.max()) > shape[a] << fine:
                 return None                              # an element outside the image
-            on_box |= (lo == 0) | (hi == shape[a])
+            on_box |= (lo == 0) | (hi == shape[a] << fine)
             hi -= 1                                      # >= lo: volumes are positive
+            if fine:
+                lo >>= fine
+                hi >>= fine
             flat_lo += lo * strides[a]
             flat_hi += hi * strides[a]
         leaf = leaf_map[flat_lo]
@@ -137,7 +146,7 @@ def lattice_checks(points: np.ndarray, cells: np.ndarray, material: np.ndarray,
         if (material[start:start + n] != lab_flat[flat_lo]).any():
             return None
         first = int(leaf.min())
-        part = np.bincount(leaf - first, weights=det / math.factorial(d))
+        part = np.bincount(leaf - first, weights=det / (1 << d * fine) / math.factorial(d))
         leaf_volume[first:first + len(part)] += part
         # the chain: facet k (without corner k) enters with sign (-1)^k times the parity
         # of its corners' order
@@ -162,7 +171,7 @@ def lattice_checks(points: np.ndarray, cells: np.ndarray, material: np.ndarray,
             if len(cand):
                 single, exterior = _may_stay_single(
                     [[p[j][a][cand] for a in range(d)] for j in rest[k]],
-                    [p[k][a][cand] for a in range(d)], lab, exclude)
+                    [p[k][a][cand] for a in range(d)], lab, exclude, fine)
                 single = cand[single]
                 term = terms[k][single]
                 np.negative(term, out=term, where=odds[k][single])
@@ -177,11 +186,10 @@ def lattice_checks(points: np.ndarray, cells: np.ndarray, material: np.ndarray,
     wrong_leaf = np.abs(leaf_volume - expected) > 1e-9 * np.maximum(size, 1)
     if (wrong_leaf & tree.inside).any():
         return None
-    factorial = math.factorial(d)
-    volume = total / factorial
+    volume = total / unit
     if abs(volume - n_included) > 1e-9 * max(1, n_included):
         return None
-    return {"min_volume": min_det / factorial, "positive_volume": True,
+    return {"min_volume": min_det / (1 << d * fine) / math.factorial(d), "positive_volume": True,
             "volume_error": volume - n_included, "volume_sum": True,
             "n_outside_leaf": 0, "inside_one_leaf": True,
             "n_pixels_wrong": 0, "labels_recovered": True,
@@ -198,10 +206,11 @@ def _facet_products(v: list) -> list:
     return [v[1] * cd, v[0] * cd, ab * v[3], ab * v[2]]
 
 
-def _may_stay_single(corners: list, opposite: list, lab: np.ndarray,
-                     exclude: np.ndarray) -> np.ndarray:
+def _may_stay_single(corners: list, opposite: list, lab: np.ndarray, exclude: np.ndarray,
+                     fine: int = 0) -> np.ndarray:
     """Which facets (their d corners ``corners[j][a]`` and the element's other corner
-    ``opposite[a]``, integers) lie on an axis plane with the pixel just across outside
+    ``opposite[a]``, integers in units of 2**-fine pixel) lie on a pixel plane with the
+    pixel just across outside
     the image or excluded: the facets the general check lets stay single (its probe,
     a quarter pixel out of the facet's centroid, lands in that pixel), and how many of
     them face an excluded pixel (not the box)."""
@@ -214,6 +223,8 @@ def _may_stay_single(corners: list, opposite: list, lab: np.ndarray,
         flat = np.ones(n, dtype=bool)
         for c in corners[1:]:
             flat &= c[a] == plane
+        if fine:                       # inside a pixel: the pixel across is its own
+            flat &= (plane & ((1 << fine) - 1)) == 0
         hit = np.flatnonzero(flat)
         if not len(hit):
             continue
@@ -221,9 +232,9 @@ def _may_stay_single(corners: list, opposite: list, lab: np.ndarray,
         for b in range(d):
             if b == a:
                 # the element lies above the plane: the pixel across is below it
-                pixel.append(plane[hit] - (opposite[a][hit] > plane[hit]))
+                pixel.append((plane[hit] >> fine) - (opposite[a][hit] > plane[hit]))
             else:
-                pixel.append(sum(c[b][hit] for c in corners) // d)
+                pixel.append(sum(c[b][hit] for c in corners) // d >> fine)
         pixel = np.stack(pixel)
         inside = ((pixel >= 0) & (pixel < np.array(lab.shape)[:, None])).all(axis=0)
         ok = ~inside
