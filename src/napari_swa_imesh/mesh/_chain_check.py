@@ -1,14 +1,14 @@
 """The default checks of a mesh whose points lie on the pixel lattice, without a sort.
 
 The general checks (``_checks``) pair all ``(d+1) * M`` facet occurrences by sorting
-integer keys: several seconds at volume size. A mesh with integer points (every
-template mesh, in the index space of its lattice) is checked here instead, in one pass
-over the elements:
+integer keys: several seconds at volume size. A mesh whose points are integers in
+pixel units, or in units of 2**-K pixel (every template mesh; ``--refine K``), is checked
+here instead, in one pass over the elements:
 
 * volumes, leaves and labels as ``_checks._elements`` does, in integers;
 * conformity as a boundary: the facets of all elements, each taken with the
   orientation its element gives it (the chain ``∂(sum of elements)``), less the facets
-  that may stay single (on an axis plane with the pixel across outside the image or
+  that may stay single (on a pixel plane with the pixel across outside the image or
   excluded), must cancel to nothing.
 
 Why that suffices: with every volume positive, every element inside one leaf of the
