@@ -86,7 +86,8 @@ def lattice_checks(points: np.ndarray, cells: np.ndarray, material: np.ndarray,
         # points on a lattice 2**fine times finer than the pixels (--refine)
         found = pack_points(points * (1 << fine) if fine else points)
         fine += found is None
-    if found is None or max(lab.shape) << fine >= 1 << found[1]:
+    # edges below 2**16: determinants exact in int64 and in the general path's floats
+    if found is None or max(lab.shape) << fine > 1 << 16:
         return None
     packed, bits = found
     unit = (1 << d * fine) * math.factorial(d)         # det per pixel volume
@@ -189,7 +190,8 @@ def lattice_checks(points: np.ndarray, cells: np.ndarray, material: np.ndarray,
     volume = total / unit
     if abs(volume - n_included) > 1e-9 * max(1, n_included):
         return None
-    return {"min_volume": min_det / (1 << d * fine) / math.factorial(d), "positive_volume": True,
+    return {"min_volume": min_det / (1 << d * fine) / math.factorial(d),
+            "positive_volume": True,
             "volume_error": volume - n_included, "volume_sum": True,
             "n_outside_leaf": 0, "inside_one_leaf": True,
             "n_pixels_wrong": 0, "labels_recovered": True,
