@@ -19,9 +19,12 @@ def pack_points(coords: np.ndarray) -> tuple[np.ndarray, int] | None:
 
     Examples
     --------
-    >>> packed, bits = pack_points(np.array([[1.0, 2.0], [3.0, 0.0]]))
-    >>> bits, corners(packed, np.array([[0, 1]]), bits, 2)
-    (31, [[array([1]), array([2])], [array([3]), array([0])]])
+    >>> packed, bits = pack_points(np.array([[1.0, 2.0], [3.0, 0.0], [0.0, 5.0]]))
+    >>> p = corners(packed, np.array([[0, 1, 2]]), bits, 2)
+    >>> bits, [[int(x[0]) for x in corner] for corner in p]
+    (31, [[1, 2], [3, 0], [0, 5]])
+    >>> pack_points(np.array([[0.5, 1.0]])) is None
+    True
     """
     d = coords.shape[1]
     bits = 63 // d
