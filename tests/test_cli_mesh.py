@@ -462,3 +462,24 @@ def test_checks_beside_the_writer_give_the_files_and_verdict_of_one_after_the_ot
     report = one_json(stdout)
     assert report["checks"] == check_mesh(mesh, lab).to_dict()
     assert report["seconds"]["check"] > 0 and report["seconds"]["write"] > 0
+
+
+def test_full_check_sorts_and_agrees_with_the_default(tmp_path, capsys, monkeypatch):
+    """--full-check takes the sort of every facet (the one-pass check is never called)
+    and reports what the default does."""
+    from napari_swa_imesh.mesh import _checks
+
+    lab = (np.indices((9, 8, 7)).sum(0) // 5).astype(np.uint8)
+    np.save(tmp_path / "lab.npy", lab)
+    code, stdout, _ = run(capsys, "mesh", tmp_path / "lab.npy", "-o", tmp_path / "a.vtu",
+                          "--json")
+    assert code == 0
+    default = one_json(stdout)["checks"]
+
+    def refused(*args):
+        raise AssertionError("the one-pass check ran under --full-check")
+
+    monkeypatch.setattr(_checks, "lattice_checks", refused)
+    code, stdout, _ = run(capsys, "mesh", tmp_path / "lab.npy", "-o", tmp_path / "b.vtu",
+                          "--json", "--full-check")
+    assert code == 0 and one_json(stdout)["checks"] == default and default["all_passed"]

@@ -16,6 +16,7 @@ import numpy as np
 
 from .._tree import RegionTree, _build_tree
 from .._validation import as_labels
+from ._chain_check import lattice_checks
 from ._facets import _blocks, _runs, _side_passes
 from ._lattice import labels_on_lattice
 from ._quality import _corner_det, _det
@@ -230,7 +231,8 @@ def _inv(m: np.ndarray) -> np.ndarray:
     return np.stack([np.cross(b, c), np.cross(c, a), np.cross(a, b)], axis=2) / det
 
 
-def check_mesh(mesh: Mesh, labels, *, exclude=(), tree: RegionTree | None = None) -> MeshChecks:
+def check_mesh(mesh: Mesh, labels, *, exclude=(), tree: RegionTree | None = None,
+               full: bool = False) -> MeshChecks:
     """Check that a mesh represents a label image faithfully.
 
     Parameters
@@ -245,6 +247,9 @@ def check_mesh(mesh: Mesh, labels, *, exclude=(), tree: RegionTree | None = None
     tree : RegionTree, optional
         The region tree of `labels` (``build_tree(labels)``) when the caller has it
         already; built here otherwise.
+    full : bool
+        Pair every facet by a sort even for points on the lattice (see Notes); the same
+        verdict and counts.
 
     Returns
     -------
@@ -263,10 +268,12 @@ def check_mesh(mesh: Mesh, labels, *, exclude=(), tree: RegionTree | None = None
 
     Notes
     -----
-    One chunked pass over the elements (volumes, the block at both corners of each
-    bounding box, per-block volumes) and one sort of integer facet keys (8 bytes per facet
-    of an element, in passes beyond ``2**27`` keys); memory beyond the mesh is about the
-    keys plus an int32 block index per pixel, time O(M log M) with a small constant.
+    Integer points in pixel units (every template mesh): one pass without a sort
+    (``_chain_check``). Other meshes, one failing there, or `full`: one chunked pass over
+    the elements (volumes, the block at both corners of each bounding box, per-block
+    volumes) and one sort of integer facet keys (8 bytes per facet of an element, in
+    passes beyond ``2**27`` keys); memory beyond the mesh is about the keys plus an int32
+    block index per pixel, time O(M log M) with a small constant.
 
     Examples
     --------
@@ -291,28 +298,28 @@ def check_mesh(mesh: Mesh, labels, *, exclude=(), tree: RegionTree | None = None
         if not multiple:
             raise ValueError(f"tree was built from an image of shape {tuple(tree.shape)}, but the "
                              f"labels have shape {lab.shape}; pass build_tree(labels) or no tree.")
-    return _check_mesh(mesh, lab, exclude_arr, tree)
+    return _check_mesh(mesh, lab, exclude_arr, tree, full=full)
 
 
 def _check_mesh(mesh: Mesh, lab: np.ndarray, exclude: np.ndarray,
-                tree: RegionTree | None = None) -> MeshChecks:
+                tree: RegionTree | None = None, *, full: bool = False) -> MeshChecks:
     """The worker behind :func:`check_mesh`: `lab` from ``as_labels``, `exclude` int64,
     `tree` the region tree of `lab` (or of its lattice) or None (then built here)."""
     lattice = mesh.info.get("lattice") if isinstance(mesh.info, dict) else None
     if lattice:
-        return _check_on_lattice(mesh, lab, exclude, tree, lattice.get("factors"))
+        return _check_on_lattice(mesh, lab, exclude, tree, lattice.get("factors"), full)
     # a mesh read from a file does not say how its voxels were cut: the subdivision the
     # mesher picks for this spacing when the points fit it, else the voxels themselves
-    checks = _check_on_lattice(mesh, lab, exclude, tree, None)
+    checks = _check_on_lattice(mesh, lab, exclude, tree, None, full)
     if not checks.all_passed and mesh.spacing and len(set(mesh.spacing)) > 1:
-        voxels = _check_on_lattice(mesh, lab, exclude, tree, (1,) * lab.ndim)
+        voxels = _check_on_lattice(mesh, lab, exclude, tree, (1,) * lab.ndim, full)
         if voxels.all_passed:
             return voxels
     return checks
 
 
 def _check_on_lattice(mesh: Mesh, lab: np.ndarray, exclude: np.ndarray,
-                      tree: RegionTree | None, factors) -> MeshChecks:
+                      tree: RegionTree | None, factors, full: bool = False) -> MeshChecks:
     points = _index_points(mesh)
     cells = np.asarray(mesh.cells)
     # anisotropic voxels cut into n cells per axis: check in those cells, whose
@@ -325,16 +332,17 @@ def _check_on_lattice(mesh: Mesh, lab: np.ndarray, exclude: np.ndarray,
     n_excluded = count_excluded(lab, exclude)
     if tree is None or tuple(tree.shape) != lab.shape:
         tree = _build_tree(lab)
-    elements, sign, spread_bits = _elements(points, cells, np.asarray(mesh.material), lab,
-                                            exclude, tree, lab.size - n_excluded)
+    finite = _finite(mesh)
+    parts = None if full or not finite["finite"] else lattice_checks(
+        points, cells, np.asarray(mesh.material), lab, exclude, tree, lab.size - n_excluded)
+    if parts is None:  # not on the lattice, or failed there: the sort says what is wrong
+        parts, sign, spread_bits = _elements(points, cells, np.asarray(mesh.material), lab,
+                                             exclude, tree, lab.size - n_excluded)
+        parts.update(_facets(points, cells, sign, lab, exclude, spread_bits))
     voxel = float(np.prod(mesh.spacing)) / float(np.prod(repeats)) if mesh.spacing else 1.0
     for key in ("min_volume", "volume_error"):
-        elements[key] *= voxel
-    parts = {
-        **elements,
-        **_facets(points, cells, sign, lab, exclude, spread_bits),
-        **_finite(mesh),
-    }
+        parts[key] *= voxel
+    parts.update(finite)
     return MeshChecks(**{name: parts[name] for name in MeshChecks.__dataclass_fields__})
 
 

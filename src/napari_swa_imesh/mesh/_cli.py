@@ -19,14 +19,8 @@ from .._cli_util import StepTimer, print_json
 from .._validation import normalize_spacing
 from ._checks import _check_mesh
 from ._export import MESH_SUFFIXES
-from ._memory import (
-    available_memory,
-    count_boundary_voxels,
-    current_rss,
-    estimate_mesh_memory,
-    format_bytes,
-    parse_memory_size,
-)
+from ._memory import (available_memory, count_boundary_voxels, current_rss,
+                      estimate_mesh_memory, format_bytes, parse_memory_size)
 
 __all__ = ["add_commands", "parse_material_names"]
 
@@ -91,8 +85,10 @@ def add_commands(subparsers) -> None:
                         "quality bound) instead of subdividing them into nearly cubic cells")
     p.add_argument("--force", action="store_true", help="replace an existing output file")
     p.add_argument("--no-check", action="store_true",
-                   help="skip the conformity/volume/label checks (they take about as long "
-                        "as the meshing and one sort key per element facet of memory)")
+                   help="skip the conformity/volume/label checks (less than the meshing)")
+    p.add_argument("--full-check", action="store_true",
+                   help="check by sorting every element facet, as for a mesh made elsewhere "
+                        "(same verdict as the default one-pass check; slower)")
     p.add_argument("--memory-limit", default="auto", metavar="BYTES|auto|off",
                    help="refuse to start when the estimated peak memory of the run "
                         "(labels, tree, balance, elements, checks, writing) exceeds this: "
@@ -213,7 +209,8 @@ def _run_mesh(args: argparse.Namespace) -> int:
         # both only read the mesh; numpy's gathers and sorts release the GIL
         if not args.no_check:
             timer.seconds["check"] = 0.0
-            checked = pool.submit(_timed_check, timer, mesh, labels, exclude, tree)
+            checked = pool.submit(_timed_check, timer, mesh, labels, exclude, tree,
+                                  args.full_check)
         del tree, labels  # the writers need only the mesh
         with timer("write"):
             written = write_mesh(mesh, args.output, force=args.force, **write_options)
@@ -238,18 +235,17 @@ def _run_mesh(args: argparse.Namespace) -> int:
     return 0
 
 
-def _timed_check(timer, mesh, labels, exclude, tree) -> dict:
+def _timed_check(timer, mesh, labels, exclude, tree, full) -> dict:
     with timer("check"):
-        return _check_mesh(mesh, labels, exclude, tree).to_dict()
+        return _check_mesh(mesh, labels, exclude, tree, full=full).to_dict()
 
 
 def _check_resolution_args(args) -> None:
     """Refine and coarsen levels in range before any reading (the size cap needs the
     spacing, so it is checked with it)."""
     from ._coarsen import check_coarsen
-    from ._lattice import check_refine
-
     from ._imesh import check_periodic
+    from ._lattice import check_refine
 
     check_refine(args.refine)
     check_coarsen(args.coarsen)

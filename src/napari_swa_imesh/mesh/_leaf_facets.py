@@ -24,6 +24,7 @@ import math
 
 import numpy as np
 
+from ._packed import corners, pack_points
 from ._quality import _edge_det
 from ._types import Mesh
 
@@ -84,32 +85,33 @@ def _lattice_coords(mesh: Mesh) -> tuple[np.ndarray, tuple[int, ...]] | None:
     return coords, shape
 
 
-def _leaf_origins(coords: np.ndarray, cells: np.ndarray, level: np.ndarray) -> np.ndarray:
-    """(n, d) lowest corner of the leaf of each cell: leaves are aligned to their side,
-    and a simplex of positive volume has a corner below the leaf's far faces."""
-    low = coords[cells[:, 0]]
-    for k in range(1, cells.shape[1]):
-        np.minimum(low, coords[cells[:, k]], out=low)
-    shift = level.astype(np.int32)[:, None]
-    return (low >> shift) << shift
+def _leaf_boxes(packed, axes, cells, leaf, level, shape):
+    """One element of each leaf (any), the leaf's lowest corner and level; None when a
+    leaf leaves the lattice. Leaves are aligned to their side, and a simplex of positive
+    volume has a corner below the leaf's far faces: the lowest corner, rounded down."""
+    if (leaf[1:] >= leaf[:-1]).all():     # the mesher's order: the last of each run
+        rep = np.flatnonzero(np.append(leaf[1:] != leaf[:-1], True))
+    else:                                  # the last of each leaf, as a scatter leaves it
+        rep = np.full(int(leaf.max()) + 1, -1, dtype=np.int64)
+        rep[leaf] = np.arange(len(leaf))
+        rep = rep[rep >= 0]
+    lev = level[rep]
+    p = _gather(packed, axes, cells[rep], len(shape))
+    shift = lev.astype(np.int64)
+    origin = np.stack([(np.minimum.reduce([c[a] for c in p]).astype(np.int64) >> shift) << shift
+                       for a in range(len(shape))], axis=1)
+    if (origin < 0).any() or ((origin + (1 << shift)[:, None]) > np.asarray(shape)).any():
+        return None
+    return rep, origin, lev
 
 
-def _paint(coords, cells, code, leaf, level, shape, dtype) -> np.ndarray | None:
-    """Flat lattice image of material codes (EMPTY where no leaf was meshed)."""
+def _paint(boxes, values, shape, dtype) -> np.ndarray:
+    """Flat lattice image of the leaves' `values` (EMPTY where no leaf was meshed)."""
     d = len(shape)
     image = np.full(math.prod(shape), EMPTY, dtype=dtype)
-    n_leaves = int(leaf.max()) + 1
-    rep = np.full(n_leaves, -1, dtype=np.int64)
-    rep[leaf] = np.arange(len(leaf))                 # one element per leaf (any)
-    rep = rep[rep >= 0]
-    lev = level[rep]
-    origin = _leaf_origins(coords, cells[rep], lev).astype(np.int64)
-    if (origin < 0).any() or ((origin + (1 << lev.astype(np.int64))[:, None])
-                              > np.asarray(shape)).any():
-        return None
+    _, origin, lev = boxes
     strides = np.array([math.prod(shape[a + 1:]) for a in range(d)], dtype=np.int64)
     okey = origin @ strides
-    values = code[rep]
     box = image.reshape(shape)
     for lv in np.unique(lev):
         sel = np.flatnonzero(lev == lv)
@@ -126,6 +128,44 @@ def _paint(coords, cells, code, leaf, level, shape, dtype) -> np.ndarray | None:
             image[(okey[part, None] + offsets[None]).ravel()] = np.repeat(values[part],
                                                                           len(offsets))
     return image
+
+
+def _on_group_faces(image: np.ndarray, shape, boxes) -> np.ndarray:
+    """Which leaves hold a lattice cell next to another value of `image` or to the image
+    box (a summed-area table of those cells, read at each leaf's 2**d corners)."""
+    d = len(shape)
+    box = image.reshape(shape)
+    edge = np.zeros(shape, dtype=bool)
+    for a in range(d):
+        lo = (slice(None),) * a + (slice(0, -1),)
+        hi = (slice(None),) * a + (slice(1, None),)
+        differ = box[lo] != box[hi]
+        edge[lo] |= differ
+        edge[hi] |= differ
+        edge[(slice(None),) * a + (0,)] = True
+        edge[(slice(None),) * a + (-1,)] = True
+    dtype = np.int32 if math.prod(shape) < 2**31 else np.int64
+    table = np.zeros(tuple(n + 1 for n in shape), dtype=dtype)
+    table[(slice(1, None),) * d] = edge
+    del edge
+    for a in range(d):
+        np.cumsum(table, axis=a, dtype=dtype, out=table)
+    _, origin, lev = boxes
+    far = origin + (1 << lev.astype(np.int64))[:, None]
+    count = np.zeros(len(origin), dtype=np.int64)
+    for corner in range(1 << d):
+        ends = [far[:, a] if corner >> a & 1 else origin[:, a] for a in range(d)]
+        sign = -1 if (d - bin(corner).count("1")) & 1 else 1
+        count += sign * table[tuple(ends)]
+    return count > 0
+
+
+def _gather(packed, axes, cells, d) -> list:
+    """``p[corner][axis]`` of `cells`: unpacked, or axis by axis when the points did not
+    pack."""
+    if packed is not None:
+        return corners(packed[0], cells, packed[1], d, np.int32)
+    return [[x[cells[:, j]] for x in axes] for j in range(d + 1)]
 
 
 def _lattice_det(p: list) -> np.ndarray:
@@ -174,11 +214,21 @@ def template_group_rows(mesh: Mesh, *, signs: bool = False):
     materials, code = material_codes(mesh.material)
     dtype = code.dtype
     cells, leaf, level = mesh.cells, cd["leaf"], cd["level"]
-    image = _paint(coords, cells, code, leaf, level, shape, dtype)
-    if image is None:
-        return None
-    axes = [np.ascontiguousarray(coords[:, a]) for a in range(d)]
+    packed = pack_points(coords)
+    axes = [np.ascontiguousarray(coords[:, a]) for a in range(d)] if packed is None else []
     del coords
+    boxes = _leaf_boxes(packed, axes, cells, leaf, level, shape)
+    if boxes is None:
+        return None
+    leaf_code = code[boxes[0]]
+    image = _paint(boxes, leaf_code, shape, dtype)
+    # only elements of a leaf with a group facet, or of a material not its leaf's, can
+    # own one: the others (most, inside their material) skip the facet work
+    worth = np.zeros(int(leaf.max()) + 1, dtype=bool)
+    worth[leaf[boxes[0]]] = _on_group_faces(image, shape, boxes)
+    leaf_code_of = np.zeros(len(worth), dtype=dtype)
+    leaf_code_of[leaf[boxes[0]]] = leaf_code
+    del boxes
     bound = np.asarray(shape, dtype=np.int64)
     strides = np.array([math.prod(shape[a + 1:]) for a in range(d)], dtype=np.int64)
     owners, opposites, acrosses = [], [], []
@@ -189,11 +239,18 @@ def template_group_rows(mesh: Mesh, *, signs: bool = False):
     for start in range(0, m, _CHUNK):
         cc = cells[start:start + _CHUNK]
         n = len(cc)
-        p = [[x[cc[:, j]] for x in axes] for j in range(d + 1)]   # p[corner][axis]: (n,)
+        lf = leaf[start:start + _CHUNK]
+        sel = np.flatnonzero(worth[lf] | (code[start:start + n] != leaf_code_of[lf]))
         if signs:
-            det = _lattice_det(p)
-            np.less(det, 0, out=negative[start:start + n])
-        shift = level[start:start + _CHUNK].astype(np.int32)
+            p = _gather(packed, axes, cc, d)
+            np.less(_lattice_det(p), 0, out=negative[start:start + n])
+            p = [[x[sel] for x in row] for row in p]
+        else:
+            p = _gather(packed, axes, cc[sel], d)
+        n = len(sel)
+        if not n:
+            continue
+        shift = level[start:start + _CHUNK][sel].astype(np.int32)
         # which faces of its leaf (aligned to its side) each corner lies on: bit 2a for
         # the low end along axis a, bit 2a+1 for the high end
         faces = [np.zeros(n, dtype=np.uint8) for _ in range(d + 1)]
@@ -221,18 +278,22 @@ def template_group_rows(mesh: Mesh, *, signs: bool = False):
                 return None
             ax, out = _FACE_AXIS[bits], _FACE_STEP[bits]
             # the lattice cell across the face: one step out along the face's axis, the
-            # facet's centroid (strictly inside the neighbour's face) along the others
+            # facet's lowest corner along the others (the facet has an extent along
+            # each, and its box lies in one neighbour's face: the templates cut a face
+            # as its smaller neighbours do)
             flat = np.zeros(len(hit), dtype=np.int64)
             inside = np.ones(len(hit), dtype=bool)
             for a in range(d):
-                total = p[rest[0]][a][hit].astype(np.int64)
+                first = p[rest[0]][a][hit].astype(np.int64)
+                low = first.copy()
                 for j in rest[1:]:
-                    total += p[j][a][hit]
-                cell = np.where(ax == a, p[rest[0]][a][hit] + out, total // d)
+                    np.minimum(low, p[j][a][hit], out=low)
+                cell = np.where(ax == a, first + out, low)
                 inside &= (cell >= 0) & (cell < bound[a])
                 flat += cell * strides[a]
             across = np.full(len(hit), OUTSIDE, dtype=np.int64)
             across[inside] = image[flat[inside]]
+            hit = sel[hit]                   # the facets' elements in the chunk
             mine = code[start + hit].astype(np.int64)
             differ = across != mine
             hit, across, mine = hit[differ], across[differ], mine[differ]
