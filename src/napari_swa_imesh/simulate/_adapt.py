@@ -57,7 +57,7 @@ P1_BUDGET = 3_000_000
 #: First guess of the vertices one split leaf adds (measured 19-27 on blobs), and how
 #: many meshes a budgeted step may try; it keeps the largest within budget.
 VERTICES_PER_SPLIT = 24.0
-BUDGET_TRIES = 4
+BUDGET_TRIES = 6
 BUDGET_SLACK = 0.05   # a try within 5 % under the budget is good enough
 TIE = 1e-9  # relative: indicators this close are one value
 #: Indicator total (relative to the flux energy, so scale-free) below which the field is
@@ -219,21 +219,26 @@ def refine_within(labels, mesh: Mesh, leaf_indicator: np.ndarray, target: float,
     ranked = np.sort(values)[::-1]
     useful = int(np.count_nonzero(ranked > 0)) if values.sum() > FLOOR else 0
     vertices = len(mesh.points)
-    per_split = VERTICES_PER_SPLIT
-    best, count = None, 0
+    best, count = None, int(min(useful, (target - vertices) // VERTICES_PER_SPLIT))
     for _ in range(BUDGET_TRIES):
-        count = int(min(useful, (target - vertices) // per_split))
         if count < 1:
             break
         # ties go together, as Doerfler's do: a transposed image is refined the same way
         split = values >= ranked[count - 1] * (1 - TIE)
         out = _refine_marked(labels, mesh, split[leaf], tree)
-        added = len(out[0].points) - vertices
-        if len(out[0].points) <= target:
-            best = out if best is None or len(out[0].points) > len(best[0].points) else best
-            if len(out[0].points) >= (1 - BUDGET_SLACK) * target or count == useful:
+        reached = len(out[0].points)
+        if reached <= target:
+            best = out if best is None or reached > len(best[0].points) else best
+            if reached >= (1 - BUDGET_SLACK) * target or count == useful:
                 break
-        per_split = max(added / np.count_nonzero(split), 1.0) * (1 + BUDGET_SLACK / 2)
+        # scattered splits cost more each (their balance), so aim a little under
+        again = int(min(useful, count * (target - vertices) / max(reached - vertices, 1)
+                        * (1 - BUDGET_SLACK / 2)))
+        if again == count:
+            again -= 1 if reached > target else 0
+            if again == count:
+                break
+        count = again
     if best is None:
         best = _refine_marked(labels, mesh, np.zeros(mesh.n_cells, dtype=bool), tree)
     return best
