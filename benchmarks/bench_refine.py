@@ -11,7 +11,7 @@ averaged; their half-difference is the reference's own uncertainty.
 
 Printed: error and vertices for IMESH P1 at refine K = 0, 1, 2 (meshes, so nothing
 adapts), adaptive P1 (Doerfler marking with theta 0.4, 1 and 2 steps; ``order=1`` with
-``adapt="auto"``: 2 steps within 3x the vertices), P2 at K = 0 and the default (P2 after
+``adapt="auto"``: 2 steps within 2.9x the vertices), P2 at K = 0 and the default (P2 after
 one adaptive step), beside uniform voxel tetrahedra (P1) and voxel hexahedra (Q1) at 1x
 and 2x; then the issue's target for each P1 route (at most half the K = 0 error within 3x
 its vertices: PASS or MISS, with the rate log(error ratio) / log(vertex ratio) it

@@ -75,9 +75,9 @@ def test_p1_asked_adapts_twice_within_3x_the_vertices_towards_a_finer_solution()
     fine = simulate(labels, K, order=2, adapt=0, refine=2, axes="x").k_eff["x"]
     plain = simulate(labels, K, order=1, adapt=0, axes="x")
     auto = simulate(labels, K, order=1, axes="x")
-    assert auto.choice == "P1 (asked), 2 adaptive steps within 3x the vertices"
+    assert auto.choice == f"P1 (asked), 2 adaptive steps within {_adapt.P1_GROWTH:g}x the vertices"
     assert auto.order == 1 and auto.adapt == 2 and auto.dofs == len(auto.mesh.points)
-    assert vertices < auto.dofs <= 3 * vertices
+    assert vertices < auto.dofs <= _adapt.P1_GROWTH * vertices <= 3 * vertices
     assert check_mesh(auto.mesh, labels).all_passed
     # conforming: above the exact value, and much closer to it than P1 on the first mesh
     assert fine < auto.k_eff["x"] < plain.k_eff["x"]
@@ -95,7 +95,7 @@ def test_p1_over_its_budget_is_not_adapted_and_says_why(monkeypatch, tmp_path, c
     assert main(["simulate", str(tmp_path / "l.npy"), "-k", "1=1", "2=10", "3=0.1",
                  "--order", "1", "--axes", "x", "--json"]) == 0
     out = json.loads(capsys.readouterr().out)
-    assert out["order"] == 1 and "2 adaptive steps within 3x the vertices" in out["choice"]
+    assert out["order"] == 1 and f"within {_adapt.P1_GROWTH:g}x the vertices" in out["choice"]
     # a mesh without its labels, or adapt 0, stays as it is
     assert simulate(mesh_labels(labels), K, axes="x", order=1).adapt == 0
     assert simulate(labels, K, axes="x", order=1, adapt=0).dofs == vertices

@@ -26,6 +26,7 @@ from qtpy.QtWidgets import QFileDialog, QLabel, QTableWidget, QWidget
 
 from ..mesh import MeshClipper, shown_faces
 from ..simulate import simulate_steps, write_field
+from ..simulate._adapt import P1_GROWTH
 from ..simulate._remesh import mesh_refine, needs_remesh, remesh
 from ._clip_panel import ClipPanel
 from ._conductivity_table import Conductivity, ConductivityTable, parse_conductivity
@@ -45,7 +46,7 @@ __all__ = ["SimulateWidget", "Conductivity", "ConductivityTable", "parse_conduct
            "FIELD_KEY", "PROTOCOLS"]
 
 FIELD_KEY = "swa_imesh_field"
-#: elements -> (order, adapt): P1 on the mesh as shown, or adapted within 3x its vertices
+#: elements -> (order, adapt): P1 on the mesh as shown, or adapted within P1_GROWTH x its vertices
 ORDERS = {"auto: P2, refined once where the flux jumps": ("auto", "auto"),
           "P1 (linear)": (1, 0),
           "P1, refined twice where the flux jumps (at most 3x the vertices)": (1, "auto"),
@@ -191,7 +192,7 @@ class SimulateWidget(QWidget):
         if adapt == 0 or order == 2 or self.labels_combo.value is None:
             return ""
         if order == 1:
-            return ", refined twice where the flux jumps, within 3x the vertices"
+            return f", refined twice where the flux jumps, within {P1_GROWTH:g}x the vertices"
         return ", refined once more where the flux jumps (auto) if P2 fits the budget"
 
     def _update_note(self, *_) -> None:
