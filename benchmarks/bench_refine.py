@@ -19,7 +19,7 @@ reached; halving within 3x needs 0.63), and at 64^3 the issue's own figures (<= 
 with <= 600k vertices).
 
 Measured on 32^3 (reference +-0.17 %), error against vertices of P1: refine 0 +4.74 %
-(26.0k), adapt auto +2.81 % (77.6k, x2.99); Doerfler theta 0.2-0.5 over 1-3 steps, facet
+(26.0k), adapt auto +2.87 % (74.5k, x2.87); Doerfler theta 0.2-0.5 over 1-3 steps, facet
 jumps weighted by 1/k (max, arithmetic) or not, and 3 budgeted steps (+2.77 % at x3.01)
 all lie on one curve, error about N^-0.5, which halves at about 4x the vertices. Splitting
 only the leaves that touch a non-flat interface edge (>= 3 materials or a staircase step
