@@ -90,6 +90,14 @@ def test_periodic_refined_run_meshes_the_labels_again_and_shows_the_tensor(
     sim.run()
     wait_idle(qtbot, sim, timeout=120_000)
     assert sim.result.mesh is flow.mesh.mesh and not sim.tensor_table.isVisibleTo(sim)
+    # P1 adapted: two steps on the labels, within 3x the vertices of the mesh shown
+    sim.order_combo.value = "P1, refined twice where the flux jumps (at most 3x the vertices)"
+    assert "within 2.9x the vertices" in sim.mesh_note.value
+    sim.run()
+    wait_idle(qtbot, sim, timeout=120_000)
+    assert sim.result.order == 1 and sim.result.adapt == 2
+    assert flow.mesh.mesh.n_cells < sim.result.mesh.n_cells
+    assert len(sim.result.mesh.points) <= 3 * len(flow.mesh.mesh.points)
 
 
 def test_the_field_follows_the_clipping_plane(make_napari_viewer, qtbot):

@@ -26,6 +26,7 @@ from qtpy.QtWidgets import QFileDialog, QLabel, QTableWidget, QWidget
 
 from ..mesh import MeshClipper, shown_faces
 from ..simulate import simulate_steps, write_field
+from ..simulate._adapt import P1_GROWTH
 from ..simulate._remesh import mesh_refine, needs_remesh, remesh
 from ._clip_panel import ClipPanel
 from ._conductivity_table import Conductivity, ConductivityTable, parse_conductivity
@@ -45,8 +46,11 @@ __all__ = ["SimulateWidget", "Conductivity", "ConductivityTable", "parse_conduct
            "FIELD_KEY", "PROTOCOLS"]
 
 FIELD_KEY = "swa_imesh_field"
-ORDERS = {"auto: P2, refined once where the flux jumps": "auto", "P1 (linear)": 1,
-          "P2 (quadratic, more accurate)": 2}
+#: elements -> (order, adapt): P1 on the mesh as shown, or adapted within P1_GROWTH x its vertices
+ORDERS = {"auto: P2, refined once where the flux jumps": ("auto", "auto"),
+          "P1 (linear)": (1, 0),
+          "P1, refined twice where the flux jumps (at most 3x the vertices)": (1, "auto"),
+          "P2 (quadratic, more accurate)": (2, "auto")}
 PROTOCOLS = [("mixed: k_eff per axis (potential 0 and 1 on two faces)", "mixed"),
              ("periodic: the full tensor (unit mean gradient)", "periodic")]
 COLORMAP = "turbo"
@@ -184,8 +188,11 @@ class SimulateWidget(QWidget):
             periodic=self.protocol_combo.value == "periodic")
 
     def _adapt_note(self) -> str:
-        if ORDERS[self.order_combo.value] != "auto" or self.labels_combo.value is None:
+        order, adapt = ORDERS[self.order_combo.value]
+        if adapt == 0 or order == 2 or self.labels_combo.value is None:
             return ""
+        if order == 1:
+            return f", refined twice where the flux jumps, within {P1_GROWTH:g}x the vertices"
         return ", refined once more where the flux jumps (auto) if P2 fits the budget"
 
     def _update_note(self, *_) -> None:
@@ -228,7 +235,7 @@ class SimulateWidget(QWidget):
         if not axes:
             notify_error("tick at least one axis to compute k_eff along.")
             return None
-        order = ORDERS[self.order_combo.value]
+        order, adapt = ORDERS[self.order_combo.value]
         protocol, refine = self.protocol_combo.value, int(self.refine_spin.value)
         labels = None
         if self._remeshing():
@@ -250,7 +257,8 @@ class SimulateWidget(QWidget):
                 yield 0, 1, f"meshing the labels again (refine {refine}, {protocol})"
                 run_mesh = remesh(mesh, labels, refine=refine, periodic=protocol == "periodic")
             result = yield from simulate_steps(run_mesh, conductivity, order=order, axes=axes,
-                                               protocol=protocol, labels=source)
+                                               protocol=protocol, labels=source,
+                                               adapt=adapt if source is not None else 0)
             shown = shown_faces(result.mesh.cells, result.mesh.material)
             clipper = MeshClipper(result.mesh, shown=shown)
             return result, shown[0], clipper

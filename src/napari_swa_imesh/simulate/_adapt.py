@@ -12,6 +12,13 @@ pays for flat interfaces too. The default (``order="auto"``, ``adapt="auto"``) i
 3. meshes the labels again one lattice level finer in the marked cells
    (:func:`~napari_swa_imesh.mesh._adapt.refine_marked`) and solves P2 there.
 
+P1 asked with ``adapt="auto"`` takes :data:`P1_STEPS` steps instead, each splitting the
+leaves of largest indicator, as many as keep the vertices within their share of
+:data:`P1_GROWTH` times the first mesh's (:func:`refine_within`): on these images the
+error of P1 falls with the vertices at the same rate whatever theta or facet weighting
+marks them (about N^-0.5, measured on 32^3 blobs), so the budget, not theta, is what
+decides the accuracy, and a budget is what a user can plan for.
+
 Measured by ``benchmarks/bench_simulate.py``: on 32^3 three-phase blobs (contrast 100)
 the error against the extrapolated voxel reference drops from 4.7 % (P1) and 1.2 % (P2)
 to 0.87 % with 1.65 times the P2 unknowns; uniform interface refinement of P2 needs 6.7
@@ -24,12 +31,14 @@ from __future__ import annotations
 
 import numpy as np
 
+from ..mesh._adapt import _refine_marked
 from ..mesh._facets import paired_facets
 from ..mesh._lattice import MAX_REFINE
 from ..mesh._quality import signed_volumes
 from ..mesh._types import Mesh
 
-__all__ = ["AUTO", "P2_BUDGET", "THETA", "auto_settings", "doerfler", "flux_jump_indicator"]
+__all__ = ["AUTO", "P1_GROWTH", "P1_STEPS", "P2_BUDGET", "THETA", "auto_settings", "doerfler",
+           "flux_jump_indicator", "refine_within"]
 
 AUTO = "auto"
 #: Doerfler fraction of the indicator to refine (0.4 measured best per unknown of 0.2-0.5).
@@ -40,14 +49,30 @@ P2_BUDGET = 3_000_000
 #: in 2-D), and the growth of one adaptive step (measured 1.65, rounded up).
 P2_PER_VERTEX = {2: 4.0, 3: 7.7}
 ADAPT_GROWTH = 1.8
+#: P1's default adaptive steps and the growth of its vertices they may reach together
+#: (issue 11's budget is at most 3x the vertices, 600k at 64^3 where the first mesh has
+#: 202k: the fitted count lands within BUDGET_SLACK under this), and the most vertices
+#: it adapts to.
+P1_STEPS = 2
+P1_GROWTH = 2.9
+P1_BUDGET = 3_000_000
+#: First guess of the vertices one split leaf adds (measured 19-27 on blobs), and how
+#: many meshes a budgeted step may try; it keeps the largest within budget.
+VERTICES_PER_SPLIT = 24.0
+BUDGET_TRIES = 6
+BUDGET_SLACK = 0.05   # a try within 5 % under the budget is good enough
 TIE = 1e-9  # relative: indicators this close are one value
 #: Indicator total (relative to the flux energy, so scale-free) below which the field is
 #: exact up to round-off (measured 1e-25 on laminates, 1e-3 and more on real images).
 FLOOR = 1e-12
 
 
-def auto_settings(mesh: Mesh, order, adapt, from_labels: bool) -> tuple[int, int, str]:
-    """Resolve ``"auto"`` order and adaptive steps for `mesh`; returns (order, adapt, why).
+def auto_settings(mesh: Mesh, order, adapt, from_labels: bool
+                  ) -> tuple[int, int, float | None, str]:
+    """Resolve ``"auto"`` order and adaptive steps for `mesh`.
+
+    Returns (order, adapt, growth, why): `growth` is the vertex budget of the adaptive
+    steps together (relative to `mesh`), None for Doerfler marking with :data:`THETA`.
 
     Raises ValueError for adaptive steps asked of a mesh that cannot take them (no labels,
     coarsened, or past the finest refine level).
@@ -58,9 +83,9 @@ def auto_settings(mesh: Mesh, order, adapt, from_labels: bool) -> tuple[int, int
                  and not mesh.info.get("coarsen"))
     # periodic faces must match, so a finer lattice refines whole box faces: the default
     # does not adapt there (its cost is not the growth the budget counts)
-    auto_adapts = can_adapt and room > 0 and not mesh.info.get("periodic")
-    fits_adapted = auto_adapts and p2 * ADAPT_GROWTH <= P2_BUDGET
-    note = ""
+    auto_adapts = can_adapt and not mesh.info.get("periodic")
+    fits_adapted = auto_adapts and room > 0 and p2 * ADAPT_GROWTH <= P2_BUDGET
+    note, growth, asked_p1 = "", None, order == 1
     if order == AUTO:
         order = 2 if p2 <= P2_BUDGET else 1
         why = f"P{order}"
@@ -70,10 +95,20 @@ def auto_settings(mesh: Mesh, order, adapt, from_labels: bool) -> tuple[int, int
     else:
         why = f"P{order} (asked)"
     if adapt == AUTO:
-        # the adaptive step belongs to P2's default, within the same budget
-        adapt = 1 if (order == 2 and fits_adapted) else 0
-        if order == 2 and auto_adapts and not fits_adapted:
-            note = f"not adapted: it would pass the default's budget of {P2_BUDGET:,} unknowns"
+        if order == 2:
+            # the adaptive step belongs to P2's default, within the same budget
+            adapt = 1 if fits_adapted else 0
+            if auto_adapts and room > 0 and not fits_adapted:
+                note = f"not adapted: it would pass the default's budget of {P2_BUDGET:,} unknowns"
+        elif asked_p1 and auto_adapts and room > 0:
+            # P1 asked: budgeted steps (the P1 the default falls back to is too big already)
+            fits = len(mesh.points) * P1_GROWTH <= P1_BUDGET
+            adapt, growth = (min(P1_STEPS, room), P1_GROWTH) if fits else (0, None)
+            if not fits:
+                note = (f"not adapted: {P1_GROWTH:g}x the vertices would pass the P1 "
+                        f"budget of {P1_BUDGET:,} unknowns")
+        else:
+            adapt = 0
     if adapt and not can_adapt:
         raise ValueError("adaptive refinement needs a label image to mesh again (a mesh "
                          "read from a file or coarsened cannot be refined): pass adapt=0, "
@@ -84,7 +119,9 @@ def auto_settings(mesh: Mesh, order, adapt, from_labels: bool) -> tuple[int, int
                          f"{MAX_REFINE - room}): lower refine or adapt.")
     if adapt:
         why += f", {adapt} adaptive step" + "s" * (adapt > 1)
-    return order, int(adapt), why + (f" ({note})" if note else "")
+        if growth is not None:
+            why += f" within {growth:g}x the vertices"
+    return order, int(adapt), growth, why + (f" ({note})" if note else "")
 
 
 def check_adapt(adapt) -> int | str:
@@ -152,3 +189,58 @@ def doerfler(indicator: np.ndarray, theta: float = THETA) -> np.ndarray:
     # every element as large as the last one needed: ties (mirror-image elements, equal
     # up to rounding) are marked together, so a transposed image is refined the same way
     return indicator >= ranked[count - 1] * (1 - TIE)
+
+
+def refine_within(labels, mesh: Mesh, leaf_indicator: np.ndarray, target: float, tree=None):
+    """The labels meshed again with the leaves of largest indicator split, as many as keep
+    the vertices within `target`.
+
+    Parameters
+    ----------
+    labels : array_like of int
+        The label image `mesh` was made from.
+    mesh : Mesh
+        A template mesh of `labels` (or the last adaptive step's).
+    leaf_indicator : (L,) ndarray
+        Indicator per balanced leaf (``bincount`` of the elements' over their ``leaf``).
+    target : float
+        Most vertices the new mesh may have.
+    tree : RegionTree, optional
+        The tree the last adaptive step returned (required after one).
+
+    Returns
+    -------
+    (Mesh, RegionTree)
+        The largest mesh tried within `target` (the vertices a split adds depend on its
+        neighbours' balance, so the count is fitted from each try), and its tree. With
+        no room for one split, or an exact field, nothing is split (the lattice is still
+        one level finer, so the steps stay counted).
+    """
+    leaf = np.asarray(mesh.cell_data["leaf"])
+    values = np.asarray(leaf_indicator, dtype=float)
+    ranked = np.sort(values)[::-1]
+    useful = int(np.count_nonzero(ranked > 0)) if values.sum() > FLOOR else 0
+    vertices = len(mesh.points)
+    best, count = None, int(min(useful, (target - vertices) // VERTICES_PER_SPLIT))
+    for _ in range(BUDGET_TRIES):
+        if count < 1:
+            break
+        # ties go together, as Doerfler's do: a transposed image is refined the same way
+        split = values >= ranked[count - 1] * (1 - TIE)
+        out = _refine_marked(labels, mesh, split[leaf], tree)
+        reached = len(out[0].points)
+        if reached <= target:
+            best = out if best is None or reached > len(best[0].points) else best
+            if reached >= (1 - BUDGET_SLACK) * target or count == useful:
+                break
+        # scattered splits cost more each (their balance), so aim a little under
+        again = int(min(useful, count * (target - vertices) / max(reached - vertices, 1)
+                        * (1 - BUDGET_SLACK / 2)))
+        if again == count:
+            again -= 1 if reached > target else 0
+            if again == count:
+                break
+        count = again
+    if best is None:
+        best = _refine_marked(labels, mesh, np.zeros(mesh.n_cells, dtype=bool), tree)
+    return best

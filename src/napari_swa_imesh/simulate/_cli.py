@@ -45,7 +45,8 @@ def add_commands(subparsers) -> None:
     p.add_argument("--adapt", default="auto", metavar="auto|0|1|2",
                    help="k_eff on labels: adaptive steps before the final solve (a P1 solve, "
                         "then the labels meshed again one level finer where the flux jumps "
-                        "most); auto (default): one step with P2")
+                        "most); auto (default): one step with P2, or with --order 1 two steps "
+                        "within 2.9x the vertices")
     p.add_argument("--refine", type=int, default=0, metavar="K",
                    help="labels only: elements at material interfaces are 2^-K voxels "
                         "(0..4, default 0), where the field is least smooth")

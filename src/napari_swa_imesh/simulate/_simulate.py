@@ -13,7 +13,8 @@ import numpy as np
 
 from ..mesh import Mesh, mesh_labels
 from ..mesh._adapt import _refine_marked
-from ._adapt import AUTO, auto_settings, check_adapt, doerfler, flux_jump_indicator
+from ._adapt import (AUTO, auto_settings, check_adapt, doerfler, flux_jump_indicator,
+                     refine_within)
 from ._assembly import cell_fluxes, fe_space, p1_embedding, stiffness_matrix
 from ._conductivity import axis_names, conductivity_tensors
 from ._fe import vertex_values
@@ -258,7 +259,8 @@ def simulate_steps(mesh_or_labels, conductivity: Mapping, *, spacing=None,
     materials, cell_material = np.unique(mesh.material, return_inverse=True)
     tensors = conductivity_tensors(conductivity, materials, mesh.ndim, mesh.material_names)
     source = labels if isinstance(mesh_or_labels, Mesh) else mesh_or_labels
-    order, adapt, choice = auto_settings(mesh, order, adapt, source is not None)
+    order, adapt, growth, choice = auto_settings(mesh, order, adapt, source is not None)
+    start = len(mesh.points)
     seconds["mesh"] = time.perf_counter() - t0
     total = 2 + len(names) + adapt
     tree = None                # the tree of the last adapted mesh, for the next step
@@ -270,9 +272,12 @@ def simulate_steps(mesh_or_labels, conductivity: Mapping, *, spacing=None,
                          protocol=protocol)
         # mark whole leaves (the unit the mesher splits) by their summed indicator
         leaf = np.asarray(mesh.cell_data["leaf"])
-        indicator = flux_jump_indicator(mesh, [first.flux[a] for a in names])
-        marked = doerfler(np.bincount(leaf, indicator))[leaf]
-        mesh, tree = _refine_marked(source, mesh, marked, tree)
+        indicator = np.bincount(leaf, flux_jump_indicator(mesh, [first.flux[a] for a in names]))
+        if growth is None:
+            mesh, tree = _refine_marked(source, mesh, doerfler(indicator)[leaf], tree)
+        else:              # P1's default: each step its share of the vertex budget
+            target = start * growth ** ((step + 1) / adapt)
+            mesh, tree = refine_within(source, mesh, indicator, target, tree)
         materials, cell_material = np.unique(mesh.material, return_inverse=True)
         seconds[f"adapt {step + 1}"] = time.perf_counter() - t0
     yield 1 + adapt, total, f"assembling P{order} on {mesh.n_cells} elements"
@@ -396,7 +401,9 @@ def simulate(mesh_or_labels, conductivity: Mapping, *, spacing=None,
     adapt : {"auto", 0, 1, 2}
         Adaptive steps before the final solve: a P1 solve, its flux-jump indicator, and
         the labels meshed again one level finer where it is largest (:mod:`._adapt`).
-        ``"auto"``: one step with P2 when the labels are at hand and the budget allows.
+        ``"auto"``: one step with P2 when the labels are at hand and the budget allows;
+        with ``order=1``, two steps that together at most triple the vertices (the leaves
+        of largest indicator split first; :func:`._adapt.refine_within`).
     labels : (M, N[, P]) array_like of int, optional
         With a mesh: the label image it was made from, so that it can be adapted.
 
