@@ -9,7 +9,8 @@ from hypothesis import strategies as st
 
 from napari_swa_imesh.mesh import Mesh, facet_groups, mesh_labels
 from napari_swa_imesh.mesh._facets import _sorted_groups
-from napari_swa_imesh.mesh._leaf_facets import material_codes, template_group_rows
+from napari_swa_imesh.mesh._leaf_facets import (material_codes, present_materials,
+                                                 template_group_rows)
 
 
 def _assert_same(fast, slow):
@@ -67,6 +68,16 @@ def test_material_codes_rank_large_ids_too():
     materials, code = material_codes(np.array([3, 3, 1], np.uint8))
     assert materials.tolist() == [1, 3] and code.tolist() == [1, 1, 0]
     assert materials.dtype == np.uint8 and code.dtype == np.int16
+
+
+@pytest.mark.parametrize("values", [[5, 2**40, 5, 0], [3, 3, 1], [-4, 7, -4], [2**20 + 3, 1]])
+def test_present_materials_are_the_materials_of_material_codes(values):
+    for dtype in (np.int64, np.uint8) if max(values) < 256 and min(values) >= 0 else (np.int64,):
+        material = np.array(values, dtype=dtype)
+        present = present_materials(material)
+        np.testing.assert_array_equal(present, np.unique(material))
+        assert present.dtype == material.dtype
+        np.testing.assert_array_equal(present, material_codes(material)[0])
 
 
 @pytest.mark.parametrize("world", [None, np.diag([-2.0, 1.0, 0.5, 1.0]), np.diag([2.0, 1, 1, 1]),

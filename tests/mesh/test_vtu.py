@@ -82,3 +82,58 @@ def test_meshio_reads_every_array_whatever_the_block_sizes(tmp_path):
         np.testing.assert_allclose(back.points[:, :2], points)
         for key, values in data.items():
             np.testing.assert_array_equal(back.cell_data[key][0], values, err_msg=(n, key))
+
+
+def _file_types(path) -> dict:
+    """The ``type`` each ``<DataArray Name=...>`` declares in the file's XML header."""
+    import re
+
+    head = path.read_bytes().split(b"<AppendedData", 1)[0].decode()
+    return {name: kind for kind, name in re.findall(r'<DataArray type="(\w+)" Name="([^"]+)"',
+                                                     head)}
+
+
+@pytest.mark.parametrize("big", [False, True])
+def test_64_bit_integers_are_int32_in_the_file_only_when_every_value_fits(tmp_path, big):
+    """Labels and leaf ids in 4 bytes when they fit, Int64 from 2**31 on: same values."""
+    pv = pytest.importorskip("pyvista")
+    points = np.array([[0.0, 0, 0], [1, 0, 0], [0, 1, 0], [0, 0, 1], [1, 1, 1]])
+    cells = np.array([[0, 1, 2, 3], [1, 2, 3, 4]] * 40000)    # more than one chunk
+    label = 2**31 if big else 2**31 - 1
+    material = np.tile(np.array([-2**31, label], dtype=np.int64), 40000)
+    leaf = np.arange(len(cells), dtype=np.int64)
+    hits = np.arange(len(points), dtype=np.uint64)
+    path = tmp_path / "m.vtu"
+    write_vtu(path, points, cells, cell_data={"material": material, "leaf": leaf,
+                                              "quality": np.full(len(cells), 5**0.5 / 2)},
+              point_data={"hits": hits})
+    assert _file_types(path) == {"material": "Int64" if big else "Int32", "leaf": "Int32",
+                                 "quality": "Float64", "hits": "Int32",
+                                 "connectivity": "Int32", "offsets": "Int32", "types": "UInt8"}
+    grid, m = pv.read(path), meshio.read(path)
+    for read in (grid.cell_data, {k: v[0] for k, v in m.cell_data.items()}):
+        np.testing.assert_array_equal(read["material"], material)
+        np.testing.assert_array_equal(read["leaf"], leaf)
+        # the worst quality read back is still at (not above) its bound sqrt(5)/2
+        assert (read["quality"] == 5**0.5 / 2).all()
+    np.testing.assert_array_equal(grid.point_data["hits"], hits)
+
+
+@pytest.mark.parametrize("label", [7, 2**40])
+def test_read_mesh_gets_the_labels_and_leaves_of_a_meshed_volume_back(tmp_path, label):
+    """write_mesh .vtu -> read_mesh (what ``swa-imesh simulate mesh.vtu`` reads): the
+    materials, leaves and qualities of the mesher, whatever width the file gave them."""
+    from napari_swa_imesh.mesh import mesh_labels, read_mesh, write_mesh
+
+    labels = np.ones((4, 5, 6), dtype=np.int64)
+    labels[1:3, 2:, 3:] = label
+    mesh = mesh_labels(labels)
+    path = write_mesh(mesh, tmp_path / "m.vtu")[0]
+    assert _file_types(path)["material"] == ("Int32" if label < 2**31 else "Int64")
+    back = read_mesh(path)
+    assert back.material.dtype == np.int64
+    assert set(np.unique(back.material)) == {1, label}
+    # same element order in the file: compare per element
+    np.testing.assert_array_equal(back.material, mesh.material)
+    for key in ("leaf", "level", "quality", "min_dihedral", "max_dihedral"):
+        np.testing.assert_array_equal(back.cell_data[key], mesh.cell_data[key], err_msg=key)

@@ -11,7 +11,8 @@ reordered so that its signed volume stays positive there. Reading is in ``_read`
 What each format holds
 ----------------------
 ========  ==========================================================================
-``.vtu``  VTK XML (raw binary, streamed); points padded to z = 0 in 2-D; every per-cell array; facet groups
+``.vtu``  VTK XML (raw binary, streamed); points padded to z = 0 in 2-D; every per-cell array
+          (64-bit integers as Int32 when every value fits, see ``_vtu``); facet groups
           in ``<stem>_facets.vtu`` (cell data ``group`` and ``owner``, names in field
           data; see ``_facet_vtu``).
 ``.vtk``  legacy VTK 4.2 (readable by any VTK); points padded; every per-cell array;
@@ -323,9 +324,10 @@ def write_mesh_vtu(mesh: Mesh, path, *, point_data: dict | None = None,
     """Write `mesh` to `path` as ``.vtu`` with extra per-point and per-cell arrays.
 
     The writer behind :func:`write_mesh`'s ``.vtu`` (x, y(, z) order, cells positive
-    there, ``material`` and the mesh's own arrays in their dtypes; see :mod:`._vtu`), for
-    callers that add fields and write through :func:`~napari_swa_imesh.io.atomic_write`
-    themselves. Vectors in `cell_data`/`point_data` must already be in x, y(, z) order.
+    there, ``material`` and the mesh's own arrays in their dtypes, 64-bit integers as
+    Int32 when every value fits; see :mod:`._vtu`), for callers that add fields and write
+    through :func:`~napari_swa_imesh.io.atomic_write` themselves. Vectors in
+    `cell_data`/`point_data` must already be in x, y(, z) order.
     """
     points = export_points(mesh)
     data = {"material": mesh.material, **mesh.cell_data, **(cell_data or {})}

@@ -3,11 +3,12 @@
 The companion holds the same points as the mesh file, in the same order (so a facet's
 nodes are node ids of the mesh), and one cell per facet: lines in 2-D, triangles in 3-D
 (3-node lines and 6-node triangles at second order), oriented out of the element that
-owns them. Cell data: ``group`` (int32, the group id 1..K) and ``owner`` (int64, the
-0-based element of the mesh file that the facet bounds; on an interface, the element of
-the lower-labelled material). The names ride in ``<FieldData>``: one one-value array per
-group, named after the group and holding its id (VTK's field data; meshio reads them
-as ``field_data``, pyvista as ``grid.field_data``).
+owns them. Cell data: ``group`` (int32, the group id 1..K) and ``owner`` (the 0-based
+element of the mesh file that the facet bounds; on an interface, the element of the
+lower-labelled material; Int32 in the file below 2**31 elements, else Int64). The names
+ride in ``<FieldData>``: one one-value array per group, named after the group and holding
+its id (VTK's field data; meshio reads them as ``field_data``, pyvista as
+``grid.field_data``).
 """
 
 from __future__ import annotations

@@ -439,9 +439,10 @@ def facet_groups(mesh: Mesh) -> dict[str, FacetGroup]:
     return groups_and_signs(mesh)[0]
 
 
-def groups_and_signs(mesh: Mesh, signs: bool = False):
+def groups_and_signs(mesh: Mesh, signs: bool = False, facets: bool = True):
     """:func:`facet_groups`, and with `signs` which elements have a negative volume in
-    the points' frame when the leaf path found it on the way (else None)."""
+    the points' frame when the leaf path found it on the way (else None). Without
+    `facets`, the groups' ``facets`` are None (owner and corner only)."""
     cells = np.asarray(mesh.cells, dtype=np.intp)
     material = np.asarray(mesh.material)
     fast = template_group_rows(mesh, signs=signs)
@@ -453,7 +454,7 @@ def groups_and_signs(mesh: Mesh, signs: bool = False):
     boundary = across < 0
     return named_groups(mesh, cells, material, owner[boundary], opposite[boundary],
                         owner[~boundary], opposite[~boundary],
-                        across[~boundary]), (fast[3] if signs else None)
+                        across[~boundary], facets), (fast[3] if signs else None)
 
 
 def _sorted_groups(mesh: Mesh) -> dict[str, FacetGroup]:

@@ -9,7 +9,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ._common import FACE_CORNERS, material_names
-from ._leaf_facets import material_codes
+from ._leaf_facets import present_materials
 from ._types import Mesh
 
 __all__ = ["FacetGroup", "named_groups"]
@@ -39,17 +39,19 @@ class FacetGroup:
 
 
 def named_groups(mesh: Mesh, cells, material, b_owner, b_opposite, i_owner, i_opposite,
-                  i_other) -> dict[str, FacetGroup]:
+                 i_other, facets: bool = True) -> dict[str, FacetGroup]:
     """The groups of :func:`facet_groups` from boundary facets (owner, opposite corner)
     and interface facets (owner of material A, its opposite corner, material B), each
-    in lexicographic order."""
+    in lexicographic order. Without `facets`, the groups' ``facets`` are None (for a
+    caller that builds them from owner and corner in its own frame)."""
     d = mesh.ndim
     groups: dict[str, FacetGroup] = {}
 
     def add(name: str, owner: np.ndarray, corner: np.ndarray) -> None:
         if owner.size:
-            groups[name] = FacetGroup(cells[owner[:, None], FACE_CORNERS[d][corner]],
-                                      owner, corner)
+            groups[name] = FacetGroup(
+                cells[owner[:, None], FACE_CORNERS[d][corner]] if facets else None,
+                owner, corner)
 
     lo, hi = mesh.image_box()
     coords = mesh.points[cells[b_owner[:, None], FACE_CORNERS[d][b_opposite]]]   # (B, d, d)
@@ -63,7 +65,7 @@ def named_groups(mesh: Mesh, cells, material, b_owner, b_opposite, i_owner, i_op
             on_side |= hit
     del coords
 
-    present, _ = material_codes(material)
+    present = present_materials(material)
     names = material_names(mesh.material_names, present)
     # (A, B) pairs by their ranks among the materials: no sort of the facets
     rank = np.searchsorted(present, np.stack([material[i_owner], i_other]))
@@ -75,7 +77,7 @@ def named_groups(mesh: Mesh, cells, material, b_owner, b_opposite, i_owner, i_op
 
     b_owner, b_opposite = b_owner[~on_side], b_opposite[~on_side]
     outside = material[b_owner]
-    for mat in material_codes(outside)[0]:
+    for mat in present_materials(outside):
         mine = outside == mat
         add(f"exterior_{names[int(mat)]}", b_owner[mine], b_opposite[mine])
     return groups

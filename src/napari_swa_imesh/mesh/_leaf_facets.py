@@ -28,7 +28,7 @@ from ._packed import corners, pack_points
 from ._quality import _edge_det
 from ._types import Mesh
 
-__all__ = ["material_codes", "template_group_rows"]
+__all__ = ["material_codes", "present_materials", "template_group_rows"]
 
 _CHUNK = 1 << 17                  # elements per pass (their corners stay in cache-ish)
 _PAINT = 1 << 22                  # lattice cells painted at once
@@ -41,6 +41,22 @@ _FACE_AXIS = np.zeros(64, dtype=np.int8)
 _FACE_STEP = np.zeros(64, dtype=np.int64)
 for _bit in range(6):
     _FACE_AXIS[1 << _bit], _FACE_STEP[1 << _bit] = _bit // 2, -1 + (_bit & 1)
+
+
+def present_materials(material: np.ndarray) -> np.ndarray:
+    """The materials present, sorted: :func:`material_codes` without the per-element
+    ranks (a gather of every element that callers wanting only the list skip).
+
+    Examples
+    --------
+    >>> present_materials(np.array([7, 2, 7])).tolist()
+    [2, 7]
+    """
+    material = np.asarray(material)
+    top = int(material.max()) if material.size else 0
+    if material.size and material.min() >= 0 and top < max(1 << 20, material.size):
+        return np.flatnonzero(np.bincount(material, minlength=top + 1)).astype(material.dtype)
+    return np.unique(material)
 
 
 def material_codes(material: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

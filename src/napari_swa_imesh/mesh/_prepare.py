@@ -21,7 +21,7 @@ import numpy as np
 
 from ._common import export_points, export_turns, material_names
 from ._facets import FACE_CORNERS, groups_and_signs
-from ._leaf_facets import material_codes
+from ._leaf_facets import present_materials
 from ._order2 import MidEdges, with_mid_nodes
 from ._quality import _corner_det
 from ._types import Mesh
@@ -151,7 +151,7 @@ class ExportMesh:
         self.n_corners = len(corners)
         # the leaf path of the facet groups gives the volumes' signs on the way (its
         # corner gathers are most of the cost of either)
-        found, negative = groups_and_signs(mesh, signs=True) if groups != "none" else ({}, None)
+        found, negative = groups_and_signs(mesh, signs=True, facets=False) if groups != "none" else ({}, None)
         if negative is not None:
             # one affine map from the points to the files' frame turns every cell alike
             self.flip = negative ^ export_turns(mesh)
@@ -172,7 +172,7 @@ class ExportMesh:
         self.points = (corners if self.edges is None
                        else np.concatenate([corners, self.edges.midpoints(corners)]))
         self.material = np.asarray(mesh.material, dtype=np.int64)
-        self.names = material_names(mesh.material_names, material_codes(self.material)[0])
+        self.names = material_names(mesh.material_names, present_materials(self.material))
         chosen = select_facet_groups(found, groups) if groups != "none" else {}
         self.groups = {name: self._in_file_frame(k + 1, g)
                        for k, (name, g) in enumerate(chosen.items())}

@@ -6,7 +6,10 @@ One XML header that lists every array with its offset, then the arrays after
 (meshio's reader of raw data cuts the data at the last one). Raw bytes go from numpy
 straight to the file: no encoding pass, a quarter fewer bytes than base64, no copy of
 the mesh (connectivity, offsets and cell types are written in chunks). Connectivity and
-offsets are Int32 when the ids fit. VTK (ParaView, pyvista) and meshio read it.
+offsets are Int32 when the ids fit, and so is any 64-bit integer array whose values all
+fit (labels, leaf ids: readers get the same values in 4 bytes instead of 8; a label of
+2**31 or more keeps the array Int64). Floats keep their width: float32 would round the
+worst quality sqrt(5)/2 up, past its bound. VTK (ParaView, pyvista) and meshio read it.
 """
 
 from __future__ import annotations
@@ -39,6 +42,20 @@ def _vtk_array(values: np.ndarray) -> np.ndarray:
     if f"{dtype.kind}{dtype.itemsize}" not in _VTK_TYPE:
         dtype = np.dtype(np.int64 if dtype.kind in "iu" else np.float64)
     return np.ascontiguousarray(values, dtype=dtype)
+
+
+def _narrowed(values: np.ndarray):
+    """`values` (a :func:`_vtk_array`) as Int32 when 64-bit integers that all fit: one
+    array, converted chunk by chunk as it is written (no copy of the whole); else as is."""
+    if values.dtype.itemsize != 8 or values.dtype.kind not in "iu" or not values.size:
+        return values
+    if int(values.min()) < -2**31 or int(values.max()) >= 2**31:
+        return values
+    if values.ndim != 1:
+        return values.astype(np.int32)
+    return _Chunked(np.int32, len(values), lambda: (
+        values[start:start + _CHUNK].astype(np.int32)
+        for start in range(0, len(values), _CHUNK)))
 
 
 def _type_name(dtype: np.dtype) -> str:
@@ -104,7 +121,8 @@ def write_vtu(path, points: np.ndarray, cells: np.ndarray, *,
         Triangles or tetrahedra (any cell of `cell_type`), or the same handed over
         block by block.
     cell_data, point_data : dict of str to (M,) / (N,) or (M, k) / (N, k) array_like
-        Arrays per cell and per point (k components).
+        Arrays per cell and per point (k components), in their dtypes, except that 64-bit
+        integers whose values all fit in Int32 are written as Int32 (same values).
     field_data : dict of str to (n,) array_like of int, optional
         Small integer arrays of the whole grid (``<FieldData>``, written as text; VTK
         and meshio read them).
@@ -146,7 +164,8 @@ def write_vtu(path, points: np.ndarray, cells: np.ndarray, *,
         ("Cells", "types", _Chunked(np.uint8, n_cells, types)),
     ]
     for section, data in (("CellData", cell_data or {}), ("PointData", point_data or {})):
-        arrays += [(section, str(name), _vtk_array(values)) for name, values in data.items()]
+        arrays += [(section, str(name), _narrowed(_vtk_array(values)))
+                   for name, values in data.items()]
 
     # the data go in the reverse of the tags' order: meshio turns raw data into base64
     # block by block, looking each tag up by its old offset in document order after
