@@ -46,8 +46,13 @@ def mark_corners(tree: RegionTree, select: np.ndarray, shape, strides) -> np.nda
     return is_vertex
 
 
-def template_mesh(bal: RegionTree, meshed: np.ndarray):
+def template_mesh(bal: RegionTree, meshed: np.ndarray, *, rule: str = "parity"):
     """Cut every meshed leaf by the look-up tables.
+
+    `rule` is the 3-D face-diagonal rule (``_templates_luts``): ``"parity"`` (five
+    tetrahedra per plain leaf) or ``"lowest"`` (Kuhn's six; what a periodic mesh with an
+    odd extent needs, since a translation by an odd number of cells flips the parity).
+    2-D meshes always use the lowest-corner rule.
 
     Returns points (index space), cells, leaf index and template id per element, and the
     seconds spent per step.
@@ -70,7 +75,14 @@ def template_mesh(bal: RegionTree, meshed: np.ndarray):
     coarse = np.flatnonzero(level >= 1)  # level-0 leaves have no sites: no leaf is smaller
     site_of_coarse = okey[coarse, None] + half[coarse, None] * site_keys[None]  # (Lc, n_sites)
     hanging[coarse] = is_vertex[site_of_coarse]
-    kuhn = ~hanging.any(axis=1)
+    plain = ~hanging.any(axis=1)
+    variant = None
+    if d == 3 and rule == "parity":
+        # the leaf's parity: sum of its origin in units of its side
+        parity = (bal.origin[leaves] >> bal.level[leaves, None]).sum(axis=1) & 1
+        variant = (parity + 1).astype(np.int8)
+    elif rule not in ("parity", "lowest"):
+        raise ValueError(f"rule must be 'parity' or 'lowest'; got {rule!r}.")
     # the points elements use: corners of meshed leaves, the sites they carry, and the
     # new points of the templates (marked without scattering every element's keys)
     used = is_vertex if meshed.sum() == bal.inside.sum() else mark_corners(bal, meshed, shape, strides)
@@ -79,7 +91,8 @@ def template_mesh(bal: RegionTree, meshed: np.ndarray):
     seconds["vertices"] = time.perf_counter() - t
 
     t = time.perf_counter()
-    cells, which, template_of, _ = cut_leaves(okey, size, hanging, strides, used=used)
+    cells, which, template_of, _ = cut_leaves(okey, size, hanging, strides, used=used,
+                                              variant=variant)
     leaf_of = leaves[which]  # intp: it indexes the leaf arrays again below
     del which
     seconds["simplices"] = time.perf_counter() - t
@@ -87,12 +100,12 @@ def template_mesh(bal: RegionTree, meshed: np.ndarray):
     t = time.perf_counter()
     points = np.stack(np.unravel_index(np.flatnonzero(used), shape), axis=1).astype(np.float64)
     seconds["numbering"] = time.perf_counter() - t
-    seconds["_n_kuhn"] = int(kuhn.sum())
+    seconds["_n_plain"] = int(plain.sum())
     return points, cells, leaf_of, template_of, seconds
 
 
 def cut_leaves(okey: np.ndarray, size: np.ndarray, hanging: np.ndarray, strides: np.ndarray,
-               *, used: np.ndarray | None = None):
+               *, used: np.ndarray | None = None, variant: np.ndarray | None = None):
     """Cut leaves by the look-up tables; the dictionary step, shared with the quality table.
 
     Parameters
@@ -111,6 +124,9 @@ def cut_leaves(okey: np.ndarray, size: np.ndarray, hanging: np.ndarray, strides:
         points are marked in it, and elements come back as vertex numbers (the rank of the
         key among the marked points, i.e. ``cumsum(used) - 1``) instead of keys, so the
         big key array is never built.
+    variant : (L,) ndarray of int8, optional
+        Diagonal rule per leaf (``VARIANTS[d]``, see ``_templates_luts``); default 0, the
+        lowest-corner rule, for every leaf.
 
     Returns
     -------
@@ -129,29 +145,37 @@ def cut_leaves(okey: np.ndarray, size: np.ndarray, hanging: np.ndarray, strides:
     kd = strides.dtype
     wd = np.int32 if len(okey) < 2**31 else np.int64
     half = size >> 1
-    kuhn = ~hanging.any(axis=1)
-    nk = np.flatnonzero(kuhn)
-    other = np.flatnonzero(~kuhn)
-    # group the other leaves by the case of each face: (face, case, members)
+    if variant is None:
+        variant = np.zeros(len(okey), dtype=np.int8)
+    plain = ~hanging.any(axis=1)
+    other = np.flatnonzero(~plain)
+    # plain leaves by variant: (variant, members)
+    plain_groups = [(v, np.flatnonzero(plain & (variant == v))) for v in luts.VARIANTS[d]]
+    # the other leaves by the variant and case of each face: (variant, face, case, members)
     groups = []
+    n_var = len(luts.VARIANTS[d])
     for f, fsites in enumerate(luts.FACE_SITES[d]):
-        # uint8 codes: numpy's stable sort is a radix sort for them
-        code = np.zeros(len(other), dtype=np.uint8)
+        n_case = 1 << len(fsites)
+        # uint16 codes (variant, case): numpy's stable sort is a radix sort for them
+        code = variant[other].astype(np.uint16) << np.uint16(len(fsites))
         for bit, site in enumerate(fsites):
-            code |= hanging[other, site].astype(np.uint8) << np.uint8(bit)
+            code |= hanging[other, site].astype(np.uint16) << np.uint16(bit)
         order = np.argsort(code, kind="stable")
-        bounds = np.searchsorted(code[order], np.arange((1 << len(fsites)) + 1), side="left")
-        for case in range(1 << len(fsites)):
-            if bounds[case + 1] > bounds[case]:
-                if len(luts.FACE_LUT[d][f][case]) == 0:
-                    raise RuntimeError(f"leaf configuration outside the look-up table (face {f}, "
-                                       f"case {case}); the tree is not balanced as assumed.")
-                groups.append((f, case, other[order[bounds[case]:bounds[case + 1]]]))
-    n_kuhn = len(luts.KUHN[d])
-    total = len(nk) * n_kuhn + sum(len(sel) * len(luts.FACE_LUT[d][f][c]) for f, c, sel in groups)
+        bounds = np.searchsorted(code[order], np.arange(n_var * n_case + 1), side="left")
+        for v in luts.VARIANTS[d]:
+            for case in range(n_case):
+                lo, hi = bounds[v * n_case + case], bounds[v * n_case + case + 1]
+                if hi > lo:
+                    if len(luts.FACE_LUT[d][v][f][case]) == 0:
+                        raise RuntimeError(f"leaf configuration outside the look-up table "
+                                           f"(face {f}, case {case}); the tree is not "
+                                           "balanced as assumed.")
+                    groups.append((v, f, case, other[order[lo:hi]]))
+    total = (sum(len(sel) * len(luts.PLAIN[d][v]) for v, sel in plain_groups)
+             + sum(len(sel) * len(luts.FACE_LUT[d][v][f][c]) for v, f, c, sel in groups))
     new_points = []
-    for f, case, sel in groups:
-        new_local = _new_points(d, f, case)
+    for v, f, case, sel in groups:
+        new_local = _new_points(d, v, f, case)
         if len(new_local):
             new_keys = new_local.astype(kd) @ strides
             new_points.append((okey[sel, None] + half[sel, None] * new_keys[None]).ravel())
@@ -180,19 +204,23 @@ def cut_leaves(okey: np.ndarray, size: np.ndarray, hanging: np.ndarray, strides:
         template_of[start:start + n * t].reshape(n, t)[:] = np.arange(first_template, first_template + t)
         return start + n * t
 
-    # Kuhn leaves: d! simplices in units of the leaf side
-    start = emit(0, nk, size, luts.KUHN[d].astype(kd) @ strides, 0)
+    start = 0
+    # plain leaves: d! Kuhn simplices or five tetrahedra, in units of the leaf side
+    for v, sel in plain_groups:
+        if len(sel):
+            start = emit(start, sel, size, luts.PLAIN[d][v].astype(kd) @ strides,
+                         luts.PLAIN_TEMPLATE_ID[d][v])
     # other leaves: every face by its own case, coned to the leaf centre (unit: half side)
-    for f, case, sel in groups:
-        lut = luts.FACE_LUT[d][f][case]
-        start = emit(start, sel, half, lut.astype(kd) @ strides, luts.FACE_TEMPLATE_ID[d][f][case])
+    for v, f, case, sel in groups:
+        lut = luts.FACE_LUT[d][v][f][case]
+        start = emit(start, sel, half, lut.astype(kd) @ strides, luts.FACE_TEMPLATE_ID[d][v][f][case])
     return keys, which, template_of, new_points
 
 
-def _new_points(d: int, face: int, case: int) -> np.ndarray:
+def _new_points(d: int, variant: int, face: int, case: int) -> np.ndarray:
     """(k, d) local points of a face case that are neither corners nor sites present."""
     present = {tuple(luts.SITES[d][s]) for i, s in enumerate(luts.FACE_SITES[d][face]) if case >> i & 1}
-    pts = {tuple(p) for p in luts.FACE_LUT[d][face][case].reshape(-1, d).tolist()}
+    pts = {tuple(p) for p in luts.FACE_LUT[d][variant][face][case].reshape(-1, d).tolist()}
     new = [p for p in sorted(pts) if p not in present and any(c == 1 for c in p)]
     return np.array(new, dtype=np.int64).reshape(-1, d)
 
