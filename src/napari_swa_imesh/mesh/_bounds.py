@@ -129,7 +129,8 @@ def quality_table(dim: int) -> list[dict]:
         One row per distinct template simplex (up to rotations and reflections of the
         cube), worst ratio first, over every configuration cut by every diagonal rule
         (``_templates_luts``). Keys: ``dim``, ``kind`` ("kuhn", "five": the 3-D plain leaf
-        of five tetrahedra, or "cone"), ``vertices``
+        of five tetrahedra, "cone", or "table": only in the sited-leaf table, see
+        ``_templates_luts.LeafTable``), ``vertices``
         (coordinates on a leaf of side 2, as in the reference's tables),
         ``circumradius``, ``shortest_edge``, ``radius_edge_ratio``, ``min_angle`` and
         ``max_angle`` (2-D, degrees) or ``min_dihedral`` and ``max_dihedral`` (3-D,
@@ -185,7 +186,7 @@ def quality_table(dim: int) -> list[dict]:
             "dim": d,
             "kind": ("kuhn" if set(entry["tids"]) & plain_ids[0] else
                      "five" if any(set(entry["tids"]) & plain_ids[v] for v in plain_ids) else
-                     "cone"),
+                     "cone" if min(entry["tids"]) < luts.TABLE_FIRST_ID[d] else "table"),
             "vertices": entry["simplex"].tolist(),
             "circumradius": ratio * shortest,
             "shortest_edge": shortest,

@@ -149,6 +149,8 @@ def cut_leaves(okey: np.ndarray, size: np.ndarray, hanging: np.ndarray, strides:
         variant = np.zeros(len(okey), dtype=np.int8)
     plain = ~hanging.any(axis=1)
     other = np.flatnonzero(~plain)
+    # sited leaves whose configuration the table cuts into fewer tetrahedra than cones
+    tabled, entry, other = _table_entries(d, hanging, variant, other)
     # plain leaves by variant: (variant, members)
     plain_groups = [(v, np.flatnonzero(plain & (variant == v))) for v in luts.VARIANTS[d]]
     # the other leaves by the variant and case of each face: (variant, face, case, members)
@@ -171,14 +173,25 @@ def cut_leaves(okey: np.ndarray, size: np.ndarray, hanging: np.ndarray, strides:
                                            f"(face {f}, case {case}); the tree is not "
                                            "balanced as assumed.")
                     groups.append((v, f, case, other[order[lo:hi]]))
+    table = luts.LEAF_TABLE.get(d)
+    per_entry = np.diff(table.offset)[entry] if len(tabled) else np.zeros(0, np.int64)
     total = (sum(len(sel) * len(luts.PLAIN[d][v]) for v, sel in plain_groups)
-             + sum(len(sel) * len(luts.FACE_LUT[d][v][f][c]) for v, f, c, sel in groups))
+             + sum(len(sel) * len(luts.FACE_LUT[d][v][f][c]) for v, f, c, sel in groups)
+             + int(per_entry.sum()))
     new_points = []
     for v, f, case, sel in groups:
         new_local = _new_points(d, v, f, case)
         if len(new_local):
             new_keys = new_local.astype(kd) @ strides
             new_points.append((okey[sel, None] + half[sel, None] * new_keys[None]).ravel())
+    if len(tabled):
+        # the table's own new points (fan face centres, the centre where used), per leaf
+        starts = np.searchsorted(table.new_entry, np.arange(len(table.key) + 1))
+        n_new = (starts[1:] - starts[:-1])[entry]
+        leaf_of_new = np.repeat(tabled, n_new)
+        row = np.repeat(starts[entry] - (np.cumsum(n_new) - n_new), n_new) + np.arange(n_new.sum())
+        new_keys = table.new_point[row].astype(kd) @ strides
+        new_points.append(okey[leaf_of_new] + half[leaf_of_new] * new_keys)
     new_points = np.concatenate(new_points) if new_points else np.zeros(0, kd)
     vertex_id = None
     if used is not None:
@@ -214,7 +227,36 @@ def cut_leaves(okey: np.ndarray, size: np.ndarray, hanging: np.ndarray, strides:
     for v, f, case, sel in groups:
         lut = luts.FACE_LUT[d][v][f][case]
         start = emit(start, sel, half, lut.astype(kd) @ strides, luts.FACE_TEMPLATE_ID[d][v][f][case])
+    if len(tabled):
+        # tabled leaves: each its entry's tetrahedra (unit: half side)
+        n = int(per_entry.sum())
+        leaf = np.repeat(tabled, per_entry)
+        member = table.member[np.repeat(table.offset[entry] - (np.cumsum(per_entry) - per_entry),
+                                        per_entry) + np.arange(n)]
+        block = keys[start:start + n]
+        np.multiply(half[leaf, None], (table.simplex.astype(kd) @ strides)[member], out=block)
+        block += okey[leaf, None]
+        if vertex_id is not None:
+            np.take(vertex_id, block, out=block)
+        which[start:start + n] = leaf
+        template_of[start:start + n] = member + luts.TABLE_FIRST_ID[d]
+        start += n
     return keys, which, template_of, new_points
+
+
+def _table_entries(d: int, hanging: np.ndarray, variant: np.ndarray, sited: np.ndarray):
+    """Split the sited leaves into those the leaf table cuts and the rest:
+    (tabled leaves, their table entries, the other leaves)."""
+    table = luts.LEAF_TABLE.get(d)
+    empty = np.zeros(0, dtype=sited.dtype)
+    if table is None or not len(table.key) or not len(sited):
+        return empty, np.zeros(0, np.int64), sited
+    code = variant[sited].astype(np.int32) << np.int32(hanging.shape[1])
+    for bit in range(hanging.shape[1]):
+        code |= hanging[sited, bit].astype(np.int32) << np.int32(bit)
+    pos = np.minimum(np.searchsorted(table.key, code), len(table.key) - 1)
+    hit = table.key[pos] == code
+    return sited[hit], pos[hit].astype(np.int64), sited[~hit]
 
 
 def _new_points(d: int, variant: int, face: int, case: int) -> np.ndarray:

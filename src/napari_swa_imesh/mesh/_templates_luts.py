@@ -38,6 +38,12 @@ Convention
     diagonal, when the face centre is a vertex; a fan from a *new* face-centre vertex
     over the boundary segments when only edge midpoints are; else the rule's diagonal.
 
+* Sited 3-D leaves under the parity rule whose cones can be beaten: ``LEAF_TABLE[3]``
+  (:class:`LeafTable`, loaded from ``leaf_tables.npz`` beside this module) cuts them
+  into the fewest tetrahedra with the same boundary triangles (so neighbours still agree),
+  each within the bounds of the plain and cone templates, found offline by
+  ``tools/leaf_tables.py`` and checked by ``tests/mesh/test_leaf_tables.py``. Other
+  configurations, and every leaf of the lowest-corner rule, keep the cones.
 * ``VARIANTS[d]``: the variants of that dimension (``(0,)`` in 2-D, ``(0, 1, 2)`` in 3-D).
   ``FACE_LUT[d][v][f][case]`` is the ``(t, d+1, d)`` array of cone simplices for face ``f``
   (``FACES[d][f] = (axis, side)``, side 0 or 2 on the local lattice) whose sites present
@@ -48,18 +54,22 @@ Convention
   ``0 .. d!-1`` are the Kuhn simplices) then its face simplices, numbered by
   ``FACE_TEMPLATE_ID[d][v][f][case]`` (first id of that case). ``TEMPLATES[d]`` holds
   every template simplex by id as float coordinates in units of the leaf side, so
-  per-element quality is a table look-up.
+  per-element quality is a table look-up; the leaf table's simplices come last, from
+  ``TABLE_FIRST_ID[3]``.
 """
 
 from __future__ import annotations
 
 import itertools
 import math
+from dataclasses import dataclass
+from pathlib import Path
 
 import numpy as np
 
-__all__ = ["FACES", "FACE_LUT", "FACE_SITES", "FACE_TEMPLATE_ID", "KUHN", "PLAIN",
-           "PLAIN_TEMPLATE_ID", "SITES", "TEMPLATES", "VARIANTS", "face_simplices",
+__all__ = ["FACES", "FACE_LUT", "FACE_SITES", "FACE_TEMPLATE_ID", "KUHN", "LEAF_TABLE",
+           "LeafTable", "PLAIN", "PLAIN_TEMPLATE_ID", "SITES", "TABLE_FIRST_ID", "TEMPLATES",
+           "VARIANTS", "face_simplices",
            "kuhn_simplices", "orient", "parity_simplices"]
 
 
@@ -233,3 +243,56 @@ for _d in (2, 3):
     assert len(KUHN[_d]) == math.factorial(_d)
 del _d
 VARIANTS: dict[int, tuple[int, ...]] = {d: tuple(range(len(PLAIN[d]))) for d in PLAIN}
+#: id of the first sited-leaf table simplex: the plain and cone templates come before
+TABLE_FIRST_ID: dict[int, int] = {d: len(TEMPLATES[d]) for d in TEMPLATES}
+
+
+@dataclass(frozen=True)
+class LeafTable:
+    """Sited 3-D leaves cut into fewer tetrahedra than the cones, per configuration.
+
+    Made offline by ``tools/leaf_tables.py`` (a MILP per configuration class, the face
+    triangulations of ``FACE_LUT`` kept) and checked by ``tests/mesh/test_leaf_tables.py``.
+    Entry ``e`` is the leaf of variant ``key[e] >> 18`` whose sites present are the bits
+    of ``key[e] & (2**18 - 1)`` (bit i = ``SITES[3][i]``); its tetrahedra are
+    ``simplex[member[offset[e]:offset[e + 1]]]`` (local coordinates in {0, 1, 2}, unit
+    half the leaf side, positively oriented; template id ``TABLE_FIRST_ID[3] + member``).
+    ``new[e]`` lists (lattice indices ``9x + 3y + z``) the points the entry uses that are
+    neither corners nor sites present: fan face centres, and the leaf centre if used.
+    """
+
+    key: np.ndarray          # (K,) int32, sorted
+    offset: np.ndarray       # (K+1,) int64
+    member: np.ndarray       # (T,) int16
+    simplex: np.ndarray      # (S, 4, 3) int8
+    new_entry: np.ndarray    # (N,) int64: entry of each new point
+    new_point: np.ndarray    # (N, 3) int8: local coordinates of each new point
+
+
+def _load_table(path: Path) -> LeafTable | None:
+    if not path.exists():
+        return None
+    with np.load(path) as z:
+        key, offset = z["key"].astype(np.int32), z["offset"].astype(np.int64)
+        member, simplex = z["member"].astype(np.int16), z["simplex"].astype(np.int8)
+    lattice = np.array(list(itertools.product((0, 1, 2), repeat=3)), dtype=np.int8)
+    # the points each entry uses, less its corners and sites present
+    used = np.zeros((len(key), 27), dtype=bool)
+    entry_of = np.repeat(np.arange(len(key)), np.diff(offset))
+    idx = simplex[member].astype(np.int64) @ np.array([9, 3, 1])
+    used[entry_of[:, None], idx] = True
+    used[:, (lattice == 1).sum(axis=1) == 0] = False                      # corners
+    site_idx = SITES[3].astype(np.int64) @ np.array([9, 3, 1])
+    present = (key[:, None] >> np.arange(len(site_idx))) & 1
+    used[:, site_idx] &= present == 0
+    new_entry, new_idx = np.nonzero(used)
+    return LeafTable(key, offset, member, simplex, new_entry.astype(np.int64),
+                     lattice[new_idx])
+
+
+LEAF_TABLE: dict[int, LeafTable] = {}
+_table = _load_table(Path(__file__).with_name("leaf_tables.npz"))
+if _table is not None:
+    LEAF_TABLE[3] = _table
+    TEMPLATES[3] = np.concatenate([TEMPLATES[3], _table.simplex.astype(float) / 2.0])
+del _table
