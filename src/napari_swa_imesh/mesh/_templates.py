@@ -214,7 +214,9 @@ def cut_leaves(okey: np.ndarray, size: np.ndarray, hanging: np.ndarray, strides:
             lattice_keys += okey[sel, None, None]
             np.take(vertex_id, lattice_keys, out=block)
         which[start:start + n * t].reshape(n, t)[:] = sel[:, None]
-        template_of[start:start + n * t].reshape(n, t)[:] = np.arange(first_template, first_template + t)
+        template_of[start:start + n * t].reshape(n, t)[:] = (
+            np.arange(first_template, first_template + t) if np.isscalar(first_template)
+            else first_template)
         return start + n * t
 
     start = 0
@@ -228,19 +230,15 @@ def cut_leaves(okey: np.ndarray, size: np.ndarray, hanging: np.ndarray, strides:
         lut = luts.FACE_LUT[d][v][f][case]
         start = emit(start, sel, half, lut.astype(kd) @ strides, luts.FACE_TEMPLATE_ID[d][v][f][case])
     if len(tabled):
-        # tabled leaves: each its entry's tetrahedra (unit: half side)
-        n = int(per_entry.sum())
-        leaf = np.repeat(tabled, per_entry)
-        member = table.member[np.repeat(table.offset[entry] - (np.cumsum(per_entry) - per_entry),
-                                        per_entry) + np.arange(n)]
-        block = keys[start:start + n]
-        np.multiply(half[leaf, None], (table.simplex.astype(kd) @ strides)[member], out=block)
-        block += okey[leaf, None]
-        if vertex_id is not None:
-            np.take(vertex_id, block, out=block)
-        which[start:start + n] = leaf
-        template_of[start:start + n] = member + luts.TABLE_FIRST_ID[d]
-        start += n
+        # tabled leaves, by entry: each entry's tetrahedra (unit: half side)
+        order = np.argsort(entry, kind="stable")
+        present, first = np.unique(entry[order], return_index=True)
+        bounds = np.append(first, len(order))
+        local = table.simplex.astype(kd) @ strides              # (S, 4)
+        for e, lo, hi in zip(present.tolist(), bounds[:-1].tolist(), bounds[1:].tolist()):
+            members = table.member[table.offset[e]:table.offset[e + 1]]
+            start = emit(start, tabled[order[lo:hi]], half, local[members],
+                         members + luts.TABLE_FIRST_ID[d])
     return keys, which, template_of, new_points
 
 
