@@ -267,9 +267,11 @@ def main(argv=None) -> int:
         member.extend(sid[tuple(sorted(s))] for s in entries[k].tolist())
         offset[j + 1] = len(member)
     key_arr = np.array([(w << 18) | c for w, c in keys], dtype=np.int32)
-    np.savez_compressed(args.out, key=key_arr, offset=offset,
-                        member=np.array(member, dtype=np.int16),
-                        simplex=LATTICE[simplices].astype(np.int8))
+    member = np.array(member, dtype=np.int16)
+    simplex = LATTICE[simplices].astype(np.int8)
+    new_entry, new_point = luts.table_new_points(key_arr, offset, member, simplex)
+    np.savez_compressed(args.out, key=key_arr, offset=offset, member=member, simplex=simplex,
+                        new_entry=new_entry.astype(np.int32), new_point=new_point)
     print(f"{n_classes} classes ({n_optimal} proven optimal), {len(keys)} entries, "
           f"{len(simplices)} distinct tetrahedra -> {args.out} "
           f"({time.perf_counter() - t0:.0f} s)")

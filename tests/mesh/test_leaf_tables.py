@@ -84,6 +84,18 @@ def test_every_entry_tiles_its_leaf_with_the_face_tables_triangles():
     np.testing.assert_array_equal(unique[count == 1], np.sort(np.concatenate(expected)))
     # stored only where it saves tetrahedra
     assert (np.diff(TABLE.offset) < n_cones).all()
+    # the new points the mesher marks: every point used, less corners and sites present
+    point = tets @ np.array([9, 3, 1])                              # (N, 4) lattice index
+    used = np.unique(np.repeat(entry, 4) * 27 + point.ravel())
+    e, p = used // 27, used % 27
+    lattice = np.array(list(itertools.product((0, 1, 2), repeat=3)))
+    corner = (lattice[p] != 1).all(axis=1)
+    site_bit = {tuple(s): i for i, s in enumerate(luts.SITES[3].tolist())}
+    bit = np.array([site_bit.get(tuple(q), -1) for q in lattice.tolist()])[p]
+    present = (bit >= 0) & ((code[e] >> np.maximum(bit, 0)) & 1).astype(bool)
+    expected_new = np.sort(used[~corner & ~present])
+    stored = np.sort(TABLE.new_entry * 27 + TABLE.new_point.astype(np.int64) @ np.array([9, 3, 1]))
+    np.testing.assert_array_equal(stored, expected_new)
 
 
 def test_every_table_tetrahedron_is_within_the_proven_bounds():

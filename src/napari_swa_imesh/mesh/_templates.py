@@ -11,6 +11,7 @@ of a template, so its quality is a table look-up.
 
 from __future__ import annotations
 
+import functools
 import itertools
 import math
 import time
@@ -214,9 +215,7 @@ def cut_leaves(okey: np.ndarray, size: np.ndarray, hanging: np.ndarray, strides:
             lattice_keys += okey[sel, None, None]
             np.take(vertex_id, lattice_keys, out=block)
         which[start:start + n * t].reshape(n, t)[:] = sel[:, None]
-        template_of[start:start + n * t].reshape(n, t)[:] = (
-            np.arange(first_template, first_template + t) if np.isscalar(first_template)
-            else first_template)
+        template_of[start:start + n * t].reshape(n, t)[:] = np.arange(first_template, first_template + t)
         return start + n * t
 
     start = 0
@@ -230,16 +229,34 @@ def cut_leaves(okey: np.ndarray, size: np.ndarray, hanging: np.ndarray, strides:
         lut = luts.FACE_LUT[d][v][f][case]
         start = emit(start, sel, half, lut.astype(kd) @ strides, luts.FACE_TEMPLATE_ID[d][v][f][case])
     if len(tabled):
-        # tabled leaves, by entry: each entry's tetrahedra (unit: half side)
-        order = np.argsort(entry, kind="stable")
-        present, first = np.unique(entry[order], return_index=True)
-        bounds = np.append(first, len(order))
-        local = table.simplex.astype(kd) @ strides              # (S, 4)
-        for e, lo, hi in zip(present.tolist(), bounds[:-1].tolist(), bounds[1:].tolist()):
-            members = table.member[table.offset[e]:table.offset[e + 1]]
-            start = emit(start, tabled[order[lo:hi]], half, local[members],
-                         members + luts.TABLE_FIRST_ID[d])
+        # tabled leaves, grouped by their number of tetrahedra t (a few dozen groups):
+        # each leaf takes its entry's row of t members (unit: half side)
+        rows = _member_rows(table)
+        count = np.diff(table.offset)[entry]
+        order = np.argsort(count, kind="stable")
+        counts, first = np.unique(count[order], return_index=True)
+        bounds = np.append(first, len(order)).tolist()
+        local = table.simplex.astype(kd) @ strides              # (S, d+1)
+        for t, lo, hi in zip(counts.tolist(), bounds[:-1], bounds[1:]):
+            sel, members = tabled[order[lo:hi]], rows[entry[order[lo:hi]], :t]
+            n = len(sel)
+            block = keys[start:start + n * t].reshape(n, t, d + 1)
+            lattice_keys = local[members]                      # (n, t, d+1)
+            lattice_keys *= half[sel, None, None]
+            lattice_keys += okey[sel, None, None]
+            if vertex_id is None:
+                block[:] = lattice_keys
+            else:
+                np.take(vertex_id, lattice_keys, out=block)
+            which[start:start + n * t].reshape(n, t)[:] = sel[:, None]
+            template_of[start:start + n * t].reshape(n, t)[:] = members + luts.TABLE_FIRST_ID[d]
+            start += n * t
     return keys, which, template_of, new_points
+
+
+@functools.lru_cache(maxsize=2)
+def _member_rows(table: luts.LeafTable) -> np.ndarray:
+    return table.member_rows
 
 
 def _table_entries(d: int, hanging: np.ndarray, variant: np.ndarray, sited: np.ndarray):

@@ -187,8 +187,17 @@ def face_simplices(d: int, axis: int, side: int, present: set[tuple[int, ...]],
         faces = _face_polygons(present_2d, through_low)
     else:
         raise ValueError(f"templates exist for 2-D and 3-D leaves only; got d={d}.")
-    out = [orient(np.array([lift(q) for q in f] + [centre])) for f in faces]
-    return np.array(out, dtype=np.int8)
+    flat = np.array(faces, dtype=np.int8)                     # (t, d, d-1) face coordinates
+    out = np.empty((len(flat), d + 1, d), dtype=np.int8)
+    out[:, :d, axis] = side
+    out[:, :d, others] = flat
+    out[:, d] = centre
+    # orient all at once (one determinant call, not one per simplex: import time)
+    det = np.linalg.det((out[:, 1:] - out[:, :1]).astype(float))
+    if (det == 0).any():
+        raise ValueError("a template simplex is degenerate.")
+    out[det < 0, :2] = out[det < 0, 1::-1]
+    return out
 
 
 def _build_variant(d: int, v: int, sites, faces, face_sites, templates: list):
@@ -247,7 +256,7 @@ VARIANTS: dict[int, tuple[int, ...]] = {d: tuple(range(len(PLAIN[d]))) for d in 
 TABLE_FIRST_ID: dict[int, int] = {d: len(TEMPLATES[d]) for d in TEMPLATES}
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, eq=False)  # hashed by identity: look-ups cache per table
 class LeafTable:
     """Sited 3-D leaves cut into fewer tetrahedra than the cones, per configuration.
 
@@ -268,26 +277,40 @@ class LeafTable:
     new_entry: np.ndarray    # (N,) int64: entry of each new point
     new_point: np.ndarray    # (N, 3) int8: local coordinates of each new point
 
+    @property
+    def member_rows(self) -> np.ndarray:
+        """(K, t_max) int16: each entry's members in one row, padded with -1."""
+        count = np.diff(self.offset)
+        rows = np.full((len(self.key), int(count.max(initial=0))), -1, dtype=np.int16)
+        rows[np.repeat(np.arange(len(self.key)), count),
+             np.arange(len(self.member)) - np.repeat(self.offset[:-1], count)] = self.member
+        return rows
+
 
 def _load_table(path: Path) -> LeafTable | None:
     if not path.exists():
         return None
     with np.load(path) as z:
-        key, offset = z["key"].astype(np.int32), z["offset"].astype(np.int64)
-        member, simplex = z["member"].astype(np.int16), z["simplex"].astype(np.int8)
+        return LeafTable(z["key"].astype(np.int32), z["offset"].astype(np.int64),
+                         z["member"].astype(np.int16), z["simplex"].astype(np.int8),
+                         z["new_entry"].astype(np.int64), z["new_point"].astype(np.int8))
+
+
+def table_new_points(key: np.ndarray, offset: np.ndarray, member: np.ndarray,
+                     simplex: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(entry, local point) of every point a table entry uses that is neither a corner
+    nor a site present: what :class:`LeafTable` stores as ``new_entry``, ``new_point``."""
     lattice = np.array(list(itertools.product((0, 1, 2), repeat=3)), dtype=np.int8)
-    # the points each entry uses, less its corners and sites present
     used = np.zeros((len(key), 27), dtype=bool)
     entry_of = np.repeat(np.arange(len(key)), np.diff(offset))
-    idx = simplex[member].astype(np.int64) @ np.array([9, 3, 1])
+    idx = (simplex.astype(np.int64) * np.array([9, 3, 1])).sum(axis=2)[member]  # (T, 4)
     used[entry_of[:, None], idx] = True
     used[:, (lattice == 1).sum(axis=1) == 0] = False                      # corners
     site_idx = SITES[3].astype(np.int64) @ np.array([9, 3, 1])
     present = (key[:, None] >> np.arange(len(site_idx))) & 1
     used[:, site_idx] &= present == 0
     new_entry, new_idx = np.nonzero(used)
-    return LeafTable(key, offset, member, simplex, new_entry.astype(np.int64),
-                     lattice[new_idx])
+    return new_entry.astype(np.int64), lattice[new_idx]
 
 
 LEAF_TABLE: dict[int, LeafTable] = {}
