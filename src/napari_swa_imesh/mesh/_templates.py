@@ -157,12 +157,15 @@ def cut_leaves(okey: np.ndarray, size: np.ndarray, hanging: np.ndarray, strides:
     # the other leaves by the variant and case of each face: (variant, face, case, members)
     groups = []
     n_var = len(luts.VARIANTS[d])
+    # one gather of the sited leaves' rows (a gather per site and face costs more)
+    sites_of_other = hanging[other].view(np.uint8)
+    variant_of_other = variant[other].astype(np.uint16)
     for f, fsites in enumerate(luts.FACE_SITES[d]):
         n_case = 1 << len(fsites)
         # uint16 codes (variant, case): numpy's stable sort is a radix sort for them
-        code = variant[other].astype(np.uint16) << np.uint16(len(fsites))
+        code = variant_of_other << np.uint16(len(fsites))
         for bit, site in enumerate(fsites):
-            code |= hanging[other, site].astype(np.uint16) << np.uint16(bit)
+            code |= sites_of_other[:, site].astype(np.uint16) << np.uint16(bit)
         order = np.argsort(code, kind="stable")
         bounds = np.searchsorted(code[order], np.arange(n_var * n_case + 1), side="left")
         for v in luts.VARIANTS[d]:
@@ -238,10 +241,12 @@ def cut_leaves(okey: np.ndarray, size: np.ndarray, hanging: np.ndarray, strides:
         bounds = np.append(first, len(order)).tolist()
         local = table.simplex.astype(kd) @ strides              # (S, d+1)
         for t, lo, hi in zip(counts.tolist(), bounds[:-1], bounds[1:]):
-            sel, members = tabled[order[lo:hi]], rows[entry[order[lo:hi]], :t]
+            # np.take, not fancy indexing: whole rows copied, no per-element iterator
+            sel = tabled[order[lo:hi]]
+            members = np.take(rows[:, :t], entry[order[lo:hi]], axis=0)
             n = len(sel)
             block = keys[start:start + n * t].reshape(n, t, d + 1)
-            lattice_keys = local[members]                      # (n, t, d+1)
+            lattice_keys = np.take(local, members, axis=0)     # (n, t, d+1)
             lattice_keys *= half[sel, None, None]
             lattice_keys += okey[sel, None, None]
             if vertex_id is None:
@@ -256,7 +261,8 @@ def cut_leaves(okey: np.ndarray, size: np.ndarray, hanging: np.ndarray, strides:
 
 @functools.lru_cache(maxsize=2)
 def _member_rows(table: luts.LeafTable) -> np.ndarray:
-    return table.member_rows
+    # intp: numpy would convert any other index dtype on every gather
+    return table.member_rows.astype(np.intp)
 
 
 def _table_entries(d: int, hanging: np.ndarray, variant: np.ndarray, sited: np.ndarray):
@@ -266,14 +272,17 @@ def _table_entries(d: int, hanging: np.ndarray, variant: np.ndarray, sited: np.n
     empty = np.zeros(0, dtype=sited.dtype)
     if table is None or not len(table.key) or not len(sited):
         return empty, np.zeros(0, np.int64), sited
+    # the 18 site bits of each leaf, packed little-endian into 3 bytes, then one int32
+    packed = np.packbits(hanging[sited], axis=1, bitorder="little").astype(np.int32)
     code = variant[sited].astype(np.int32) << np.int32(hanging.shape[1])
-    for bit in range(hanging.shape[1]):
-        code |= hanging[sited, bit].astype(np.int32) << np.int32(bit)
+    for byte in range(packed.shape[1]):
+        code |= packed[:, byte] << np.int32(8 * byte)
     pos = np.minimum(np.searchsorted(table.key, code), len(table.key) - 1)
     hit = table.key[pos] == code
     return sited[hit], pos[hit].astype(np.int64), sited[~hit]
 
 
+@functools.lru_cache(maxsize=None)
 def _new_points(d: int, variant: int, face: int, case: int) -> np.ndarray:
     """(k, d) local points of a face case that are neither corners nor sites present."""
     present = {tuple(luts.SITES[d][s]) for i, s in enumerate(luts.FACE_SITES[d][face]) if case >> i & 1}
