@@ -20,7 +20,10 @@ periodic meshes with an odd extent keeps the cones), this script solves offline,
   volume (then they tile the leaf face to face: a conforming triangulation).
 
 Configurations are solved once per class under the cube's 48 symmetries (a reflection of
-an odd number of axes swaps the two parity variants) and mapped back; every stored
+an odd number of axes swaps the two parity variants) and mapped back. Each solution is
+kept by the symmetries that fix its configuration (a constraint of the MILP), so the
+table commutes with the cube's symmetries: a transposed image gets the transposed mesh,
+as with Kuhn's and the cones' templates. Every stored
 triangulation is then verified on its own (facets against the face table, volumes,
 quality). Only configurations the solver cuts into fewer tetrahedra than the cones are
 stored. The package test ``tests/mesh/test_leaf_tables.py`` checks the stored file again,
@@ -113,8 +116,11 @@ def on_leaf_face(tri) -> bool:
     return any((p[:, a] == s).all() for a in range(3) for s in (0, 2))
 
 
-def solve(cand, inside, points: np.ndarray, btris, centre: bool, time_limit: float):
-    """Fewest candidates tiling the leaf with these boundary triangles, or None."""
+def solve(cand, inside, points: np.ndarray, btris, centre: bool, time_limit: float,
+          stabiliser=()):
+    """Fewest candidates tiling the leaf with these boundary triangles, or None; the
+    tiling is kept by every symmetry in `stabiliser` (those that fix the leaf), so the
+    table is one function of the leaf whatever symmetry maps a class to it."""
     present = np.zeros(27, dtype=bool)
     present[points] = True
     present[CENTRE] |= centre
@@ -142,8 +148,25 @@ def solve(cand, inside, points: np.ndarray, btris, centre: bool, time_limit: flo
     if any(tri not in row_of for tri in bset):
         return None
     kept = np.asarray(kept)
-    a = coo_matrix((vals, (rows, cols)), shape=(len(row_of), len(kept))).tocsr()
-    rhs = np.zeros(len(row_of))
+    # invariance: x_t = x_s(t) for every symmetry s of the leaf (0 when s(t) is no candidate)
+    column = {tuple(sorted(c)): j for j, c in enumerate(cand[kept].tolist())}
+    n_rows = len(row_of)
+    for perm, flips in stabiliser:
+        images = lattice_index(transform(LATTICE[cand[kept]], perm, flips))
+        for j, image in enumerate(images.tolist()):
+            k = column.get(tuple(sorted(image)))
+            if k == j:
+                continue
+            rows.append(n_rows)
+            cols.append(j)
+            vals.append(1.0)
+            if k is not None:
+                rows.append(n_rows)
+                cols.append(k)
+                vals.append(-1.0)
+            n_rows += 1
+    a = coo_matrix((vals, (rows, cols)), shape=(n_rows, len(kept))).tocsr()
+    rhs = np.zeros(n_rows)
     rhs[[row_of[tri] for tri in bset]] = 1.0
     tets = LATTICE[cand[kept]].astype(float)
     vol = np.abs(np.linalg.det(tets[:, 1:] - tets[:, :1]))
@@ -234,9 +257,13 @@ def main(argv=None) -> int:
             n_classes += 1
             btris = boundary_triangles(configs[i], v)
             points = np.unique(np.array(btris).ravel())
+            # the symmetries that fix this leaf (an odd number of flips swaps the parity)
+            stabiliser = [g for g, (moved, odd) in zip(syms, images)
+                          if not odd and moved[i] == code]
             best, optimal = None, True
             for centre in (False, True):
-                found = solve(cand, inside, points, btris, centre, args.time_limit)
+                found = solve(cand, inside, points, btris, centre, args.time_limit,
+                              stabiliser)
                 if found is not None and (best is None or len(found[0]) < len(best)):
                     best, optimal = found
             # every image of this (configuration, variant): the same count, mapped

@@ -142,3 +142,34 @@ def test_meshes_use_the_table_and_save_tetrahedra(monkeypatch):
     vol = signed_volumes(with_table.points, with_table.cells)
     assert (vol > 0).all() and vol.sum() == pytest.approx(lab.size)
     assert check_mesh(with_table, lab).all_passed
+
+
+def test_the_table_commutes_with_the_cubes_symmetries():
+    # a leaf rotated or reflected gets the rotated or reflected tetrahedra (an odd number
+    # of reflections swaps the two parities), so a transposed image gets the transposed
+    # mesh as it does with the plain and cone templates
+    variant, code, tets, entry = _all_entries()
+    key = TABLE.key.astype(np.int64)
+
+    def tet_keys(entry_key, t):
+        idx = np.sort(t @ np.array([9, 3, 1]), axis=1)
+        return ((((entry_key * 27 + idx[:, 0]) * 27 + idx[:, 1]) * 27 + idx[:, 2]) * 27
+                + idx[:, 3])
+
+    expected = np.sort(tet_keys(key[entry], tets))
+    sites = luts.SITES[3].astype(np.int64)
+    site_of = {tuple(s): i for i, s in enumerate(sites.tolist())}
+    for perm in itertools.permutations(range(3)):
+        for flips in itertools.product((False, True), repeat=3):
+            def move(points):
+                q = points[..., list(perm)].copy()
+                q[..., list(flips)] = 2 - q[..., list(flips)]
+                return q
+            image = np.array([site_of[tuple(p)] for p in move(sites).tolist()])
+            moved_code = np.zeros_like(code)
+            for i, j in enumerate(image):
+                moved_code |= ((code >> i) & 1) << j
+            moved_variant = 3 - variant if sum(flips) % 2 else variant
+            moved_key = (moved_variant.astype(np.int64) << 18) | moved_code
+            got = np.sort(tet_keys(moved_key[entry], move(tets)))
+            np.testing.assert_array_equal(got, expected, err_msg=f"{perm} {flips}")
