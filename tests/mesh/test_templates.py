@@ -22,59 +22,95 @@ def _facets_on(simplices: np.ndarray, axis: int, side: int) -> set:
     return out
 
 
-def _valid_cases(d, f):
-    return [c for c in range(1 << len(luts.FACE_SITES[d][f])) if len(luts.FACE_LUT[d][f][c])]
+def _valid_cases(d, f, v=0):
+    return [c for c in range(1 << len(luts.FACE_SITES[d][f])) if len(luts.FACE_LUT[d][v][f][c])]
+
+
+def _variants():
+    return [(d, v) for d in (2, 3) for v in luts.VARIANTS[d]]
+
+
+def _across(v):
+    """The variant of the same-size neighbour across a face: parity flips, lowest stays."""
+    return v if v == 0 else 3 - v
+
+
+def _child_variant(v, corner):
+    """Variant of the child at `corner` (in {0,1}^d) of a leaf of variant `v`."""
+    return v if v == 0 else 1 + sum(corner) % 2
 
 
 @pytest.mark.parametrize("d", [2, 3])
-def test_kuhn_fills_the_cube_positively(d):
-    kuhn = luts.KUHN[d].astype(float)
-    pts = kuhn.reshape(-1, d)
-    vol = signed_volumes(pts, np.arange(len(pts)).reshape(-1, d + 1))
-    assert (vol > 0).all() and vol.sum() == pytest.approx(1.0)
+def test_plain_leaves_fill_the_cube_positively(d):
+    assert np.array_equal(luts.KUHN[d], luts.PLAIN[d][0])
+    for v in luts.VARIANTS[d]:
+        plain = luts.PLAIN[d][v].astype(float)
+        pts = plain.reshape(-1, d)
+        vol = signed_volumes(pts, np.arange(len(pts)).reshape(-1, d + 1))
+        assert (vol > 0).all() and vol.sum() == pytest.approx(1.0)
+        assert len(plain) == (math.factorial(d) if v == 0 else 5)
 
 
-@pytest.mark.parametrize("d", [2, 3])
-def test_shared_faces_are_cut_the_same_from_both_sides(d):
+@pytest.mark.parametrize(("d", "v"), _variants())
+def test_shared_faces_are_cut_the_same_from_both_sides(d, v):
+    w = _across(v)
     for f, (axis, side) in enumerate(luts.FACES[d]):
         if side == 2:
             continue
         g = luts.FACES[d].index((axis, 2))
         shift = np.zeros(d, int)
         shift[axis] = 2
-        for case in _valid_cases(d, f):
+        for case in _valid_cases(d, f, v):
             # the face's sites, in the same bit order seen from the neighbour below
             mine = {tuple(luts.SITES[d][s]) for i, s in enumerate(luts.FACE_SITES[d][f]) if case >> i & 1}
             theirs = 0
             for i, s in enumerate(luts.FACE_SITES[d][g]):
                 if tuple(luts.SITES[d][s] - shift) in mine:
                     theirs |= 1 << i
-            a = _facets_on(luts.FACE_LUT[d][f][case], axis, 0)
-            b = _facets_on(luts.FACE_LUT[d][g][theirs] - shift, axis, 0)
+            a = _facets_on(luts.FACE_LUT[d][v][f][case], axis, 0)
+            b = _facets_on(luts.FACE_LUT[d][w][g][theirs] - shift, axis, 0)
             assert a == b and a, (f, case)
 
 
-@pytest.mark.parametrize("d", [2, 3])
-def test_plain_faces_match_kuhn_and_quadrants_match_children(d):
-    kuhn = luts.KUHN[d] * 2
+@pytest.mark.parametrize(("d", "v"), _variants())
+def test_plain_faces_match_plain_leaves_and_quadrants_match_children(d, v):
+    plain_leaf = luts.PLAIN[d][v] * 2
     for f, (axis, side) in enumerate(luts.FACES[d]):
-        plain = _facets_on(luts.FACE_LUT[d][f][0], axis, side)
-        assert plain == _facets_on(kuhn, axis, side)
+        plain = _facets_on(luts.FACE_LUT[d][v][f][0], axis, side)
+        assert plain == _facets_on(plain_leaf, axis, side)
+        # and the plain leaf across the face (other parity) cuts it alike
+        shift = np.zeros(d, int)
+        shift[axis] = 2 if side == 2 else -2
+        across = luts.PLAIN[d][_across(v)] * 2 + shift
+        assert plain == _facets_on(across, axis, side)
         full = (1 << len(luts.FACE_SITES[d][f])) - 1
-        # a face whose centre is a vertex is cut like the faces of four Kuhn children
+        # a face whose centre is a vertex is cut like the faces of four plain children
         children = set()
         for corner in np.ndindex((2,) * d):
-            child = luts.KUHN[d] + np.array(corner)
+            child = luts.PLAIN[d][_child_variant(v, corner)] + np.array(corner)
             children |= _facets_on(child, axis, side)
         if d == 3:
-            assert _facets_on(luts.FACE_LUT[d][f][full], axis, side) == children
+            assert _facets_on(luts.FACE_LUT[d][v][f][full], axis, side) == children
 
 
-@pytest.mark.parametrize("d", [2, 3])
-def test_every_face_case_covers_its_face(d):
+def test_parity_rule_is_the_even_corner_diagonal():
+    # a plain face of an even leaf is cut through its corners with sum(c / side) even;
+    # quadrants of a face with its centre present: an X through the centre
+    for f, (axis, side) in enumerate(luts.FACES[3]):
+        for v in (1, 2):
+            for tri in _facets_on(luts.FACE_LUT[3][v][f][0], axis, side):
+                shared = set(tri) & set(next(iter(_facets_on(luts.FACE_LUT[3][v][f][0], axis, side) - {tri})))
+                assert all((sum(c) // 2 + v - 1) % 2 == 0 for c in shared), (f, v)
+            full = (1 << len(luts.FACE_SITES[3][f])) - 1
+            for tri in _facets_on(luts.FACE_LUT[3][v][f][full], axis, side):
+                assert (1, 1) in {tuple(c[a] for a in range(3) if a != axis) for c in tri}
+
+
+@pytest.mark.parametrize(("d", "v"), _variants())
+def test_every_face_case_covers_its_face(d, v):
     for f, (axis, side) in enumerate(luts.FACES[d]):
-        for case in _valid_cases(d, f):
-            simplices = luts.FACE_LUT[d][f][case].astype(float)
+        for case in _valid_cases(d, f, v):
+            simplices = luts.FACE_LUT[d][v][f][case].astype(float)
             pts = simplices.reshape(-1, d)
             vol = signed_volumes(pts, np.arange(len(pts)).reshape(-1, d + 1))
             # cone of height 1 over a face of area 2^(d-1): volume 2^(d-1) / d

@@ -83,12 +83,17 @@ def test_transposing_the_image_transposes_the_tensor():
         assert lo <= mixed.k_eff[name] <= hi
 
 
-@pytest.mark.parametrize("d", [2, 3])
-def test_periodic_meshes_have_matching_opposite_faces(d):
+@pytest.mark.parametrize(("d", "shape", "spacing", "rule"), [
+    (2, (9, 6), (1.0, 2.5), "lowest"),
+    (3, (9, 6, 7), (1.0, 2.5, 1.0), "lowest"),   # odd extents: Kuhn's lowest-corner rule
+    (3, (8, 6, 10), (1.0, 1.0, 1.0), "parity"),  # even extents: five tetrahedra per plain leaf
+])
+def test_periodic_meshes_have_matching_opposite_faces(d, shape, spacing, rule):
     rng = np.random.default_rng(d)
-    lab = rng.integers(1, 4, size=(9, 6, 7)[:d]).astype(np.uint8)
+    lab = rng.integers(1, 4, size=shape).astype(np.uint8)
     lab[(slice(2, 5),) * d] = 1
-    mesh = mesh_labels(lab, periodic=True, spacing=(1.0, 2.5, 1.0)[:d])
+    mesh = mesh_labels(lab, periodic=True, spacing=spacing)
+    assert mesh.info["diagonal_rule"] == rule
     groups = facet_groups(mesh)
     lo, hi = mesh.image_box()
     for name, axis in zip("xyz"[:d], range(d - 1, -1, -1)):
@@ -101,7 +106,7 @@ def test_periodic_meshes_have_matching_opposite_faces(d):
         low, high = groups[f"{name}min"], groups[f"{name}max"]
         assert len(low) == len(high)
         assert facet_set(low, lo[axis]) == facet_set(high, hi[axis])
-    plain = mesh_labels(lab, spacing=(1.0, 2.5, 1.0)[:d])
+    plain = mesh_labels(lab, spacing=spacing)
     assert mesh.n_cells >= plain.n_cells
 
 

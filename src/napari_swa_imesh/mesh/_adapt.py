@@ -101,7 +101,7 @@ def _refine_marked(labels, mesh: Mesh, marked: np.ndarray, tree: RegionTree | No
     seconds = {"tree": time.perf_counter() - t0}
     out = _mesh_tree(tree, method="template", exclude=exclude, spacing=fine.step,
                      material_names=_names(mesh.material_names), connectivity=None,
-                     report_face_balance=False, seconds=seconds)
+                     report_face_balance=False, seconds=seconds, periodic=periodic)
     out.shape, out.spacing = tuple(lab.shape), spacing
     out.world = mesh.world              # the same image, so the same place in the world
     out.info["spacing"] = list(spacing)

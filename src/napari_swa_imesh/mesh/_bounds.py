@@ -127,7 +127,10 @@ def quality_table(dim: int) -> list[dict]:
     -------
     list of dict
         One row per distinct template simplex (up to rotations and reflections of the
-        cube), worst ratio first. Keys: ``dim``, ``kind`` ("kuhn" or "cone"), ``vertices``
+        cube), worst ratio first, over every configuration cut by every diagonal rule
+        (``_templates_luts``). Keys: ``dim``, ``kind`` ("kuhn", "five": the 3-D plain leaf
+        of five tetrahedra, "cone", or "table": only in the sited-leaf table, see
+        ``_templates_luts.LeafTable``), ``vertices``
         (coordinates on a leaf of side 2, as in the reference's tables),
         ``circumradius``, ``shortest_edge``, ``radius_edge_ratio``, ``min_angle`` and
         ``max_angle`` (2-D, degrees) or ``min_dihedral`` and ``max_dihedral`` (3-D,
@@ -144,15 +147,20 @@ def quality_table(dim: int) -> list[dict]:
     configs = leaf_configurations(d)
     strides = np.array([3 ** (d - 1 - a) for a in range(d)], dtype=np.int64)
     n = len(configs)
-    keys, which, template_id, _ = cut_leaves(np.zeros(n, np.int64), np.full(n, 2, np.int64),
-                                          configs, strides)
+    # every configuration under every diagonal rule (variant) the mesher uses
+    n_var = len(luts.VARIANTS[d])
+    variant = np.repeat(np.asarray(luts.VARIANTS[d], dtype=np.int8), n)
+    keys, which, template_id, _ = cut_leaves(
+        np.zeros(n * n_var, np.int64), np.full(n * n_var, 2, np.int64),
+        np.tile(configs, (n_var, 1)), strides, variant=variant)
+    which = which % n  # the configuration, whatever the variant
     # every configuration must be cut into positive simplices filling the leaf exactly
     local = np.stack(np.unravel_index(keys, (3,) * d), axis=-1).astype(float)  # (M, d+1, d)
     pts = local.reshape(-1, d)
     cells = np.arange(len(pts)).reshape(-1, d + 1)
     vol = signed_volumes(pts, cells)
     filled = np.bincount(which, weights=vol, minlength=n)
-    if not (vol > 0).all() or not np.allclose(filled, 2.0 ** d):
+    if not (vol > 0).all() or not np.allclose(filled, n_var * 2.0 ** d):
         raise RuntimeError("a template does not fill its leaf with positive simplices.")
 
     symmetries = _symmetries(d)
@@ -164,6 +172,8 @@ def quality_table(dim: int) -> list[dict]:
         key = _canonical(simplex[None], symmetries)
         entry = classes.setdefault(key, {"tids": [], "simplex": simplex})
         entry["tids"].append(int(tid))
+    plain_ids = {v: set(range(first, first + len(luts.PLAIN[d][v])))
+                 for v, first in enumerate(luts.PLAIN_TEMPLATE_ID[d])}
     rows = []
     for key, entry in classes.items():
         simplex = entry["simplex"].astype(float)
@@ -174,7 +184,9 @@ def quality_table(dim: int) -> list[dict]:
         users = np.unique(which[np.isin(template_id, entry["tids"])])
         row = {
             "dim": d,
-            "kind": "kuhn" if min(entry["tids"]) < math.factorial(d) else "cone",
+            "kind": ("kuhn" if set(entry["tids"]) & plain_ids[0] else
+                     "five" if any(set(entry["tids"]) & plain_ids[v] for v in plain_ids) else
+                     "cone" if min(entry["tids"]) < luts.TABLE_FIRST_ID[d] else "table"),
             "vertices": entry["simplex"].tolist(),
             "circumradius": ratio * shortest,
             "shortest_edge": shortest,

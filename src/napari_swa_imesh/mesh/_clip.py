@@ -103,13 +103,13 @@ class MeshClipper:
     Examples
     --------
     >>> from napari_swa_imesh.mesh import mesh_labels
-    >>> mesh = mesh_labels(np.arange(8).reshape(2, 2, 2) % 2 + 1)   # 8 cubes, 6 tets each
+    >>> mesh = mesh_labels(np.arange(8).reshape(2, 2, 2) % 2 + 1)   # 8 cubes, 5 tets each
     >>> clipper = MeshClipper(mesh)
     >>> clipper.surface(0, 2.0)["n_faces"]      # all kept: 6 sides of 4 squares, 2 triangles
     48
     >>> cut = clipper.surface(0, 0.5)           # the lower layer of cubes: a 2 x 2 x 1 slab
     >>> cut["n_kept"], cut["n_faces"]
-    (24, 32)
+    (20, 32)
     """
 
     def __init__(self, mesh, *, shown: tuple[np.ndarray, np.ndarray] | None = None):

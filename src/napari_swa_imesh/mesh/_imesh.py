@@ -100,9 +100,11 @@ def mesh_labels(labels, *, method: str = "template", exclude=(), spacing=None,
     -----
     The mesher works on the lattice of :func:`choose_lattice` (``info["lattice"]``): the
     voxels themselves for cubic spacing without refinement. The per-element metrics are
-    those of the physical elements; ``level`` counts lattice cells. Template elements per leaf: d! (Kuhn) when no edge midpoint or
-    face centre of the leaf is a vertex, else one cone simplex per boundary segment or face
-    triangle (2-D: 5-8; 3-D: 12-48).
+    those of the physical elements; ``level`` counts lattice cells. Template elements per leaf, when no edge midpoint or
+    face centre of the leaf is a vertex: 2 in 2-D, 5 in 3-D (6, Kuhn's, in a periodic mesh
+    with an odd extent: ``info["diagonal_rule"]``); else one cone simplex per boundary
+    segment or face triangle (2-D: 5-8; 3-D: 12-48), or in 3-D the fewer tetrahedra of the
+    leaf table where it has the configuration (17-40; ``_templates_luts.LeafTable``).
 
     Raises
     ------
@@ -242,7 +244,7 @@ def _mesh_labels(lab: np.ndarray, *, method: str, exclude: np.ndarray, spacing: 
     seconds = {"tree": time.perf_counter() - t0}
     mesh = _mesh_tree(tree, method=method, exclude=exclude, spacing=lattice.step,
                       material_names=_names(material_names), connectivity=None,
-                      report_face_balance=False, seconds=seconds)
+                      report_face_balance=False, seconds=seconds, periodic=periodic)
     # the mesh describes the image it came from; the lattice is in info
     mesh.shape, mesh.spacing = tuple(lab.shape), tuple(spacing)
     mesh.info["spacing"] = list(spacing)
@@ -329,9 +331,10 @@ def mesh_tree(tree: RegionTree, *, method: str = "template", exclude=(), spacing
 
 def _mesh_tree(tree: RegionTree, *, method: str, exclude: np.ndarray, spacing: tuple,
                material_names: dict[int, str], connectivity: int | None,
-               report_face_balance: bool, seconds: dict) -> Mesh:
+               report_face_balance: bool, seconds: dict, periodic: bool = False) -> Mesh:
     """The worker behind :func:`mesh_tree` and :func:`mesh_labels`: trusted arguments;
-    `seconds` holds the steps already timed (the tree) and receives the others."""
+    `seconds` holds the steps already timed (the tree) and receives the others.
+    `periodic`: the tree's box faces are to be cut alike (the diagonal rule follows)."""
     d = tree.ndim
     if connectivity is None:
         connectivity = 1 if method == "delaunay" else max(1, d - 1)
@@ -363,7 +366,9 @@ def _mesh_tree(tree: RegionTree, *, method: str, exclude: np.ndarray, spacing: t
         info["n_leaves_face_balanced"] = None
 
     if method == "template":
-        points, cells, leaf, template_id, vseconds = template_mesh(bal, meshed)
+        # a periodic mesh needs the rule to survive the translation by the box size
+        rule = "lowest" if periodic and any(n % 2 for n in tree.shape) else "parity"
+        points, cells, leaf, template_id, vseconds = template_mesh(bal, meshed, rule=rule)
         seconds.update(vseconds)
         t = time.perf_counter()
         table = template_quality(d, spacing)
@@ -371,8 +376,9 @@ def _mesh_tree(tree: RegionTree, *, method: str, exclude: np.ndarray, spacing: t
         cell_data = {name: values[template_id] for name, values in table.items()}
         del template_id
         seconds["quality"] = time.perf_counter() - t
-        info["n_kuhn_leaves"] = int(vseconds.pop("_n_kuhn"))
-        seconds.pop("_n_kuhn", None)
+        info["n_plain_leaves"] = int(vseconds.pop("_n_plain"))
+        seconds.pop("_n_plain", None)
+        info["diagonal_rule"] = rule if d == 3 else "lowest"
     else:
         points, cells, leaf, cell_data, dinfo, vseconds = delaunay_mesh(bal, meshed)
         seconds.update(vseconds)

@@ -11,6 +11,7 @@ of a template, so its quality is a table look-up.
 
 from __future__ import annotations
 
+import functools
 import itertools
 import math
 import time
@@ -46,8 +47,13 @@ def mark_corners(tree: RegionTree, select: np.ndarray, shape, strides) -> np.nda
     return is_vertex
 
 
-def template_mesh(bal: RegionTree, meshed: np.ndarray):
+def template_mesh(bal: RegionTree, meshed: np.ndarray, *, rule: str = "parity"):
     """Cut every meshed leaf by the look-up tables.
+
+    `rule` is the 3-D face-diagonal rule (``_templates_luts``): ``"parity"`` (five
+    tetrahedra per plain leaf) or ``"lowest"`` (Kuhn's six; what a periodic mesh with an
+    odd extent needs, since a translation by an odd number of cells flips the parity).
+    2-D meshes always use the lowest-corner rule.
 
     Returns points (index space), cells, leaf index and template id per element, and the
     seconds spent per step.
@@ -70,7 +76,14 @@ def template_mesh(bal: RegionTree, meshed: np.ndarray):
     coarse = np.flatnonzero(level >= 1)  # level-0 leaves have no sites: no leaf is smaller
     site_of_coarse = okey[coarse, None] + half[coarse, None] * site_keys[None]  # (Lc, n_sites)
     hanging[coarse] = is_vertex[site_of_coarse]
-    kuhn = ~hanging.any(axis=1)
+    plain = ~hanging.any(axis=1)
+    variant = None
+    if d == 3 and rule == "parity":
+        # the leaf's parity: sum of its origin in units of its side
+        parity = (bal.origin[leaves] >> bal.level[leaves, None]).sum(axis=1) & 1
+        variant = (parity + 1).astype(np.int8)
+    elif rule not in ("parity", "lowest"):
+        raise ValueError(f"rule must be 'parity' or 'lowest'; got {rule!r}.")
     # the points elements use: corners of meshed leaves, the sites they carry, and the
     # new points of the templates (marked without scattering every element's keys)
     used = is_vertex if meshed.sum() == bal.inside.sum() else mark_corners(bal, meshed, shape, strides)
@@ -79,7 +92,8 @@ def template_mesh(bal: RegionTree, meshed: np.ndarray):
     seconds["vertices"] = time.perf_counter() - t
 
     t = time.perf_counter()
-    cells, which, template_of, _ = cut_leaves(okey, size, hanging, strides, used=used)
+    cells, which, template_of, _ = cut_leaves(okey, size, hanging, strides, used=used,
+                                              variant=variant)
     leaf_of = leaves[which]  # intp: it indexes the leaf arrays again below
     del which
     seconds["simplices"] = time.perf_counter() - t
@@ -87,12 +101,12 @@ def template_mesh(bal: RegionTree, meshed: np.ndarray):
     t = time.perf_counter()
     points = np.stack(np.unravel_index(np.flatnonzero(used), shape), axis=1).astype(np.float64)
     seconds["numbering"] = time.perf_counter() - t
-    seconds["_n_kuhn"] = int(kuhn.sum())
+    seconds["_n_plain"] = int(plain.sum())
     return points, cells, leaf_of, template_of, seconds
 
 
 def cut_leaves(okey: np.ndarray, size: np.ndarray, hanging: np.ndarray, strides: np.ndarray,
-               *, used: np.ndarray | None = None):
+               *, used: np.ndarray | None = None, variant: np.ndarray | None = None):
     """Cut leaves by the look-up tables; the dictionary step, shared with the quality table.
 
     Parameters
@@ -111,6 +125,9 @@ def cut_leaves(okey: np.ndarray, size: np.ndarray, hanging: np.ndarray, strides:
         points are marked in it, and elements come back as vertex numbers (the rank of the
         key among the marked points, i.e. ``cumsum(used) - 1``) instead of keys, so the
         big key array is never built.
+    variant : (L,) ndarray of int8, optional
+        Diagonal rule per leaf (``VARIANTS[d]``, see ``_templates_luts``); default 0, the
+        lowest-corner rule, for every leaf.
 
     Returns
     -------
@@ -129,32 +146,56 @@ def cut_leaves(okey: np.ndarray, size: np.ndarray, hanging: np.ndarray, strides:
     kd = strides.dtype
     wd = np.int32 if len(okey) < 2**31 else np.int64
     half = size >> 1
-    kuhn = ~hanging.any(axis=1)
-    nk = np.flatnonzero(kuhn)
-    other = np.flatnonzero(~kuhn)
-    # group the other leaves by the case of each face: (face, case, members)
+    if variant is None:
+        variant = np.zeros(len(okey), dtype=np.int8)
+    plain = ~hanging.any(axis=1)
+    other = np.flatnonzero(~plain)
+    # sited leaves whose configuration the table cuts into fewer tetrahedra than cones
+    tabled, entry, other = _table_entries(d, hanging, variant, other)
+    # plain leaves by variant: (variant, members)
+    plain_groups = [(v, np.flatnonzero(plain & (variant == v))) for v in luts.VARIANTS[d]]
+    # the other leaves by the variant and case of each face: (variant, face, case, members)
     groups = []
+    n_var = len(luts.VARIANTS[d])
+    # one gather of the sited leaves' rows (a gather per site and face costs more)
+    sites_of_other = hanging[other].view(np.uint8)
+    variant_of_other = variant[other].astype(np.uint16)
     for f, fsites in enumerate(luts.FACE_SITES[d]):
-        # uint8 codes: numpy's stable sort is a radix sort for them
-        code = np.zeros(len(other), dtype=np.uint8)
+        n_case = 1 << len(fsites)
+        # uint16 codes (variant, case): numpy's stable sort is a radix sort for them
+        code = variant_of_other << np.uint16(len(fsites))
         for bit, site in enumerate(fsites):
-            code |= hanging[other, site].astype(np.uint8) << np.uint8(bit)
+            code |= sites_of_other[:, site].astype(np.uint16) << np.uint16(bit)
         order = np.argsort(code, kind="stable")
-        bounds = np.searchsorted(code[order], np.arange((1 << len(fsites)) + 1), side="left")
-        for case in range(1 << len(fsites)):
-            if bounds[case + 1] > bounds[case]:
-                if len(luts.FACE_LUT[d][f][case]) == 0:
-                    raise RuntimeError(f"leaf configuration outside the look-up table (face {f}, "
-                                       f"case {case}); the tree is not balanced as assumed.")
-                groups.append((f, case, other[order[bounds[case]:bounds[case + 1]]]))
-    n_kuhn = len(luts.KUHN[d])
-    total = len(nk) * n_kuhn + sum(len(sel) * len(luts.FACE_LUT[d][f][c]) for f, c, sel in groups)
+        bounds = np.searchsorted(code[order], np.arange(n_var * n_case + 1), side="left")
+        for v in luts.VARIANTS[d]:
+            for case in range(n_case):
+                lo, hi = bounds[v * n_case + case], bounds[v * n_case + case + 1]
+                if hi > lo:
+                    if len(luts.FACE_LUT[d][v][f][case]) == 0:
+                        raise RuntimeError(f"leaf configuration outside the look-up table "
+                                           f"(face {f}, case {case}); the tree is not "
+                                           "balanced as assumed.")
+                    groups.append((v, f, case, other[order[lo:hi]]))
+    table = luts.LEAF_TABLE.get(d)
+    per_entry = np.diff(table.offset)[entry] if len(tabled) else np.zeros(0, np.int64)
+    total = (sum(len(sel) * len(luts.PLAIN[d][v]) for v, sel in plain_groups)
+             + sum(len(sel) * len(luts.FACE_LUT[d][v][f][c]) for v, f, c, sel in groups)
+             + int(per_entry.sum()))
     new_points = []
-    for f, case, sel in groups:
-        new_local = _new_points(d, f, case)
+    for v, f, case, sel in groups:
+        new_local = _new_points(d, v, f, case)
         if len(new_local):
             new_keys = new_local.astype(kd) @ strides
             new_points.append((okey[sel, None] + half[sel, None] * new_keys[None]).ravel())
+    if len(tabled):
+        # the table's own new points (fan face centres, the centre where used), per leaf
+        starts = np.searchsorted(table.new_entry, np.arange(len(table.key) + 1))
+        n_new = (starts[1:] - starts[:-1])[entry]
+        leaf_of_new = np.repeat(tabled, n_new)
+        row = np.repeat(starts[entry] - (np.cumsum(n_new) - n_new), n_new) + np.arange(n_new.sum())
+        new_keys = table.new_point[row].astype(kd) @ strides
+        new_points.append(okey[leaf_of_new] + half[leaf_of_new] * new_keys)
     new_points = np.concatenate(new_points) if new_points else np.zeros(0, kd)
     vertex_id = None
     if used is not None:
@@ -180,19 +221,72 @@ def cut_leaves(okey: np.ndarray, size: np.ndarray, hanging: np.ndarray, strides:
         template_of[start:start + n * t].reshape(n, t)[:] = np.arange(first_template, first_template + t)
         return start + n * t
 
-    # Kuhn leaves: d! simplices in units of the leaf side
-    start = emit(0, nk, size, luts.KUHN[d].astype(kd) @ strides, 0)
+    start = 0
+    # plain leaves: d! Kuhn simplices or five tetrahedra, in units of the leaf side
+    for v, sel in plain_groups:
+        if len(sel):
+            start = emit(start, sel, size, luts.PLAIN[d][v].astype(kd) @ strides,
+                         luts.PLAIN_TEMPLATE_ID[d][v])
     # other leaves: every face by its own case, coned to the leaf centre (unit: half side)
-    for f, case, sel in groups:
-        lut = luts.FACE_LUT[d][f][case]
-        start = emit(start, sel, half, lut.astype(kd) @ strides, luts.FACE_TEMPLATE_ID[d][f][case])
+    for v, f, case, sel in groups:
+        lut = luts.FACE_LUT[d][v][f][case]
+        start = emit(start, sel, half, lut.astype(kd) @ strides, luts.FACE_TEMPLATE_ID[d][v][f][case])
+    if len(tabled):
+        # tabled leaves, grouped by their number of tetrahedra t (a few dozen groups):
+        # each leaf takes its entry's row of t members (unit: half side)
+        rows = _member_rows(table)
+        count = np.diff(table.offset)[entry]
+        order = np.argsort(count, kind="stable")
+        counts, first = np.unique(count[order], return_index=True)
+        bounds = np.append(first, len(order)).tolist()
+        local = table.simplex.astype(kd) @ strides              # (S, d+1)
+        for t, lo, hi in zip(counts.tolist(), bounds[:-1], bounds[1:]):
+            # np.take, not fancy indexing: whole rows copied, no per-element iterator
+            sel = tabled[order[lo:hi]]
+            members = np.take(rows[:, :t], entry[order[lo:hi]], axis=0)
+            n = len(sel)
+            block = keys[start:start + n * t].reshape(n, t, d + 1)
+            lattice_keys = np.take(local, members, axis=0)     # (n, t, d+1)
+            lattice_keys *= half[sel, None, None]
+            lattice_keys += okey[sel, None, None]
+            if vertex_id is None:
+                block[:] = lattice_keys
+            else:
+                np.take(vertex_id, lattice_keys, out=block)
+            which[start:start + n * t].reshape(n, t)[:] = sel[:, None]
+            template_of[start:start + n * t].reshape(n, t)[:] = members + luts.TABLE_FIRST_ID[d]
+            start += n * t
     return keys, which, template_of, new_points
 
 
-def _new_points(d: int, face: int, case: int) -> np.ndarray:
+@functools.lru_cache(maxsize=2)
+def _member_rows(table: luts.LeafTable) -> np.ndarray:
+    # intp: numpy would convert any other index dtype on every gather
+    return table.member_rows.astype(np.intp)
+
+
+def _table_entries(d: int, hanging: np.ndarray, variant: np.ndarray, sited: np.ndarray):
+    """Split the sited leaves into those the leaf table cuts and the rest:
+    (tabled leaves, their table entries, the other leaves)."""
+    table = luts.LEAF_TABLE.get(d)
+    empty = np.zeros(0, dtype=sited.dtype)
+    if table is None or not len(table.key) or not len(sited):
+        return empty, np.zeros(0, np.int64), sited
+    # the 18 site bits of each leaf, packed little-endian into 3 bytes, then one int32
+    packed = np.packbits(hanging[sited], axis=1, bitorder="little").astype(np.int32)
+    code = variant[sited].astype(np.int32) << np.int32(hanging.shape[1])
+    for byte in range(packed.shape[1]):
+        code |= packed[:, byte] << np.int32(8 * byte)
+    pos = np.minimum(np.searchsorted(table.key, code), len(table.key) - 1)
+    hit = table.key[pos] == code
+    return sited[hit], pos[hit].astype(np.int64), sited[~hit]
+
+
+@functools.lru_cache(maxsize=None)
+def _new_points(d: int, variant: int, face: int, case: int) -> np.ndarray:
     """(k, d) local points of a face case that are neither corners nor sites present."""
     present = {tuple(luts.SITES[d][s]) for i, s in enumerate(luts.FACE_SITES[d][face]) if case >> i & 1}
-    pts = {tuple(p) for p in luts.FACE_LUT[d][face][case].reshape(-1, d).tolist()}
+    pts = {tuple(p) for p in luts.FACE_LUT[d][variant][face][case].reshape(-1, d).tolist()}
     new = [p for p in sorted(pts) if p not in present and any(c == 1 for c in p)]
     return np.array(new, dtype=np.int64).reshape(-1, d)
 
