@@ -119,6 +119,28 @@ def test_a_mesh_without_matching_faces_is_refused():
         simulate(lab, {1: 1.0, 2: 2.0}, protocol="bloch")
 
 
+@pytest.mark.parametrize("order", [1, 2])
+def test_opposite_faces_cut_differently_are_refused_though_their_nodes_match(order,
+                                                                            monkeypatch):
+    """Five-tetrahedra leaves (the parity rule) forced on an odd-size periodic box: every
+    node, and at second order every mid-edge node (crossing face diagonals meet at the
+    face centre), has its twin on the opposite face, but the facets there differ."""
+    from napari_swa_imesh.mesh import _imesh
+
+    lab = np.random.default_rng(3).integers(1, 3, size=(5, 6, 7)).astype(np.uint8)
+    real = _imesh.template_mesh
+    monkeypatch.setattr(_imesh, "template_mesh",
+                        lambda bal, meshed, rule: real(bal, meshed, rule="parity"))
+    mesh = mesh_labels(lab, periodic=True)
+    with pytest.raises(ValueError, match="are cut into different facets"):
+        simulate(mesh, {1: 1.0, 2: 10.0}, protocol="periodic", order=order)
+    monkeypatch.undo()
+    honest = mesh_labels(lab, periodic=True)
+    assert honest.info["diagonal_rule"] == "lowest"
+    assert simulate(honest, {1: 1.0, 2: 10.0}, protocol="periodic", order=order,
+                    adapt=0).tensor is not None
+
+
 def test_command_line_prints_the_tensor(tmp_path, capsys):
     np.save(tmp_path / "lab.npy", layers(2, 1))
     code = main(["simulate", str(tmp_path / "lab.npy"), "-k", "1=1", "2=3",

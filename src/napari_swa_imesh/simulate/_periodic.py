@@ -8,9 +8,11 @@ is exactly a finite-element function, so no other form is assembled. The fluctua
 solves ``P^T A P w = -P^T A x_i``, where ``P`` copies each degree of freedom on a
 ``max`` face from its partner on the ``min`` face (and box edges and corners from theirs).
 
-The mesh must have the same degrees of freedom on opposite faces, translated: the
-IMESH mesh of ``mesh_labels(..., periodic=True)`` has them; any other mesh is checked and
-refused with a sentence if it has not.
+The mesh must have the same degrees of freedom on opposite faces, translated, and its
+facets there must be cut alike (matched nodes under different triangles give traces that
+differ between the faces: not periodic, and no error would show it): the IMESH mesh of
+``mesh_labels(..., periodic=True)`` has both; any other mesh is checked and refused with
+a sentence if it has not.
 """
 
 from __future__ import annotations
@@ -21,7 +23,7 @@ from scipy import sparse
 
 from ._solve import DEFAULT_TOLERANCE, SolverInfo, SPDSolver, connected_parts, split_fixed
 
-__all__ = ["PeriodicProblem", "periodic_map"]
+__all__ = ["PeriodicProblem", "periodic_map", "check_face_facets"]
 
 
 def periodic_map(dof_coordinates: np.ndarray, lo: np.ndarray, hi: np.ndarray
@@ -73,6 +75,51 @@ def periodic_map(dof_coordinates: np.ndarray, lo: np.ndarray, hi: np.ndarray
     return reduced, int(len(classes))
 
 
+def check_face_facets(cell_vertices: np.ndarray, dof_coordinates: np.ndarray,
+                      lo: np.ndarray, hi: np.ndarray, reduced: np.ndarray) -> None:
+    """Refuse a mesh whose opposite box faces carry different facets.
+
+    Parameters
+    ----------
+    cell_vertices : (d + 1, m) ndarray of int
+        The vertex dofs of every element.
+    dof_coordinates : (d, n) ndarray
+    lo, hi : (d,) ndarray
+        Box corners.
+    reduced : (n,) ndarray of intp
+        :func:`periodic_map`'s representative of every dof.
+
+    Raises
+    ------
+    ValueError
+        When some facet on a ``min`` face has no translated twin on the ``max`` face, or
+        the other way round.
+    """
+    d = dof_coordinates.shape[0]
+    tol = 1e-9 * (hi - lo)
+    rows = np.arange(d + 1)
+    for axis in range(d):
+        x = dof_coordinates[axis]
+        sides = []
+        for plane in (lo[axis], hi[axis]):
+            on = np.abs(x - plane) <= tol[axis]
+            # only elements with d vertices on the plane can have a facet there
+            near = cell_vertices[:, on[cell_vertices].sum(axis=0) >= d]
+            found = []
+            for drop in rows:                      # the facet opposite vertex `drop`
+                verts = near[rows != drop]
+                found.append(reduced[verts[:, on[verts].all(axis=0)]].T)
+            facets = np.sort(np.concatenate(found), axis=1)
+            sides.append(facets[np.lexsort(facets.T[::-1])])
+        if sides[0].shape != sides[1].shape or not np.array_equal(*sides):
+            name = "xyz"[d - 1 - axis] if d <= 3 else f"axis {axis}"
+            raise ValueError(
+                f"the mesh's faces at {name}min and {name}max have their nodes in the same "
+                "places but are cut into different facets, so the field cannot be periodic "
+                "across them: mesh the labels with periodic=True (swa-imesh mesh "
+                "--periodic), or use the mixed protocol.")
+
+
 class PeriodicProblem:
     """The folded system of one mesh, solved for one mean gradient at a time.
 
@@ -89,12 +136,18 @@ class PeriodicProblem:
         Box corners.
     tol : float
         Relative residual of each solve.
+    cell_vertices : (d + 1, m) ndarray of int, optional
+        The vertex dofs of every element: then the facets on opposite faces are checked
+        to match (:func:`check_face_facets`), not only the dofs.
     """
 
     def __init__(self, matrix: sparse.csr_matrix, dof_coordinates: np.ndarray,
-                 lo: np.ndarray, hi: np.ndarray, *, tol: float = DEFAULT_TOLERANCE):
+                 lo: np.ndarray, hi: np.ndarray, *, tol: float = DEFAULT_TOLERANCE,
+                 cell_vertices: np.ndarray | None = None):
         n = matrix.shape[0]
         reduced, n_reduced = periodic_map(dof_coordinates, lo, hi)
+        if cell_vertices is not None:
+            check_face_facets(cell_vertices, dof_coordinates, lo, hi, reduced)
         self.matrix, self.coordinates = matrix, dof_coordinates
         self.copy = sparse.csr_matrix((np.ones(n), (np.arange(n), reduced)),
                                       shape=(n, n_reduced))

@@ -313,7 +313,8 @@ def simulate_steps(mesh_or_labels, conductivity: Mapping, *, spacing=None,
     periodic = tensor = None
     if protocol == "periodic":
         t0 = time.perf_counter()
-        periodic = PeriodicProblem(matrix, doflocs, lo, hi, tol=tol)
+        periodic = PeriodicProblem(matrix, doflocs, lo, hi, tol=tol,
+                                   cell_vertices=space.element_dofs[:, :mesh.ndim + 1].T)
         tensor = np.full((mesh.ndim, mesh.ndim), np.nan)
         seconds["solve"] += time.perf_counter() - t0
     for step, name in enumerate(names, start=2 + adapt):
