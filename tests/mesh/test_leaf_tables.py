@@ -101,11 +101,14 @@ def test_every_entry_tiles_its_leaf_with_the_face_tables_triangles():
 def test_every_table_tetrahedron_is_within_the_proven_bounds():
     tets = TABLE.simplex.astype(float)
     q = quality_data(tets.reshape(-1, 3), np.arange(4 * len(tets)).reshape(-1, 4))
+    # the published numbers, not quality_bounds (built from these same templates)
+    low = math.degrees(math.atan(1 / math.sqrt(2)))          # 35.264
+    assert q["quality"].max() <= math.sqrt(5) / 2 + 1e-12
+    assert q["min_dihedral"].min() >= low - 1e-9
+    assert q["max_dihedral"].max() <= 90 + low + 1e-9       # 125.264
     bounds = quality_bounds(3)
-    assert q["quality"].max() <= bounds["quality"][1] + 1e-12
-    assert q["min_dihedral"].min() >= bounds["min_dihedral"][0] - 1e-12
-    assert q["max_dihedral"].max() <= bounds["max_dihedral"][1] + 1e-12
     assert bounds["quality"][1] == pytest.approx(math.sqrt(5) / 2)
+    assert bounds["min_dihedral"][0] == pytest.approx(low)
 
 
 def test_the_table_leaves_every_aspect_and_stretch_bound_as_it_was():

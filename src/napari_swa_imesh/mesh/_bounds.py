@@ -314,7 +314,9 @@ def format_quality_table(rows: list[dict]) -> str:
     lines = [
         f"IMESH template {kind}s in {d}-D: {rows[0]['n_configurations_total']} leaf "
         f"configurations ({rows[0]['n_configurations_up_to_symmetry']} up to symmetry), "
-        f"{len(rows)} distinct simplices up to symmetry",
+        f"{len(rows)} distinct simplices up to symmetry"
+        + (" (each configuration cut under both face-diagonal rules, parity and lowest "
+           "corner)" if d == 3 else ""),
         head,
         "-" * len(head),
     ]
