@@ -207,30 +207,36 @@ def cut_leaves(okey: np.ndarray, size: np.ndarray, hanging: np.ndarray, strides:
     which = np.empty(total, dtype=wd)
     template_of = np.empty(total, dtype=np.int16)
 
-    def emit(start, sel, scale, local_keys, first_template):
-        n, t = len(sel), len(local_keys)
+    def emit(start, sel, scale, local_keys, template_ids):
+        """Elements of the leaves `sel`: `local_keys` (t, d+1) shared by all, or
+        (n, t, d+1) one row per leaf (then used as scratch), in units of `scale`;
+        `template_ids` (t,) or (n, t)."""
+        n, t = len(sel), local_keys.shape[-2]
         block = keys[start:start + n * t].reshape(n, t, d + 1)
         if vertex_id is None:
-            np.multiply(scale[sel, None, None], local_keys[None], out=block)
+            np.multiply(scale[sel, None, None], local_keys, out=block)
             block += okey[sel, None, None]
         else:
-            lattice_keys = scale[sel, None, None] * local_keys[None]
+            lattice_keys = np.multiply(scale[sel, None, None], local_keys,
+                                       out=local_keys if local_keys.ndim == 3 else None)
             lattice_keys += okey[sel, None, None]
             np.take(vertex_id, lattice_keys, out=block)
         which[start:start + n * t].reshape(n, t)[:] = sel[:, None]
-        template_of[start:start + n * t].reshape(n, t)[:] = np.arange(first_template, first_template + t)
+        template_of[start:start + n * t].reshape(n, t)[:] = template_ids
         return start + n * t
 
     start = 0
     # plain leaves: d! Kuhn simplices or five tetrahedra, in units of the leaf side
     for v, sel in plain_groups:
         if len(sel):
-            start = emit(start, sel, size, luts.PLAIN[d][v].astype(kd) @ strides,
-                         luts.PLAIN_TEMPLATE_ID[d][v])
+            simplices = luts.PLAIN[d][v]
+            start = emit(start, sel, size, simplices.astype(kd) @ strides,
+                         luts.PLAIN_TEMPLATE_ID[d][v] + np.arange(len(simplices)))
     # other leaves: every face by its own case, coned to the leaf centre (unit: half side)
     for v, f, case, sel in groups:
         lut = luts.FACE_LUT[d][v][f][case]
-        start = emit(start, sel, half, lut.astype(kd) @ strides, luts.FACE_TEMPLATE_ID[d][v][f][case])
+        start = emit(start, sel, half, lut.astype(kd) @ strides,
+                     luts.FACE_TEMPLATE_ID[d][v][f][case] + np.arange(len(lut)))
     if len(tabled):
         # tabled leaves, grouped by their number of tetrahedra t (a few dozen groups):
         # each leaf takes its entry's row of t members (unit: half side)
@@ -242,20 +248,9 @@ def cut_leaves(okey: np.ndarray, size: np.ndarray, hanging: np.ndarray, strides:
         local = table.simplex.astype(kd) @ strides              # (S, d+1)
         for t, lo, hi in zip(counts.tolist(), bounds[:-1], bounds[1:]):
             # np.take, not fancy indexing: whole rows copied, no per-element iterator
-            sel = tabled[order[lo:hi]]
-            members = np.take(rows[:, :t], entry[order[lo:hi]], axis=0)
-            n = len(sel)
-            block = keys[start:start + n * t].reshape(n, t, d + 1)
-            lattice_keys = np.take(local, members, axis=0)     # (n, t, d+1)
-            lattice_keys *= half[sel, None, None]
-            lattice_keys += okey[sel, None, None]
-            if vertex_id is None:
-                block[:] = lattice_keys
-            else:
-                np.take(vertex_id, lattice_keys, out=block)
-            which[start:start + n * t].reshape(n, t)[:] = sel[:, None]
-            template_of[start:start + n * t].reshape(n, t)[:] = members + luts.TABLE_FIRST_ID[d]
-            start += n * t
+            members = np.take(rows[:, :t], entry[order[lo:hi]], axis=0)      # (n, t)
+            start = emit(start, tabled[order[lo:hi]], half,
+                         np.take(local, members, axis=0), members + luts.TABLE_FIRST_ID[d])
     return keys, which, template_of, new_points
 
 
