@@ -10,7 +10,6 @@ import numpy as np
 import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
-from scipy import ndimage
 
 from napari_swa_imesh.cli import main
 from napari_swa_imesh.mesh import check_mesh, mesh_labels, quality_bounds
@@ -18,12 +17,7 @@ from napari_swa_imesh.mesh._adapt import refine_marked
 from napari_swa_imesh.simulate import simulate
 from napari_swa_imesh.simulate import _adapt
 from napari_swa_imesh.simulate._adapt import doerfler, flux_jump_indicator
-
-
-def blobs(shape, sigma=1.5, seed=0, materials=3):
-    f = ndimage.gaussian_filter(np.random.default_rng(seed).standard_normal(shape), sigma)
-    return (np.digitize(f, np.quantile(f, np.linspace(0, 1, materials + 1)[1:-1])) + 1
-            ).astype(np.uint8)
+from simulate_cases import blobs
 
 
 @settings(max_examples=16, deadline=None)
