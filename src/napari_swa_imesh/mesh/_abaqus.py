@@ -11,7 +11,9 @@
 * Material ids ride along as comment lines on top, ``** swa-imesh material <id> <set>``,
   so reading recovers them (sets named ``material_<id>`` are understood too).
 * Numbers with 13 significant digits, so every field fits the 20 characters CalculiX (the
-  common free reader) takes; longer fields are rejected there.
+  common free reader) takes; longer fields are rejected there. Integers are right-aligned
+  to 8 digits with blanks (Abaqus and CalculiX skip blanks in data lines), so that numpy
+  makes the text of a whole block at once (:mod:`._text`).
 * The facet groups (:func:`~napari_swa_imesh.mesh.facet_groups`: ``xmin`` ... ``zmax``,
   ``interface_<A>_<B>``, ``exterior_<A>``) as a ``*NSET`` of their nodes (mid-edge nodes
   included at second order; for ``*BOUNDARY``) and an element-face ``*SURFACE`` (for
