@@ -133,3 +133,48 @@ def test_lattice_det_is_exact_in_int32_and_int64(d, longest):
     got = _lattice_det(p)
     assert got.tolist() == exact.tolist()
     assert got.dtype == (np.int32 if longest <= 1 << 9 else np.int64)
+
+
+def _flips_as_computed(mesh):
+    from napari_swa_imesh.mesh._prepare import ExportMesh
+
+    leaf, computed = ExportMesh(mesh), ExportMesh(mesh, groups="none")
+    assert np.array_equal(leaf.flip, computed.flip)
+    return leaf.flip
+
+
+def test_an_unchanged_template_mesh_skips_the_sign_pass(monkeypatch):
+    from napari_swa_imesh.mesh import _leaf_facets
+
+    labels = np.random.default_rng(8).integers(0, 3, (9, 8, 7))
+    mesh = mesh_labels(labels)
+    expected = _flips_as_computed(mesh)
+
+    def no_sign_pass(p):
+        raise AssertionError("the signs of an unchanged template mesh are known")
+
+    monkeypatch.setattr(_leaf_facets, "_lattice_det", no_sign_pass)
+    assert np.array_equal(_flips_as_computed(mesh), expected)
+
+
+@pytest.mark.parametrize("change", ["swap corners", "swap point axes", "new cells array"])
+def test_a_template_mesh_changed_after_meshing_gets_its_signs_computed(change):
+    from napari_swa_imesh.mesh._leaf_facets import template_group_rows
+
+    labels = np.random.default_rng(9).integers(0, 3, (8, 8, 8))
+    mesh = mesh_labels(labels)
+    before = _flips_as_computed(mesh).copy()
+    some = np.arange(0, mesh.n_cells, 7)
+    if change == "swap corners":      # same counts, same leaves: only the signs differ
+        mesh.cells[some, 0], mesh.cells[some, 1] = mesh.cells[some, 1], mesh.cells[some, 0].copy()
+    elif change == "swap point axes":  # a cube's lattice still: every element turned
+        mesh.points[:, [0, 1]] = mesh.points[:, [1, 0]]
+    else:
+        cells = mesh.cells.copy()
+        cells[some, 0], cells[some, 1] = cells[some, 1], cells[some, 0].copy()
+        mesh.cells = cells
+    assert template_group_rows(mesh) is not None      # the leaf path still takes it
+    after = _flips_as_computed(mesh)
+    turned = np.zeros(mesh.n_cells, bool)
+    turned[some if change != "swap point axes" else slice(None)] = True
+    np.testing.assert_array_equal(after, before ^ turned)

@@ -30,6 +30,7 @@ from ._checks import _check_mesh, count_excluded
 from ._delaunay import delaunay_mesh
 from ._coarsen import check_coarsen, coarsen_labels
 from ._lattice import Lattice, choose_lattice, lattice_tree
+from ._leaf_facets import made_fingerprint
 from ._templates import template_mesh, template_quality
 from ._types import Mesh
 from ._world import world_from_affine
@@ -390,6 +391,10 @@ def _mesh_tree(tree: RegionTree, *, method: str, exclude: np.ndarray, spacing: t
     material = bal.label[leaf]
     cell_data = {"quality": cell_data.pop("quality"), "level": bal.level[leaf],
                  "leaf": leaf, **cell_data}
+    if method == "template":
+        # every template element is positive by construction: a pass that needs the
+        # signs may take them from here while the arrays are still the ones made
+        info["as_made"] = made_fingerprint(points, cells)
     seconds["assemble"] = time.perf_counter() - t
     mesh = Mesh._trusted(points, cells, material, cell_data, spacing=spacing,
                          shape=tuple(tree.shape), material_names=dict(material_names or {}),

@@ -24,11 +24,11 @@ import math
 
 import numpy as np
 
-from ._packed import corners, pack_points
+from ._packed import array_fingerprint, corners, pack_points
 from ._quality import _edge_det
 from ._types import Mesh
 
-__all__ = ["material_codes", "present_materials", "template_group_rows"]
+__all__ = ["material_codes", "present_materials", "template_group_rows", "made_fingerprint"]
 
 _CHUNK = 1 << 17                  # elements per pass (their corners stay in cache-ish)
 _PAINT = 1 << 22                  # lattice cells painted at once
@@ -80,6 +80,19 @@ def material_codes(material: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         return materials, rank.astype(dtype)[material]
     materials, code = np.unique(material, return_inverse=True)
     return materials, code.reshape(-1).astype(np.int16 if len(materials) < 2**15 else np.int64)
+
+
+def made_fingerprint(points: np.ndarray, cells: np.ndarray) -> list[int]:
+    """What the template mesher records of its points and cells (``info["as_made"]``):
+    while a mesh's arrays still match it, every element is positive (the templates are
+    cut that way), and the sign pass over all elements can be skipped."""
+    return [array_fingerprint(points), array_fingerprint(cells)]
+
+
+def _as_made(mesh: Mesh) -> bool:
+    """Whether `mesh`'s points and cells are still the template mesher's own."""
+    made = mesh.info.get("as_made")
+    return made is not None and made == made_fingerprint(mesh.points, mesh.cells)
 
 
 def _lattice_coords(mesh: Mesh) -> tuple[np.ndarray, tuple[int, ...]] | None:
@@ -252,6 +265,9 @@ def template_group_rows(mesh: Mesh, *, signs: bool = False):
     seen_from_a = np.zeros(n_pairs, dtype=np.int64)
     seen_from_b = np.zeros(n_pairs, dtype=np.int64)
     negative = np.zeros(m if signs else 0, dtype=bool)
+    want_signs = signs
+    if signs and _as_made(mesh):
+        signs = False                    # none is negative: only group elements are read
     for start in range(0, m, _CHUNK):
         cc = cells[start:start + _CHUNK]
         n = len(cc)
@@ -328,4 +344,4 @@ def template_group_rows(mesh: Mesh, *, signs: bool = False):
     rows = ((np.concatenate(owners).astype(np.intp), np.concatenate(opposites),
              np.concatenate(acrosses).astype(np.int64)) if owners
             else (np.zeros(0, np.intp), np.zeros(0, np.intp), np.zeros(0, np.int64)))
-    return (*rows, negative) if signs else rows
+    return (*rows, negative) if want_signs else rows
