@@ -2,7 +2,8 @@
 
 The layout is meshio's (``meshio.write(..., file_format="xdmf")``): one ``Grid`` with the
 points as ``data0``, the cells as ``data1`` and every per-cell array after them
-(``material`` first), each a gzip-compressed HDF5 dataset named in the ``.xdmf`` as
+(``material`` first), each an HDF5 dataset (byte shuffle, then gzip: filters every HDF5
+build has) named in the ``.xdmf`` as
 ``<stem>.h5:/dataK``, so meshio, ParaView and FEniCS read it as before. What differs is
 how the arrays get there: :func:`write_xdmf_blocks` creates each dataset at its final
 size and fills it :data:`BLOCK` rows at a time, converting each block (cells oriented and
@@ -26,7 +27,8 @@ import numpy as np
 __all__ = ["require_h5py", "write_xdmf_blocks", "BLOCK"]
 
 BLOCK = 1 << 18                   # rows per block written (and per HDF5 chunk)
-_GZIP = 4                         # meshio's compression level: files of the same size
+_GZIP = 1                         # after the byte shuffle: smaller than meshio's gzip 4
+                                  # alone (105 against 110 MB at 256^3), in half the time
 
 
 def require_h5py(verb: str) -> None:
@@ -76,7 +78,8 @@ def write_xdmf_blocks(ex, xdmf_path, h5_path) -> None:
             rows = max(1, shape[0])
             ds = h5.create_dataset(f"data{k}", shape=shape, dtype=dtype,
                                    chunks=(min(BLOCK, rows),) + tuple(shape[1:]),
-                                   compression="gzip", compression_opts=_GZIP)
+                                   compression="gzip", compression_opts=_GZIP,
+                                   shuffle=True)
             for start in range(0, shape[0], BLOCK):
                 rows = slice(start, min(start + BLOCK, shape[0]))
                 ds[rows] = np.asarray(block(rows), dtype=dtype)
