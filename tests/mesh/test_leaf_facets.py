@@ -9,8 +9,8 @@ from hypothesis import strategies as st
 
 from napari_swa_imesh.mesh import Mesh, facet_groups, mesh_labels
 from napari_swa_imesh.mesh._facets import _sorted_groups
-from napari_swa_imesh.mesh._leaf_facets import (material_codes, present_materials,
-                                                 template_group_rows)
+from napari_swa_imesh.mesh._leaf_facets import (_as_made, material_codes,
+                                                 present_materials, template_group_rows)
 
 
 def _assert_same(fast, slow):
@@ -46,7 +46,11 @@ def test_leaf_path_gives_the_groups_of_the_sorting_path(case):
     except ValueError:          # everything excluded, or a size cap below the lattice
         return
     assert template_group_rows(mesh) is not None             # the fast path was taken
-    _assert_same(facet_groups(mesh), _sorted_groups(mesh))
+    expected = _sorted_groups(mesh)
+    assert mesh._made is not None and _as_made(mesh) is mesh._made   # the mesher's record
+    _assert_same(facet_groups(mesh), expected)
+    mesh._made = None                                        # and from the points alone
+    _assert_same(facet_groups(mesh), expected)
 
 
 def test_meshes_not_from_the_template_mesher_take_the_sorting_path():
@@ -178,3 +182,16 @@ def test_a_template_mesh_changed_after_meshing_gets_its_signs_computed(change):
     turned = np.zeros(mesh.n_cells, bool)
     turned[some if change != "swap point axes" else slice(None)] = True
     np.testing.assert_array_equal(after, before ^ turned)
+
+
+def test_a_changed_leaf_array_is_not_taken_from_the_mesher_s_record():
+    labels = np.zeros((8, 8, 8), np.uint8)
+    labels[2:6, 1:7, 3:5] = 1
+    mesh = mesh_labels(labels)
+    expected = _sorted_groups(mesh)
+    leaf = mesh.cell_data["leaf"]
+    # the same partition of the elements under other leaf ids: the groups cannot change,
+    # but the record's origins (by leaf id) no longer apply
+    mesh.cell_data["leaf"] = leaf.max() - leaf
+    assert _as_made(mesh) is None
+    _assert_same(facet_groups(mesh), expected)

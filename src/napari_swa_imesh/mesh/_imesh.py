@@ -30,7 +30,7 @@ from ._checks import _check_mesh, count_excluded
 from ._delaunay import delaunay_mesh
 from ._coarsen import check_coarsen, coarsen_labels
 from ._lattice import Lattice, choose_lattice, lattice_tree
-from ._leaf_facets import made_fingerprint
+from ._leaf_facets import MadeLattice
 from ._templates import template_mesh, template_quality
 from ._types import Mesh
 from ._world import world_from_affine
@@ -369,7 +369,8 @@ def _mesh_tree(tree: RegionTree, *, method: str, exclude: np.ndarray, spacing: t
     if method == "template":
         # a periodic mesh needs the rule to survive the translation by the box size
         rule = "lowest" if periodic and any(n % 2 for n in tree.shape) else "parity"
-        points, cells, leaf, template_id, vseconds = template_mesh(bal, meshed, rule=rule)
+        points, cells, leaf, template_id, vseconds, packed = template_mesh(bal, meshed,
+                                                                          rule=rule)
         seconds.update(vseconds)
         t = time.perf_counter()
         table = template_quality(d, spacing)
@@ -391,14 +392,14 @@ def _mesh_tree(tree: RegionTree, *, method: str, exclude: np.ndarray, spacing: t
     material = bal.label[leaf]
     cell_data = {"quality": cell_data.pop("quality"), "level": bal.level[leaf],
                  "leaf": leaf, **cell_data}
-    if method == "template":
-        # every template element is positive by construction: a pass that needs the
-        # signs may take them from here while the arrays are still the ones made
-        info["as_made"] = made_fingerprint(points, cells)
-    seconds["assemble"] = time.perf_counter() - t
     mesh = Mesh._trusted(points, cells, material, cell_data, spacing=spacing,
                          shape=tuple(tree.shape), material_names=dict(material_names or {}),
                          info=info)
+    if method == "template":
+        # what the facet groups' pass would otherwise recompute from the points, valid
+        # while the mesh's arrays are the ones made here
+        mesh._made = MadeLattice.record(mesh, packed, bal.origin)
+    seconds["assemble"] = time.perf_counter() - t
 
     t = time.perf_counter()
     n_el = mesh.n_cells

@@ -21,6 +21,7 @@ than 16 cells per element (deep ``--refine`` on a coarse mesh) is not painted ei
 from __future__ import annotations
 
 import math
+from dataclasses import dataclass
 
 import numpy as np
 
@@ -28,7 +29,8 @@ from ._packed import array_fingerprint, corners, pack_points
 from ._quality import _edge_det
 from ._types import Mesh
 
-__all__ = ["material_codes", "present_materials", "template_group_rows", "made_fingerprint"]
+__all__ = ["material_codes", "present_materials", "template_group_rows", "made_fingerprint",
+           "MadeLattice"]
 
 _CHUNK = 1 << 17                  # elements per pass (their corners stay in cache-ish)
 _PAINT = 1 << 22                  # lattice cells painted at once
@@ -82,42 +84,70 @@ def material_codes(material: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return materials, code.reshape(-1).astype(np.int16 if len(materials) < 2**15 else np.int64)
 
 
-def made_fingerprint(points: np.ndarray, cells: np.ndarray) -> list[int]:
-    """What the template mesher records of its points and cells (``info["as_made"]``):
-    while a mesh's arrays still match it, every element is positive (the templates are
-    cut that way), and the sign pass over all elements can be skipped."""
-    return [array_fingerprint(points), array_fingerprint(cells)]
+def made_fingerprint(mesh: Mesh) -> list[int]:
+    """Fingerprints of the arrays :class:`MadeLattice` vouches for: points, cells and the
+    ``leaf`` and ``level`` of every element."""
+    cd = mesh.cell_data
+    return [array_fingerprint(a) for a in (mesh.points, mesh.cells, cd.get("leaf", ()),
+                                           cd.get("level", ()))]
 
 
-def _as_made(mesh: Mesh) -> bool:
-    """Whether `mesh`'s points and cells are still the template mesher's own."""
-    made = mesh.info.get("as_made")
-    return made is not None and made == made_fingerprint(mesh.points, mesh.cells)
+@dataclass
+class MadeLattice:
+    """What the template mesher knows of a mesh it made, kept on it as ``mesh._made``.
+
+    While the mesh's points, cells, leaves and levels are the ones made (their
+    :func:`made_fingerprint`), the facet groups' pass takes from here what it would
+    otherwise recompute from the points: every element is positive (the templates are
+    cut that way), so no sign pass over all elements; the lattice points packed; and the
+    lattice origin of every leaf.
+    """
+
+    fingerprint: list[int]
+    packed: tuple[np.ndarray, int] | None   # as :func:`~._packed.pack_points` gives
+    leaf_origin: np.ndarray                 # (leaves of the balanced tree, d) lattice cells
+
+    @classmethod
+    def record(cls, mesh: Mesh, packed, leaf_origin: np.ndarray) -> "MadeLattice":
+        small = leaf_origin.size == 0 or int(leaf_origin.max()) < 2**31
+        return cls(made_fingerprint(mesh), packed,
+                   leaf_origin.astype(np.int32) if small else leaf_origin)
 
 
-def _lattice_coords(mesh: Mesh) -> tuple[np.ndarray, tuple[int, ...]] | None:
-    """Vertex coordinates in lattice cells (int32) and the lattice shape, or None when
-    the points are not on the lattice the mesh records."""
+def _as_made(mesh: Mesh) -> MadeLattice | None:
+    """``mesh._made`` while the arrays it vouches for are unchanged, else None."""
+    made = getattr(mesh, "_made", None)
+    return made if made is not None and made.fingerprint == made_fingerprint(mesh) else None
+
+
+def _lattice_shape(mesh: Mesh) -> tuple[int, ...] | None:
+    """The shape of the lattice of cells the mesh records, or None."""
     lattice = mesh.info.get("lattice") or {}
     step = np.asarray(lattice.get("step", mesh.spacing), dtype=np.float64)
     per_voxel = np.asarray(lattice.get("cells_per_voxel", [1] * mesh.ndim), dtype=np.int64)
     if step.shape != (mesh.ndim,) or per_voxel.shape != (mesh.ndim,):
         return None
     shape = tuple(int(n) for n in np.asarray(mesh.shape, dtype=np.int64) * per_voxel)
-    if max(shape) >= 2**30:
-        return None
-    u = mesh.points / step
+    return shape if len(shape) == mesh.ndim and max(shape) < 2**30 else None
+
+
+def _lattice_coords(mesh: Mesh) -> np.ndarray | None:
+    """Vertex coordinates in lattice cells (int32), or None when the points are not on
+    the lattice the mesh records."""
+    lattice = mesh.info.get("lattice") or {}
+    u = mesh.points / np.asarray(lattice.get("step", mesh.spacing), dtype=np.float64)
     coords = np.rint(u).astype(np.int32)
     u -= coords
     if not len(u) or np.abs(u, out=u).max() > 1e-6:
         return None
-    return coords, shape
+    return coords
 
 
-def _leaf_boxes(packed, axes, cells, leaf, level, shape):
+def _leaf_boxes(packed, axes, cells, leaf, level, shape, leaf_origin=None):
     """One element of each leaf (any), the leaf's lowest corner and level; None when a
     leaf leaves the lattice. Leaves are aligned to their side, and a simplex of positive
-    volume has a corner below the leaf's far faces: the lowest corner, rounded down."""
+    volume has a corner below the leaf's far faces: the lowest corner, rounded down
+    (unless the mesher's `leaf_origin` of every leaf id is given)."""
     if (leaf[1:] >= leaf[:-1]).all():     # the mesher's order: the last of each run
         rep = np.flatnonzero(np.append(leaf[1:] != leaf[:-1], True))
     else:                                  # the last of each leaf, as a scatter leaves it
@@ -125,10 +155,13 @@ def _leaf_boxes(packed, axes, cells, leaf, level, shape):
         rep[leaf] = np.arange(len(leaf))
         rep = rep[rep >= 0]
     lev = level[rep]
-    p = _gather(packed, axes, cells[rep], len(shape))
     shift = lev.astype(np.int64)
-    origin = np.stack([(np.minimum.reduce([c[a] for c in p]).astype(np.int64) >> shift) << shift
-                       for a in range(len(shape))], axis=1)
+    if leaf_origin is not None:
+        origin = leaf_origin[leaf[rep]].astype(np.int64)
+    else:
+        p = _gather(packed, axes, cells[rep], len(shape))
+        origin = np.stack([(np.minimum.reduce([c[a] for c in p]).astype(np.int64) >> shift)
+                           << shift for a in range(len(shape))], axis=1)
     if (origin < 0).any() or ((origin + (1 << shift)[:, None]) > np.asarray(shape)).any():
         return None
     return rep, origin, lev
@@ -234,19 +267,24 @@ def template_group_rows(mesh: Mesh, *, signs: bool = False):
             or info.get("n_elements") != m or info.get("n_vertices") != len(mesh.points)
             or not mesh.records_box or m == 0 or d not in (2, 3)):
         return None
-    found = _lattice_coords(mesh)
-    if found is None:
+    shape = _lattice_shape(mesh)
+    if shape is None or math.prod(shape) > _MAX_CELLS_PER_ELEMENT * m + (1 << 20):
         return None
-    coords, shape = found
-    if math.prod(shape) > _MAX_CELLS_PER_ELEMENT * m + (1 << 20):
-        return None
+    made = _as_made(mesh)
+    if made is not None and made.packed is not None:
+        packed, axes = made.packed, []
+    else:
+        made, coords = None, _lattice_coords(mesh)
+        if coords is None:
+            return None
+        packed = pack_points(coords)
+        axes = [np.ascontiguousarray(coords[:, a]) for a in range(d)] if packed is None else []
+        del coords
     materials, code = material_codes(mesh.material)
     dtype = code.dtype
     cells, leaf, level = mesh.cells, cd["leaf"], cd["level"]
-    packed = pack_points(coords)
-    axes = [np.ascontiguousarray(coords[:, a]) for a in range(d)] if packed is None else []
-    del coords
-    boxes = _leaf_boxes(packed, axes, cells, leaf, level, shape)
+    boxes = _leaf_boxes(packed, axes, cells, leaf, level, shape,
+                        None if made is None else made.leaf_origin)
     if boxes is None:
         return None
     leaf_code = code[boxes[0]]
@@ -266,7 +304,7 @@ def template_group_rows(mesh: Mesh, *, signs: bool = False):
     seen_from_b = np.zeros(n_pairs, dtype=np.int64)
     negative = np.zeros(m if signs else 0, dtype=bool)
     want_signs = signs
-    if signs and _as_made(mesh):
+    if made is not None:
         signs = False                    # none is negative: only group elements are read
     for start in range(0, m, _CHUNK):
         cc = cells[start:start + _CHUNK]

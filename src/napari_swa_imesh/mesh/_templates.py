@@ -20,6 +20,7 @@ import numpy as np
 
 from .._tree import RegionTree
 from . import _templates_luts as luts
+from ._packed import pack_points
 from ._quality import quality_data
 
 __all__ = ["cut_leaves", "lattice", "mark_corners", "template_mesh", "template_quality"]
@@ -55,8 +56,9 @@ def template_mesh(bal: RegionTree, meshed: np.ndarray, *, rule: str = "parity"):
     odd extent needs, since a translation by an odd number of cells flips the parity).
     2-D meshes always use the lowest-corner rule.
 
-    Returns points (index space), cells, leaf index and template id per element, and the
-    seconds spent per step.
+    Returns points (index space), cells, leaf index and template id per element, the
+    seconds spent per step, and the points packed (``_packed.pack_points``; None when
+    they do not fit).
     """
     d = bal.ndim
     seconds = {}
@@ -99,10 +101,12 @@ def template_mesh(bal: RegionTree, meshed: np.ndarray, *, rule: str = "parity"):
     seconds["simplices"] = time.perf_counter() - t
 
     t = time.perf_counter()
-    points = np.stack(np.unravel_index(np.flatnonzero(used), shape), axis=1).astype(np.float64)
+    points = np.stack(np.unravel_index(np.flatnonzero(used), shape), axis=1)
+    packed = pack_points(points)          # the facet groups' pass reads corners from it
+    points = points.astype(np.float64)
     seconds["numbering"] = time.perf_counter() - t
     seconds["_n_plain"] = int(plain.sum())
-    return points, cells, leaf_of, template_of, seconds
+    return points, cells, leaf_of, template_of, seconds, packed
 
 
 def cut_leaves(okey: np.ndarray, size: np.ndarray, hanging: np.ndarray, strides: np.ndarray,
