@@ -91,3 +91,16 @@ def test_write_rows_keeps_the_order_of_text_and_bytes_in_a_file(tmp_path):
         fh.write("tail\n")
     assert path.read_text().splitlines() == [
         "head", "       1        2", "middle", "       7,  2.500000000000e-01", "tail"]
+
+
+@pytest.mark.parametrize("first", [0, 10 ** 8 - 20])
+def test_abaqus_id_lines_stay_within_256_characters(first):
+    from napari_swa_imesh.mesh._abaqus import _write_ids
+
+    ids = np.arange(first, first + 45)
+    fh = io.StringIO()
+    _write_ids(fh, ids)
+    lines = fh.getvalue().splitlines()
+    assert max(len(line) for line in lines) <= 256
+    back = [int(f) for line in lines for f in line.split(",")]
+    assert back == (ids + 1).tolist()

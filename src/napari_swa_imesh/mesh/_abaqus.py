@@ -64,10 +64,12 @@ def _set_names(names: dict[int, str]) -> dict[int, str]:
 
 
 def _write_ids(fh, ids: np.ndarray) -> None:
-    """0-based `ids` as 1-based, 16 to a line (the Abaqus limit for data lines)."""
+    """0-based `ids` as 1-based, 16 to a line (the Abaqus limit for data lines), or 8 when
+    their fields are 16 digits wide (lines stay within Abaqus's 256 characters)."""
     ids = np.asarray(ids, dtype=np.int64) + 1
-    full = len(ids) // 16 * 16
-    write_rows(fh, ids[:full].reshape(-1, 16), sep=", ")
+    per_line = 16 if not len(ids) or ids.max() < 10 ** 8 else 8
+    full = len(ids) // per_line * per_line
+    write_rows(fh, ids[:full].reshape(-1, per_line), sep=", ")
     if full < len(ids):
         fh.write(", ".join(map(str, ids[full:].tolist())) + "\n")
 
