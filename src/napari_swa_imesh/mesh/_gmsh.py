@@ -29,6 +29,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from ._leaf_facets import material_codes
 from ._triangle_tetgen import write_rows
 
 __all__ = ["write_gmsh", "gmsh_materials", "gmsh_tags", "GMSH_TYPE"]
@@ -89,9 +90,9 @@ def _fmt(v) -> str:
 def write_gmsh(ex, path, *, binary: bool = True) -> None:
     """Write `ex` (an ``_prepare.ExportMesh``) as Gmsh 4.1 to `path`."""
     d = ex.ndim
-    materials = np.unique(ex.material)
+    materials, code = material_codes(ex.material)
     tags = gmsh_tags(materials)
-    order = np.argsort(ex.material, kind="stable")                    # (M,) by material
+    order = np.argsort(code, kind="stable")     # (M,) by material: a radix sort of ranks
     bounds = np.searchsorted(ex.material[order], materials, side="left")
     bounds = np.append(bounds, len(order))
     lo, hi = ex.points.min(axis=0), ex.points.max(axis=0)
@@ -170,7 +171,7 @@ def _element_data(out: _Out, name: str, values: np.ndarray, order: np.ndarray) -
         if out.binary:
             block = np.empty(len(rows), record)
             block["tag"], block["value"] = tags, values[rows]
-            out.fh.write(block.tobytes())
+            out.fh.write(memoryview(block).cast("B"))
         elif values.dtype.kind in "biu":
             write_rows(out.fh, np.column_stack([tags, values[rows]]), encode=True)
         else:
