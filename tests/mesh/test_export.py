@@ -416,3 +416,12 @@ def test_triangle_itself_rebuilds_the_mesh_from_our_files(tmp_path):
     assert np.array_equal(np.unique(np.sort(rebuilt["triangles"], axis=1), axis=0),
                           np.unique(np.sort(data["triangles"], axis=1), axis=0))
     np.testing.assert_array_equal(rebuilt["triangle_attributes"][:, 0], mesh.material)
+
+
+def test_reading_an_inp_of_element_types_meshio_lacks_says_what_to_do(tmp_path):
+    from napari_swa_imesh.mesh import mesh_labels
+
+    path = tmp_path / "m.inp"
+    write_mesh(mesh_labels(np.array([[1, 2], [2, 1]])), path, order=2)   # CPS6
+    with pytest.raises(ValueError, match="meshio does not know one of its element types"):
+        read_mesh(path)

@@ -161,26 +161,31 @@ def test_an_unchanged_template_mesh_skips_the_sign_pass(monkeypatch):
     assert np.array_equal(_flips_as_computed(mesh), expected)
 
 
-@pytest.mark.parametrize("change", ["swap corners", "swap point axes", "new cells array"])
+@pytest.mark.parametrize("change", ["swap corners", "swap point axes", "new cells array",
+                                    "mirror an axis"])
 def test_a_template_mesh_changed_after_meshing_gets_its_signs_computed(change):
     from napari_swa_imesh.mesh._leaf_facets import template_group_rows
 
-    labels = np.random.default_rng(9).integers(0, 3, (8, 8, 8))
+    labels = np.random.default_rng(9).integers(0, 3, (7, 8, 8))   # axes 1 and 2 alike
     mesh = mesh_labels(labels)
     before = _flips_as_computed(mesh).copy()
     some = np.arange(0, mesh.n_cells, 7)
     if change == "swap corners":      # same counts, same leaves: only the signs differ
         mesh.cells[some, 0], mesh.cells[some, 1] = mesh.cells[some, 1], mesh.cells[some, 0].copy()
     elif change == "swap point axes":  # a cube's lattice still: every element turned
-        mesh.points[:, [0, 1]] = mesh.points[:, [1, 0]]
+        mesh.points[:, [1, 2]] = mesh.points[:, [2, 1]]
+    elif change == "mirror an axis":   # only sign bits change, an even number of them
+        assert len(mesh.points) % 2 == 0
+        mesh.points[:, 0] *= -1
     else:
         cells = mesh.cells.copy()
         cells[some, 0], cells[some, 1] = cells[some, 1], cells[some, 0].copy()
         mesh.cells = cells
-    assert template_group_rows(mesh) is not None      # the leaf path still takes it
+    if change != "mirror an axis":                     # off the lattice's box: sorted
+        assert template_group_rows(mesh) is not None  # the leaf path still takes it
     after = _flips_as_computed(mesh)
     turned = np.zeros(mesh.n_cells, bool)
-    turned[some if change != "swap point axes" else slice(None)] = True
+    turned[some if change in ("swap corners", "new cells array") else slice(None)] = True
     np.testing.assert_array_equal(after, before ^ turned)
 
 

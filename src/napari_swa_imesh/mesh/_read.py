@@ -95,6 +95,10 @@ def _read_meshio(p: Path, suffix: str):
         m = meshio.read(p, file_format=fmt)
     except (meshio.ReadError, KeyError, IndexError) as exc:
         raise ValueError(f"cannot read {p} as a {suffix} mesh: {exc!r}") from exc
+    except SystemExit as exc:       # meshio's Abaqus reader exits on element types it lacks
+        raise ValueError(f"cannot read {p}: meshio does not know one of its element types "
+                         f"(it has no CPS6/DC2D6, the 2-D second-order types); read the "
+                         f"mesh from a .vtu or .msh file instead.") from exc
     types = {b.type for b in m.cells}
     dim = 3 if types & set(_TYPES[3]) else 2      # facet triangles of a 3-D file are skipped
     keep = [i for i, block in enumerate(m.cells) if block.type in _TYPES[dim]]
