@@ -7,10 +7,11 @@ temporary folder); each format is then written in a process of its own, so that 
 resident memory (``ru_maxrss``) above the loaded mesh is the writer's own; a second process
 measures the peak of the memory numpy and Python allocate while writing (``tracemalloc``,
 steadier than the resident peak). ``facet_groups`` as a format times
-``mesh.facet_groups(mesh)`` alone (the writers' shared first step); ``meshio.xdmf`` is the
-XDMF writer before issue 13 (the mesh converted whole and handed to meshio), to compare
-with ``.xdmf`` (block by block): ``--formats .xdmf meshio.xdmf --kwargs
-'{"facet_groups": "none"}'``. Extra keyword
+``mesh.facet_groups(mesh)`` alone (the writers' shared first step). The peers:
+``meshio.<suffix>`` hands the whole mesh, converted, to meshio's own writer of that format
+(its defaults; no facet groups), so ``meshio.xdmf`` is the XDMF writer before issue 13:
+``--formats .inp meshio.inp .vtu meshio.vtu .xdmf meshio.xdmf --kwargs
+'{"facet_groups": "none"}'`` compares like with like. Extra keyword
 arguments of ``write_mesh`` can be given as JSON (``--kwargs '{"binary": false}'``).
 """
 
@@ -58,8 +59,8 @@ def run_one(cache: str, suffix: str, kwargs: dict, trace: bool) -> dict:
         if suffix == "facet_groups":
             facet_groups(mesh)
             written = []
-        elif suffix == "meshio.xdmf":
-            written = _meshio_xdmf(mesh, Path(folder), kwargs)
+        elif suffix.startswith("meshio."):
+            written = _meshio_peer(mesh, Path(folder), suffix[len("meshio"):], kwargs)
         else:
             written = write_mesh(mesh, Path(folder) / f"m{suffix}", **kwargs)
         seconds, cpu = time.perf_counter() - t, time.process_time() - c
@@ -72,17 +73,20 @@ def run_one(cache: str, suffix: str, kwargs: dict, trace: bool) -> dict:
             "file_mb": size / 2**20}
 
 
-def _meshio_xdmf(mesh, folder: Path, kwargs: dict) -> list[Path]:
-    """The XDMF writer before issue 13: the whole mesh converted for meshio, which writes
-    it (the package now writes the same file block by block)."""
+_MESHIO_FORMAT = {".xdmf": "xdmf", ".inp": "abaqus", ".vtu": "vtu", ".msh": "gmsh"}
+
+
+def _meshio_peer(mesh, folder: Path, suffix: str, kwargs: dict) -> list[Path]:
+    """meshio's own writer of `suffix`, given the whole mesh converted (before issues 10
+    and 13 the package wrote .vtu and .xdmf this way)."""
     import meshio
 
     from napari_swa_imesh.mesh._export import _meshio_of
     from napari_swa_imesh.mesh._prepare import ExportMesh
 
     ex = ExportMesh(mesh, order=kwargs.get("order", 1), groups="none")
-    meshio.write(folder / "m.xdmf", _meshio_of(ex), file_format="xdmf")
-    return [folder / "m.xdmf", folder / "m.h5"]
+    meshio.write(folder / f"m{suffix}", _meshio_of(ex), file_format=_MESHIO_FORMAT[suffix])
+    return [p for p in (folder / f"m{suffix}", folder / "m.h5") if p.exists()]
 
 
 def _spawn(cache, suffix, kwargs: str, trace: bool) -> dict:

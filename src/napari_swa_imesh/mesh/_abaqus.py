@@ -95,7 +95,7 @@ def write_abaqus(ex, path, *, elements: str = "mechanical") -> None:
     `elements` (a key of :data:`ABAQUS_ELEMENTS`)."""
     set_names = _set_names(ex.names)
     element = ABAQUS_ELEMENTS[elements][(ex.ndim, ex.order)]
-    with open(path, "w") as fh:
+    with open(path, "w", encoding="utf-8", newline="\n") as fh:
         fh.write("".join(f"{_NAME_NOTE} {mat} {name}\n" for mat, name in set_names.items()))
         fh.write("*HEADING\nwritten by napari-swa-imesh\n*NODE\n")
         n = len(ex.points)

@@ -113,7 +113,8 @@ def write_rows(fh, ints: np.ndarray, floats: np.ndarray | None = None, *, sep: s
 
 def _write_bytes(fh, data: bytes, binary: bool) -> None:
     """`data` (ASCII) to `fh`: as it is to a binary file, else to the bytes under a text
-    file (flushed first, so the order holds), else decoded."""
+    file (flushed first, so the order holds; the writers open theirs with ``newline="\\n"``
+    so that both parts end lines alike on every platform), else decoded."""
     if binary:
         fh.write(data)
     elif hasattr(fh, "buffer"):
@@ -148,14 +149,14 @@ def write_node_ele(ex, node_path, ele_path) -> None:
         f"# {_PROGRAM[dim]} file written by napari-swa-imesh; indices start at 1\n"
     )
 
-    with open(node_path, "w") as fh:
+    with open(node_path, "w", encoding="utf-8", newline="\n") as fh:
         fh.write(header_comment)
         if ex.order == 2:
             fh.write(f"# nodes {ex.n_corners + 1}.. are edge midpoints (-o2)\n")
         fh.write(f"{n_points} {dim} 0 0\n")
         write_rows(fh, np.arange(1, n_points + 1)[:, None], ex.points)
 
-    with open(ele_path, "w") as fh:
+    with open(ele_path, "w", encoding="utf-8", newline="\n") as fh:
         fh.write(header_comment)
         fh.write(f"# element attributes: {', '.join(names)}\n")
         fh.write(f"{n_cells} {ex.nodes_per_cell} {len(names)}\n")
@@ -174,7 +175,7 @@ def write_facet_markers(ex, path) -> None:
     dim = ex.ndim
     groups = list(ex.groups.items())
     n = sum(len(g.owner) for _, g in groups)
-    with open(path, "w") as fh:
+    with open(path, "w", encoding="utf-8", newline="\n") as fh:
         fh.write(f"# {_PROGRAM[dim]} file written by napari-swa-imesh: facet groups as "
                  f"boundary markers; indices start at 1\n")
         fh.write("".join(f"# marker {g.id} {name}\n" for name, g in groups))
