@@ -37,8 +37,10 @@ def test_int_rows_read_back_exactly(top, sep):
     assert np.array_equal(_parse_ints(data, sep), block)
     lines = data.splitlines(keepends=True)
     assert len(lines) == len(block)
-    assert all(line.endswith(b" \n" if len(sep) == 2 else b"\n") for line in lines)
-    assert not any(line.rstrip().endswith(b",") for line in lines)
+    assert all(line.endswith(b"\n") and not line.rstrip().endswith(b",") for line in lines)
+    # each column as wide as its widest number, no wider
+    widths = [max(len(str(v)) for v in col) for col in block.T.tolist()]
+    assert {len(line) for line in lines} == {sum(widths) + len(sep) * (len(widths) - 1) + 1}
 
 
 def test_int_rows_leaves_what_it_cannot_write_to_percent_formatting():
@@ -90,7 +92,7 @@ def test_write_rows_keeps_the_order_of_text_and_bytes_in_a_file(tmp_path):
         write_rows(fh, np.array([[7]]), np.array([[0.25]]), sep=", ", float_format="%.12e")
         fh.write("tail\n")
     assert path.read_text().splitlines() == [
-        "head", "       1        2", "middle", "       7,  2.500000000000e-01", "tail"]
+        "head", "1 2", "middle", "7,  2.500000000000e-01", "tail"]
 
 
 @pytest.mark.parametrize("first", [0, 10 ** 8 - 20])

@@ -12,8 +12,9 @@
   so reading recovers them (sets named ``material_<id>`` are understood too).
 * Numbers with 13 significant digits, so every field fits the 20 characters CalculiX (the
   common free reader) takes; longer fields are rejected there. Integers are right-aligned
-  to 8 digits with blanks (Abaqus and CalculiX skip blanks in data lines), so that numpy
-  makes the text of a whole block at once (:mod:`._text`).
+  with blanks to the widest of their column in a block of lines (Abaqus and CalculiX skip
+  blanks in data lines), so that numpy makes the text of a whole block at once
+  (:mod:`._text`).
 * The facet groups (:func:`~napari_swa_imesh.mesh.facet_groups`: ``xmin`` ... ``zmax``,
   ``interface_<A>_<B>``, ``exterior_<A>``) as a ``*NSET`` of their nodes (mid-edge nodes
   included at second order; for ``*BOUNDARY``) and an element-face ``*SURFACE`` (for
@@ -64,8 +65,8 @@ def _set_names(names: dict[int, str]) -> dict[int, str]:
 
 
 def _write_ids(fh, ids: np.ndarray) -> None:
-    """0-based `ids` as 1-based, 16 to a line (the Abaqus limit for data lines), or 8 when
-    their fields are 16 digits wide (lines stay within Abaqus's 256 characters)."""
+    """0-based `ids` as 1-based, 16 to a line (the Abaqus limit for data lines), or 8 past
+    10**8 (their fields may be 16 digits wide: lines stay within Abaqus's 256 characters)."""
     ids = np.asarray(ids, dtype=np.int64) + 1
     per_line = 16 if not len(ids) or ids.max() < 10 ** 8 else 8
     full = len(ids) // per_line * per_line

@@ -85,9 +85,9 @@ def write_rows(fh, ints: np.ndarray, floats: np.ndarray | None = None, *, sep: s
     >>> fh.getvalue()
     '1 4 0.5\n'
     >>> fh = io.StringIO()
-    >>> write_rows(fh, np.array([[1, 4]]))
+    >>> write_rows(fh, np.array([[1, 4], [23, 5]]))
     >>> fh.getvalue()
-    '       1        4\n'
+    ' 1 4\n23 5\n'
     """
     ints = np.asarray(ints)
     k = ints.shape[1]
