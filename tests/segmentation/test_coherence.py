@@ -100,3 +100,30 @@ def test_fibres_turned_by_90_degrees_stay_the_same_material(coherence, monkeypat
         assert min(dice.values()) > 0.95
     else:
         assert max(dice.values()) < 0.8
+
+
+def test_model_files_saved_before_coherence_still_predict_as_they_did(tmp_path):
+    import json
+
+    from napari_swa_imesh.segmentation import load_model
+
+    rng = np.random.default_rng(5)
+    a, b = _textures(rng)
+    samples = Samples.from_dict({"boxes": [
+        {"label": 1, "start": [0, 0], "stop": [N, N]},
+        {"label": 2, "start": [0, N], "stop": [N, 2 * N]}]})
+    old = RecommendedModel(max_scale=4)
+    old.coherence = False                     # as fitted before the coherence features
+    old.fit(np.concatenate([a, b], 1), samples)
+    old.scale = 4                             # a stack where coherence would shift columns
+    path = old.save(tmp_path / "old.npz")
+    with np.load(path, allow_pickle=False) as data:
+        arrays = {k: data[k] for k in data.files}
+    meta = json.loads(str(arrays.pop("meta")))
+    assert meta.pop("coherence") is False
+    np.savez(tmp_path / "older.npz", meta=json.dumps(meta), **arrays)   # no such key then
+    loaded = load_model(tmp_path / "older.npz")
+    assert loaded.coherence is False
+    test = np.concatenate([_textures(rng)[1], a.T], 1)
+    np.testing.assert_array_equal(loaded.predict(test), old.predict(test))
+    assert load_model(_fit(rng).save(tmp_path / "new.npz")).coherence is True

@@ -121,7 +121,7 @@ def squared_coherence(x: np.ndarray, k: int, m: int) -> np.ndarray:
     return np.clip((d * ratio - 1) / (d - 1), 0, 1)
 
 
-def multiscale_feature_names(max_scale: int) -> list[str]:
+def multiscale_feature_names(max_scale: int, coherence: bool = True) -> list[str]:
     """Names of the features of levels 0..max_scale, in stack order.
 
     Examples
@@ -134,7 +134,7 @@ def multiscale_feature_names(max_scale: int) -> list[str]:
     names = ["value"]
     for j in range(1, max_scale + 1):
         names += [f"mean@{j}", f"logstd@{j}"] + [f"haar{k}@{j}" for k in range(j)]
-        names += [f"coh{k}w{m}@{j}" for k, m in coherence_pairs(j)]
+        names += [f"coh{k}w{m}@{j}" for k, m in coherence_pairs(j) if coherence]
     return names
 
 
@@ -143,7 +143,8 @@ def feature_levels(names: list[str]) -> np.ndarray:
     return np.array([0 if n == "value" else int(n.split("@")[1]) for n in names])
 
 
-def multiscale_features(image, max_scale: int) -> tuple[np.ndarray, list[str]]:
+def multiscale_features(image, max_scale: int, coherence: bool = True
+                        ) -> tuple[np.ndarray, list[str]]:
     """Per-pixel SWA statistics in centred windows of 2^j + 1 px, for j = 0..max_scale.
 
     Parameters
@@ -152,6 +153,8 @@ def multiscale_features(image, max_scale: int) -> tuple[np.ndarray, list[str]]:
         Grey-level image.
     max_scale : int
         Largest scale (window of ``2**max_scale + 1`` px per axis).
+    coherence : bool
+        Include the coherence features (False: the stack of models saved before them).
 
     Returns
     -------
@@ -164,7 +167,7 @@ def multiscale_features(image, max_scale: int) -> tuple[np.ndarray, list[str]]:
         ``value``, ``mean@j``, ``logstd@j``, ``haar{k}@j``, ``coh{k}w{m}@j``.
     """
     x = np.asarray(image, dtype=np.float32)
-    names = multiscale_feature_names(max_scale)
+    names = multiscale_feature_names(max_scale, coherence)
     out = np.empty(x.shape + (len(names),), np.float32)
     out[..., 0] = x
     energies = [haar_energy(x, k) for k in range(max_scale)]
@@ -180,11 +183,11 @@ def multiscale_features(image, max_scale: int) -> tuple[np.ndarray, list[str]]:
         for k in range(j):
             out[..., c] = 0.5 * np.log(np.maximum(ndi.uniform_filter(energies[k], w, mode="reflect"), LOG_FLOOR))
             c += 1
-        c += len(coherence_pairs(j))
+        c += len(coherence_pairs(j)) if coherence else 0
     del energies
     # one coherence map at a time, averaged into every level that uses it (bounds memory)
     column = {n: i for i, n in enumerate(names)}
-    for k, m in coherence_pairs(max_scale):
+    for k, m in coherence_pairs(max_scale) if coherence else []:
         coh = squared_coherence(x, k, m)
         for j in range(m + COHERENCE_GAP, max_scale + 1):
             out[..., column[f"coh{k}w{m}@{j}"]] = ndi.uniform_filter(coh, window(j), mode="reflect")
