@@ -38,7 +38,8 @@ def _halves(box) -> tuple[tuple[slice, ...], tuple[slice, ...]] | None:
 
 
 def blocked_cv_errors(image: np.ndarray, samples: Samples, top: int, *,
-                      per_material: int = 20000, seed: int = 0) -> dict[int, float] | None:
+                      per_material: int = 20000, seed: int = 0, coherence: bool = True
+                      ) -> dict[int, float] | None:
     """Blocked 2-fold CV error (percent) of the GM classifier of every level 0..`top`.
 
     Parameters
@@ -52,6 +53,8 @@ def blocked_cv_errors(image: np.ndarray, samples: Samples, top: int, *,
     per_material : int
         Pixels per material and fold used to train and to test (all, if fewer).
     seed : int
+    coherence : bool
+        Whether the model uses the coherence features (see :func:`multiscale_features`).
 
     Returns
     -------
@@ -78,7 +81,7 @@ def blocked_cv_errors(image: np.ndarray, samples: Samples, top: int, *,
             if halves is None:
                 continue
             for f, sl in enumerate(halves):
-                feats, names = multiscale_features(image[sl], top)
+                feats, names = multiscale_features(image[sl], top, coherence)
                 parts[f].append(feats.reshape(-1, feats.shape[-1]))
         if not parts[0]:
             return None

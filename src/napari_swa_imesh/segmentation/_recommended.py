@@ -134,6 +134,7 @@ class RecommendedModel(SegmentationModel):
         self.bias_correction = bias_correction
         self.pixels_per_material = int(pixels_per_material)
         self.seed = int(seed)
+        self.coherence = True       # False only for model files saved before these features
         self.scale = 0              # coarse level J
         self.finest_scale = 0       # refinement stops here
         self.res_scale: int | None = None
@@ -239,7 +240,7 @@ class RecommendedModel(SegmentationModel):
         # source needs no whole image
         blocked = blocked_cv_errors(BoxCrops(source.crops(self), samples.boxes), samples,
                                     self.scale, per_material=self.pixels_per_material,
-                                    seed=self.seed)
+                                    seed=self.seed, coherence=self.coherence)
         source.release()
         if self.bias_correction == "auto":
             self.bias_correction = bias_range is not None
@@ -274,7 +275,7 @@ class RecommendedModel(SegmentationModel):
         for label in samples.labels:
             rows = []
             for crop in [c for c, b in zip(crops, samples.boxes) if b.label == label]:
-                feats, names = multiscale_features(crop, top)
+                feats, names = multiscale_features(crop, top, self.coherence)
                 rows.append(feats.reshape(-1, feats.shape[-1]))
             rows = np.concatenate(rows)
             if rows.shape[0] < 4:
@@ -323,7 +324,7 @@ class RecommendedModel(SegmentationModel):
         return self.levels[level].log_likelihood(feats[:, :n], dtype=np.float32)
 
     def _predict_level(self, image: np.ndarray, level: int) -> np.ndarray:
-        feats, _ = multiscale_features(image, level)
+        feats, _ = multiscale_features(image, level, self.coherence)
         ll = self._log_likelihood(feats.reshape(-1, feats.shape[-1]), level)
         return self._class_values()[argmax_first(ll)].reshape(image.shape)
 
@@ -375,7 +376,7 @@ class RecommendedModel(SegmentationModel):
         step is local, so a block with a margin of :func:`~._chunked.halo` px gives the
         whole image's result inside the margin. `work` may be overwritten."""
         shape = work.shape
-        feats, _ = multiscale_features(work, self.scale)
+        feats, _ = multiscale_features(work, self.scale, self.coherence)
         del work
         flat = feats.reshape(-1, feats.shape[-1])
         ll = self._log_likelihood(flat, self.scale)                 # (K, N)
@@ -444,6 +445,7 @@ class RecommendedModel(SegmentationModel):
             "scale": self.scale, "finest_scale": self.finest_scale,
             "res_scale": self.res_scale, "max_scale": self.max_scale,
             "feature_set": self.feature_set, "feature_names": self.feature_names,
+            "coherence": self.coherence,
             "classifier": self.classifier_name,
             "options": {"tolerance": self.tolerance, "refine_error": self.refine_error,
                         "beta": self.beta, "bias_correction": self.bias_correction,
@@ -467,6 +469,8 @@ class RecommendedModel(SegmentationModel):
         model.finest_scale = int(meta["finest_scale"])
         model.res_scale = meta.get("res_scale")
         model.feature_names = list(meta["feature_names"])
+        # files saved before the coherence features neither name them nor say so
+        model.coherence = bool(meta.get("coherence", False))
         model.class_means = {int(k): float(v) for k, v in meta["class_means"].items()}
         model.level_error = {int(k): float(v) for k, v in meta["level_error"].items()}
         model.fisher = dict(meta.get("fisher", {}))
