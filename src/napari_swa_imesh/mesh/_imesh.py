@@ -101,11 +101,12 @@ def mesh_labels(labels, *, method: str = "template", exclude=(), spacing=None,
     -----
     The mesher works on the lattice of :func:`choose_lattice` (``info["lattice"]``): the
     voxels themselves for cubic spacing without refinement. The per-element metrics are
-    those of the physical elements; ``level`` counts lattice cells. Template elements per leaf, when no edge midpoint or
-    face centre of the leaf is a vertex: 2 in 2-D, 5 in 3-D (6, Kuhn's, in a periodic mesh
-    with an odd extent: ``info["diagonal_rule"]``); else one cone simplex per boundary
-    segment or face triangle (2-D: 5-8; 3-D: 12-48), or in 3-D the fewer tetrahedra of the
-    leaf table where it has the configuration (17-40; ``_templates_luts.LeafTable``).
+    those of the physical elements; ``level`` counts lattice cells. Template elements per
+    leaf, when no edge midpoint or face centre of the leaf is a vertex: 2 in 2-D, 5 in 3-D
+    (6, Kuhn's, in a periodic mesh with an odd extent: ``info["diagonal_rule"]``); else
+    one cone simplex per boundary segment or face triangle (2-D: 5-8; 3-D: 12-48), or in
+    3-D the fewer tetrahedra of the leaf table where it has the configuration (17-40;
+    ``_templates_luts.LeafTable``).
 
     Raises
     ------

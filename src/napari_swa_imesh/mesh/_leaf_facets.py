@@ -303,15 +303,14 @@ def template_group_rows(mesh: Mesh, *, signs: bool = False):
     seen_from_a = np.zeros(n_pairs, dtype=np.int64)
     seen_from_b = np.zeros(n_pairs, dtype=np.int64)
     negative = np.zeros(m if signs else 0, dtype=bool)
-    want_signs = signs
-    if made is not None:
-        signs = False                    # none is negative: only group elements are read
+    # a mesh as made has none negative: then only group elements are read
+    sign_pass = signs and made is None
     for start in range(0, m, _CHUNK):
         cc = cells[start:start + _CHUNK]
         n = len(cc)
         lf = leaf[start:start + _CHUNK]
         sel = np.flatnonzero(worth[lf] | (code[start:start + n] != leaf_code_of[lf]))
-        if signs:
+        if sign_pass:
             p = _gather(packed, axes, cc, d)
             np.less(_lattice_det(p), 0, out=negative[start:start + n])
             p = [[x[sel] for x in row] for row in p]
@@ -382,4 +381,4 @@ def template_group_rows(mesh: Mesh, *, signs: bool = False):
     rows = ((np.concatenate(owners).astype(np.intp), np.concatenate(opposites),
              np.concatenate(acrosses).astype(np.int64)) if owners
             else (np.zeros(0, np.intp), np.zeros(0, np.intp), np.zeros(0, np.int64)))
-    return (*rows, negative) if want_signs else rows
+    return (*rows, negative) if signs else rows
