@@ -186,9 +186,14 @@ def doerfler(indicator: np.ndarray, theta: float = THETA) -> np.ndarray:
     ranked = np.sort(indicator)[::-1]
     running = np.cumsum(ranked)      # its last entry is the total, in the same rounding
     count = min(len(ranked), int(np.searchsorted(running, theta * running[-1])) + 1)
-    # every element as large as the last one needed: ties (mirror-image elements, equal
-    # up to rounding) are marked together, so a transposed image is refined the same way
-    return indicator >= ranked[count - 1] * (1 - TIE)
+    return _largest(indicator, ranked, count)
+
+
+def _largest(values: np.ndarray, ranked: np.ndarray, count: int) -> np.ndarray:
+    """The `count` largest `values` (`ranked`: sorted descending) and any equal to the
+    last of them up to :data:`TIE`: ties (mirror-image elements, equal up to rounding) are
+    marked together, so a transposed image is refined the same way."""
+    return values >= ranked[count - 1] * (1 - TIE)
 
 
 def refine_within(labels, mesh: Mesh, leaf_indicator: np.ndarray, target: float, tree=None):
@@ -225,8 +230,7 @@ def refine_within(labels, mesh: Mesh, leaf_indicator: np.ndarray, target: float,
     for _ in range(BUDGET_TRIES):
         if count < 1:
             break
-        # ties go together, as Doerfler's do: a transposed image is refined the same way
-        split = values >= ranked[count - 1] * (1 - TIE)
+        split = _largest(values, ranked, count)
         out = _refine_marked(labels, mesh, split[leaf], tree)
         reached = len(out[0].points)
         if reached <= target:
