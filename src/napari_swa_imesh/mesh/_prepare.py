@@ -151,7 +151,8 @@ class ExportMesh:
         self.n_corners = len(corners)
         # the leaf path of the facet groups gives the volumes' signs on the way (its
         # corner gathers are most of the cost of either)
-        found, negative = groups_and_signs(mesh, signs=True, facets=False) if groups != "none" else ({}, None)
+        found, negative = ({}, None) if groups == "none" else groups_and_signs(
+            mesh, signs=True, facets=False)
         if negative is not None:
             # one affine map from the points to the files' frame turns every cell alike
             self.flip = negative ^ export_turns(mesh)
