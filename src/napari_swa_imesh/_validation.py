@@ -10,30 +10,63 @@ from collections.abc import Sequence
 
 import numpy as np
 
-__all__ = ["SPACING_RANGE", "as_image", "as_labels", "normalize_spacing", "label_dtype"]
+__all__ = ["SPACING_RANGE", "IMAGE_NDIM", "as_image", "as_labels", "check_ndim",
+           "normalize_spacing", "label_dtype"]
+
+#: Dimensionalities every command and pipeline function takes: a plane or a volume (a
+#: 4-D array is a time series or a stack of channels, which no step models).
+IMAGE_NDIM = (2, 3)
+
+
+def check_ndim(shape, *, name: str = "image", min_ndim: int = IMAGE_NDIM[0],
+               max_ndim: int | None = IMAGE_NDIM[-1]) -> None:
+    """Raise ValueError unless an array of `shape` has `min_ndim` .. `max_ndim` axes.
+
+    The one check of dimensionality: :func:`as_image`, :func:`as_labels` and the readers of
+    images kept on disk (Zarr, memory-mapped ``.npy``) all call it, so every command
+    refuses the same arrays with the same sentence.
+
+    Examples
+    --------
+    >>> check_ndim((4, 5, 6))
+    >>> check_ndim((4, 5, 6, 2))
+    Traceback (most recent call last):
+    ...
+    ValueError: image must be 2-D to 3-D; got 4-D with shape (4, 5, 6, 2). Squeeze ...
+    """
+    shape = tuple(int(n) for n in shape)
+    if len(shape) < min_ndim or (max_ndim is not None and len(shape) > max_ndim):
+        want = f"{min_ndim}-D" if max_ndim == min_ndim else (
+            f"{min_ndim}-D to {max_ndim}-D" if max_ndim else f"at least {min_ndim}-D")
+        raise ValueError(
+            f"{name} must be {want}; got {len(shape)}-D with shape {shape}. Squeeze "
+            "singleton axes or pass a single plane/volume (one time point or channel)."
+        )
+
 
 
 def as_image(
-    image, *, name: str = "image", min_ndim: int = 2, max_ndim: int | None = None,
-    copy: bool = True,
+    image, *, name: str = "image", min_ndim: int = IMAGE_NDIM[0],
+    max_ndim: int | None = IMAGE_NDIM[-1], copy: bool = True,
 ) -> np.ndarray:
     """Return `image` as a float array after checking it is a single-channel image.
 
     Parameters
     ----------
     image : array_like
-        Grey-level image, 2-D or more, axes in numpy/napari order.
+        Grey-level image, 2-D or 3-D (:data:`IMAGE_NDIM`), axes in numpy/napari order.
     name : str
         What to call it in error messages.
     min_ndim, max_ndim : int
-        Accepted range of dimensionality.
+        Accepted range of dimensionality (default :data:`IMAGE_NDIM`; see
+        :func:`check_ndim`).
     copy : bool
         True: a new float64 array. False: float32 and float64 input come back as they
         are (no copy; read it, do not write to it), other numbers as float64.
 
     Returns
     -------
-    (M, N[, P, ...]) ndarray of float64 (or float32 with ``copy=False``)
+    (M, N[, P]) ndarray of float64 (or float32 with ``copy=False``)
 
     Raises
     ------
@@ -60,13 +93,7 @@ def as_image(
             "is needed. Convert it to grey first (e.g. skimage.color.rgb2gray, or "
             "`--gray` on the command line), or pick one channel."
         )
-    if arr.ndim < min_ndim or (max_ndim is not None and arr.ndim > max_ndim):
-        want = f"{min_ndim}-D" if max_ndim == min_ndim else (
-            f"{min_ndim}-D to {max_ndim}-D" if max_ndim else f"at least {min_ndim}-D")
-        raise ValueError(
-            f"{name} must be {want}; got {arr.ndim}-D with shape {arr.shape}. "
-            "Squeeze singleton axes or pass a single plane/volume."
-        )
+    check_ndim(arr.shape, name=name, min_ndim=min_ndim, max_ndim=max_ndim)
     if arr.size == 0:
         raise ValueError(f"{name} is empty (shape {arr.shape}); give an image with pixels.")
     if copy or arr.dtype not in (np.float32, np.float64):
@@ -123,13 +150,7 @@ def as_labels(
     dtype('int32')
     """
     arr = np.asarray(labels)
-    if arr.ndim < min_ndim or (max_ndim is not None and arr.ndim > max_ndim):
-        want = f"{min_ndim}-D" if max_ndim == min_ndim else (
-            f"{min_ndim}-D to {max_ndim}-D" if max_ndim else f"at least {min_ndim}-D")
-        raise ValueError(
-            f"{name} must be {want}; got {arr.ndim}-D with shape {_plain(arr.shape)}. "
-            "Squeeze singleton axes or pass a single plane/volume."
-        )
+    check_ndim(arr.shape, name=name, min_ndim=min_ndim, max_ndim=max_ndim)
     if arr.size == 0:
         raise ValueError(
             f"{name} is empty (shape {_plain(arr.shape)}); give a label image with pixels.")
@@ -161,7 +182,8 @@ def as_labels(
             "skimage.segmentation.relabel_sequential)."
         )
     if arr.dtype.kind == "f":
-        return arr.astype(np.int32 if hi < np.iinfo(np.int32).max else np.int64)
+        # compared as Python numbers: numpy would cast the bound to float16 (overflow)
+        return arr.astype(np.int32 if _plain(hi) <= np.iinfo(np.int32).max else np.int64)
     return arr
 
 

@@ -19,6 +19,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from .._validation import check_ndim
 from ._bias import grid_factor, upsample_linear_at
 from ._chunked import refuse_flat, bias_round, default_memory, plan_chunks, strided_copy
 from ._recommended import DEFAULT_TOP, RecommendedModel
@@ -178,8 +179,7 @@ def fit_chunked(model: RecommendedModel, image, samples: Samples, *, spacing=Non
     import dask.array as da
 
     x = image if isinstance(image, da.Array) else da.from_array(np.asarray(image))
-    if x.ndim < 2:
-        raise ValueError(f"image must be 2-D or more; got {x.ndim}-D.")
+    check_ndim(x.shape)
     if x.dtype.kind not in "biuf":
         raise TypeError(f"image must hold real numbers; got dtype {x.dtype}.")
     samples.check(x.shape)

@@ -4,14 +4,14 @@ from __future__ import annotations
 
 import numpy as np
 
-from .._validation import as_labels
+from .._validation import IMAGE_NDIM, as_labels
 
 __all__ = ["confusion_matrix", "dice_scores", "jaccard_scores", "evaluate"]
 
 
 def _pair(labels, truth):
-    seg = as_labels(labels, name="labels")
-    ref = as_labels(truth, name="truth")
+    seg = as_labels(labels, name="labels", min_ndim=IMAGE_NDIM[0], max_ndim=IMAGE_NDIM[-1])
+    ref = as_labels(truth, name="truth", min_ndim=IMAGE_NDIM[0], max_ndim=IMAGE_NDIM[-1])
     if seg.shape != ref.shape:
         raise ValueError(
             f"labels of shape {seg.shape} and truth of shape {ref.shape} differ; compare "

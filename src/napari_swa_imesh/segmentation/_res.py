@@ -30,7 +30,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from .._validation import as_image
+from .._validation import as_image, check_ndim
 from ._moments import MOMENT_NAMES, moment_pyramid_unchecked
 from ._samples import BoxCrops, Samples, check_box_contrast, check_contrast
 
@@ -166,9 +166,10 @@ def res_statistics_of_boxes(image, samples: Samples, *, max_scale: int | None = 
         in a box, or boxes that all hold one value.
     """
     shape, dtype = tuple(int(n) for n in image.shape), np.dtype(image.dtype)
-    if len(shape) not in (2, 3) or dtype.kind not in "iuf":
-        raise ValueError(f"the image must be a 2-D or 3-D array of numbers, not shape {shape} "
-                         f"of {dtype}; give one channel of a grey-level image.")
+    check_ndim(shape)
+    if dtype.kind not in "iuf":
+        raise ValueError(f"the image must be an array of numbers, not {dtype}; give one "
+                         "channel of a grey-level image.")
     samples.check(shape)
     crops = [np.asarray(image[b.slices], np.float64) for b in samples.boxes]
     for box, crop in zip(samples.boxes, crops):

@@ -20,7 +20,7 @@ from pathlib import Path
 import numpy as np
 
 from .._tree import build_tree
-from .._validation import as_labels
+from .._validation import IMAGE_NDIM, as_labels
 
 __all__ = ["Material", "SampleBox", "Samples", "load_samples", "save_samples",
            "samples_from_truth", "window_scale", "check_contrast", "check_box_contrast",
@@ -371,7 +371,7 @@ def samples_from_truth(
     >>> [(b.label, b.start, b.stop) for b in s.boxes]
     [(1, (0, 4), (4, 8)), (2, (0, 0), (4, 4))]
     """
-    lab = as_labels(truth, name="truth", min_ndim=2)
+    lab = as_labels(truth, name="truth", min_ndim=IMAGE_NDIM[0], max_ndim=IMAGE_NDIM[-1])
     if per_material < 1:
         raise ValueError(f"per_material must be at least 1; got {per_material}.")
     tree = build_tree(lab)
