@@ -2,10 +2,11 @@
 
 Supported: ``.tif/.tiff`` (tifffile; ImageJ spacing and resolution tags), ``.png``,
 ``.jpg/.jpeg`` (imageio), ``.npy`` (no pickles), ``.nii/.nii.gz`` (nibabel; spacing from
-the header zooms). Arrays keep the order in which the file stores them; spacing is given
-per array axis in that same order. A NIfTI file also places its voxels in a world frame
-(:func:`read_affine`: nibabel's ``img.affine``, voxel centres at integer indices); the
-other formats place voxel corner 0 at the origin, axes scaled by the spacing.
+the affine the standard chooses, see :func:`read_affine`). Arrays keep the order in which
+the file stores them; spacing is given per array axis in that same order. A NIfTI file
+also places its voxels in a world frame (:func:`read_affine`: nibabel's ``img.affine``,
+voxel centres at integer indices); the other formats place voxel corner 0 at the origin,
+axes scaled by the spacing.
 """
 
 from __future__ import annotations
@@ -20,12 +21,13 @@ from pathlib import Path
 
 import numpy as np
 
+from ._headers import Refused, check_affine, load_nifti, load_npy, nifti_placement
 from ._validation import normalize_spacing
 
 __all__ = ["read_image", "read_affine", "is_nifti", "grid_affine", "write_labels",
            "write_labels_to", "label_array", "check_label_format", "image_suffix",
            "IMAGE_SUFFIXES", "LABEL_SUFFIXES", "check_writable", "atomic_write", "is_store",
-           "check_figure_path", "write_figure"]
+           "check_figure_path", "write_figure", "load_npy"]
 
 LABEL_SUFFIXES = (".npy", ".tif", ".tiff", ".nii", ".nii.gz", ".png")
 _UMASK_LOCK = threading.Lock()
@@ -165,15 +167,19 @@ def read_affine(path) -> np.ndarray | None:
     Returns
     -------
     (4, 4) ndarray of float64 or None
-        nibabel's ``img.affine`` (the sform, else the qform, else the zooms): maps voxel
-        indices, in the array order :func:`read_image` gives, to world x, y, z, with voxel
-        centres at integer indices. None for TIFF, PNG, JPEG and ``.npy``, whose voxel
-        corner 0 lies at the origin.
+        nibabel's ``img.affine`` (the sform when ``sform_code > 0``, else the qform when
+        ``qform_code > 0``, else the zooms): maps voxel indices, in the array order
+        :func:`read_image` gives, to world x, y, z, with voxel centres at integer indices.
+        None for TIFF, PNG, JPEG and ``.npy``, whose voxel corner 0 lies at the origin.
+        :func:`read_image` gives the norms of its spatial columns as the spacing.
 
     Raises
     ------
     FileNotFoundError, ValueError
-        Missing file, or a NIfTI header nibabel cannot parse.
+        Missing file, a NIfTI header nibabel cannot parse, or one whose chosen placement
+        gives no voxel size: a NaN, infinite or singular sform or qform, or a zero,
+        negative or NaN ``pixdim`` where the qform or the zooms are used (nibabel would
+        read such a size as 1).
 
     Examples
     --------
@@ -188,12 +194,7 @@ def read_affine(path) -> np.ndarray | None:
         return None
     if not p.is_file():
         raise FileNotFoundError(f"no image file at {p}; check the path.")
-    import nibabel as nib
-
-    try:
-        return np.asarray(nib.load(str(p)).affine, dtype=np.float64)
-    except Exception as exc:  # a corrupt header surfaces as many nibabel errors
-        raise ValueError(f"cannot read the header of {p} as NIfTI: {exc}") from exc
+    return nifti_placement(p, load_nifti(p))[0]
 
 
 def grid_affine(affine, step: int, ndim: int) -> np.ndarray:
@@ -228,12 +229,16 @@ def read_image(path, *, gray: bool = False) -> tuple[np.ndarray, tuple[float, ..
     image : ndarray
         As stored (dtype kept).
     spacing : tuple of float
-        One value per axis of `image`; 1.0 where the file says nothing.
+        One value per axis of `image`; 1.0 where the file says nothing. NIfTI: the voxel
+        sizes of :func:`read_affine` (the norms of its columns), checked before the pixels
+        are read.
 
     Raises
     ------
     FileNotFoundError, ValueError
-        Missing file, unknown suffix, or a file the reader cannot parse.
+        Missing file, unknown suffix, a file the reader cannot parse (a ``.npy`` that is
+        not one, or holds Python objects), or a NIfTI header that places no voxel
+        (:func:`read_affine`).
     """
     p = Path(path)
     if not p.is_file():
@@ -246,6 +251,8 @@ def read_image(path, *, gray: bool = False) -> tuple[np.ndarray, tuple[float, ..
         )
     try:
         image, spacing = _read_by_suffix(p, suffix)
+    except Refused:
+        raise
     except Exception as exc:  # a corrupt file surfaces as many reader-specific errors
         raise ValueError(f"cannot read {p} as a {suffix} image: {exc}") from exc
     if gray and image.ndim == 3 and image.shape[-1] in (3, 4):
@@ -266,12 +273,15 @@ def _read_by_suffix(p: Path, suffix: str):
 
         return np.asarray(iio.imread(p)), None
     if suffix == ".npy":
-        return np.load(p, allow_pickle=False), None
-    import nibabel as nib
-
-    img = nib.load(str(p))
+        return load_npy(p), None
+    img = load_nifti(p)
+    _, spatial = nifti_placement(p, img)   # refused before the pixels are read
     image = np.asarray(img.dataobj)
-    return image, tuple(float(z) for z in img.header.get_zooms()[: image.ndim])
+    # axes past the third (time, channels) have no place in the affine: their pixdim, 1
+    # where it is no size (every command refuses 4-D images anyway)
+    extra = [float(z) if np.isfinite(z) and z > 0 else 1.0
+             for z in img.header.get_zooms()[len(spatial):image.ndim]]
+    return image, spatial + tuple(extra)
 
 
 def _read_tiff(p: Path):
@@ -398,6 +408,8 @@ def write_labels(path, labels, *, spacing=None, origin=None, affine=None,
     if affine is not None and not is_nifti(path):
         raise ValueError(f"an affine can only be written to NIfTI (.nii, .nii.gz), not "
                          f"{Path(path).name!r}; give spacing and origin instead.")
+    if affine is not None:
+        check_affine(affine, min(data.ndim, 3))
     with atomic_write([path], force=force) as (tmp,):
         write_labels_to(tmp, data, spacing=spacing, origin=origin, affine=affine)
     return Path(path)

@@ -350,9 +350,9 @@ def _peek_shape_dtype(path):
                 series = tif.series[0]
                 return tuple(series.shape), np.dtype(series.dtype)
         if suffix in (".nii", ".nii.gz"):
-            import nibabel as nib
+            from .._headers import load_nifti
 
-            img = nib.load(str(path))
+            img = load_nifti(Path(path))
             return tuple(img.shape), np.dtype(img.get_data_dtype())
     except Exception:  # the reader proper reports unreadable files
         return None
