@@ -91,7 +91,7 @@ def open_levels(path, *, chunks=None):
     node = _open_node(p)
     if isinstance(node, zarr.Array):
         spacing = node.attrs.get(SPACING_KEY)
-        arr = da.from_zarr(node, chunks=chunks if chunks is not None else node.chunks)
+        arr = _from_zarr(node, p, chunks if chunks is not None else node.chunks)
         ok = isinstance(spacing, list) and len(spacing) == arr.ndim
         return [arr], tuple(float(s) for s in spacing) if ok else (1.0,) * arr.ndim
     multi = _multiscales(dict(node.attrs))
@@ -115,7 +115,7 @@ def open_levels(path, *, chunks=None):
                              f"{[a['name'] for a in names]}); give an image of one channel "
                              "and one time point.")
         c = chunks if (i == 0 and chunks is not None) else None
-        arr = da.from_zarr(z, chunks=c if c is None else tuple(
+        arr = _from_zarr(z, p, z.chunks if c is None else tuple(
             c[sum(space[:k])] if s else 1 for k, s in enumerate(space)))
         arr = arr[tuple(slice(None) if s else 0 for s in space)]
         levels.append(arr)
@@ -127,11 +127,54 @@ def open_levels(path, *, chunks=None):
     return levels, spacing or (1.0,) * levels[0].ndim
 
 
+def _from_zarr(z, store: Path, chunks):
+    """`z` as a Dask array whose every read says which chunk of `store` is damaged."""
+    import dask.array as da
+
+    return da.from_array(_CheckedChunks(z, store), chunks=chunks, asarray=True, fancy=False,
+                         name=f"zarr-{store.name}-{z.path}-{id(z):x}")
+
+
+class _CheckedChunks:
+    """A Zarr array read block by block; a chunk that cannot be read or decoded (a
+    truncated or corrupt file: zstd or blosc errors, wrong sizes) is reported as a
+    ValueError naming the chunk and the store, not as the codec's own error."""
+
+    def __init__(self, z, store: Path):
+        self.z, self.store = z, store
+        self.shape, self.dtype, self.ndim = z.shape, z.dtype, z.ndim
+
+    def __getitem__(self, index):
+        try:
+            return self.z[index]
+        except Exception as exc:  # a codec error; find which chunk of the block it is
+            raise ValueError(self._damaged(index, exc)) from exc
+
+    def _damaged(self, index, exc) -> str:
+        grid = [range(s.start // c, -(-s.stop // c)) if isinstance(s, slice) else
+                range(s // c, s // c + 1) for s, c in zip(index, self.z.chunks)]
+        bad = []
+        for key in np.stack(np.meshgrid(*grid, indexing="ij"), -1).reshape(-1, len(grid)):
+            sl = tuple(slice(k * c, (k + 1) * c) for k, c in zip(key, self.z.chunks))
+            try:
+                self.z[sl]
+            except Exception:
+                bad.append(tuple(int(k) for k in key))
+        where = f"chunk {bad[0]}" if len(bad) == 1 else (
+            f"chunks {', '.join(map(str, bad))}" if bad else "a chunk")
+        array = f" (array {self.z.path})" if self.z.path else ""
+        return (f"{where} of the Zarr store {self.store}{array} cannot be read "
+                f"({type(exc).__name__}: {exc}): the file is truncated or damaged; restore "
+                "the store from a copy or write it again.")
+
+
 class _NpyBlocks:
     """A ``.npy`` file as an indexable array whose every read maps, copies and unmaps."""
 
     def __init__(self, path: Path):
-        mm = np.load(path, mmap_mode="r", allow_pickle=False)
+        from ._headers import load_npy
+
+        mm = load_npy(path, mmap_mode="r")
         self.path, self.shape, self.dtype, self.ndim = path, mm.shape, mm.dtype, mm.ndim
         self.offset, self.order = mm.offset, "F" if mm.flags.f_contiguous and mm.ndim > 1 \
             else "C"
@@ -174,9 +217,13 @@ def open_lazy(path, *, chunks=None):
     if p.name.lower().endswith(".npy"):
         if not p.is_file():
             raise FileNotFoundError(f"no image file at {p}; check the path.")
+        from ._headers import Refused
+
         try:
             blocks = _NpyBlocks(p)
-        except Exception as exc:  # a pickled or damaged file
+        except Refused:            # not a .npy file, or one of objects: said in full
+            raise
+        except Exception as exc:   # a damaged file
             raise ValueError(f"cannot read {p} as a .npy image: {exc}") from exc
         return (da.from_array(blocks, chunks=chunks or blocks.shape, asarray=True,
                               fancy=False), (1.0,) * blocks.ndim)
