@@ -120,7 +120,8 @@ def abaqus_materials(path: Path, m, keep: list[int], n_cells: int):
 
     Ids come from our comment lines (and then only the noted sets are materials: the
     others hold facet groups), else from ``material_<id>`` set names, else 1..K in the
-    order of the sets. Returns ``(names, material (n_cells,) int64)``.
+    order of the sets. Returns ``(names, material (n_cells,) int64)``, or ``({}, None)``
+    for a file without sets or notes (no materials).
     """
     ids: dict[str, int] = {}
     with open(path) as fh:
@@ -130,16 +131,28 @@ def abaqus_materials(path: Path, m, keep: list[int], n_cells: int):
             if line.startswith(_NAME_NOTE):
                 mat, name = line[len(_NAME_NOTE) :].split()
                 ids[name] = int(mat)
+    if not ids and not m.cell_sets:
+        return {}, None
     material = np.zeros(n_cells, dtype=np.int64)
     names: dict[int, str] = {}
     offsets = np.cumsum([0] + [len(m.cells[i].data) for i in keep])
     sets = m.cell_sets.items()
     if ids:                       # our file: the noted sets are the materials, the rest
         sets = [(name, blocks) for name, blocks in sets if name in ids]   # are facet sets
+    covered = np.zeros(n_cells, dtype=bool)
     for k, (name, blocks) in enumerate(sets):
         found = re.fullmatch(r"material_(\d+)", name)
         mat = ids.get(name, int(found.group(1)) if found else k + 1)
         names[mat] = name
         for j, i in enumerate(keep):
-            material[offsets[j] + np.asarray(blocks[i], dtype=np.intp)] = mat
+            at = offsets[j] + np.asarray(blocks[i], dtype=np.intp)
+            material[at], covered[at] = mat, True
+    # our files note every material set and put every element in one: a file cut short
+    # (a line-based format, so meshio reads what is left) lacks sets or elements of them
+    lost = sorted(set(ids) - {name for name, _ in sets})
+    if ids and (lost or not covered.all()):
+        what = (f"its material set(s) {', '.join(lost)} are missing" if lost else
+                f"{int((~covered).sum())} of its {n_cells} elements are in no material set")
+        raise ValueError(f"cannot read {path} as a .inp mesh: the file is truncated or "
+                         f"damaged ({what}); write it again (or copy it again in full).")
     return names, material
