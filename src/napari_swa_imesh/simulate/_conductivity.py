@@ -29,6 +29,14 @@ def axis_names(ndim: int) -> tuple[str, ...]:
     return AXIS_NAMES[:ndim][::-1]
 
 
+CONDUCTIVITY_RANGE = (1e-30, 1e30)
+"""Accepted conductivity values (eigenvalues of a tensor), as :data:`SPACING_RANGE
+<napari_swa_imesh._validation.SPACING_RANGE>` for lengths: the solver's inner products
+hold squares of conductivities times lengths, which overflow float64 (about 1e308) for
+values near 1e100 even at contrast 1; k = 1e-30 and 1e30 solve to 1e-13 with spacings
+of 1e-30 and 1e30."""
+
+
 def _as_tensor(value, ndim: int, where: str) -> np.ndarray:
     """One material's conductivity as a (d, d) tensor in the x, y(, z) frame."""
     if isinstance(value, (bool, np.bool_)):
@@ -52,9 +60,16 @@ def _as_tensor(value, ndim: int, where: str) -> np.ndarray:
         raise ValueError(f"{where} is not finite ({value!r}); give a positive finite number.")
     if not np.allclose(tensor, tensor.T, rtol=1e-12, atol=0):
         raise ValueError(f"{where} must be a symmetric tensor.")
-    if np.linalg.eigvalsh(tensor).min() <= 0:
+    eigen = np.linalg.eigvalsh(tensor)
+    if eigen.min() <= 0:
         raise ValueError(f"{where} must be positive (a positive number or a positive "
                          f"definite tensor), not {value!r}.")
+    lo, hi = CONDUCTIVITY_RANGE
+    if eigen.min() < lo or eigen.max() > hi:
+        raise ValueError(f"{where} is {value!r}, outside {lo:g} .. {hi:g}: the solver "
+                         "multiplies conductivities with each other and with lengths, "
+                         "which beyond that range leaves float64; express the "
+                         "conductivities in other units (k_eff scales with them).")
     return tensor
 
 
