@@ -44,6 +44,12 @@ def run_demo(args) -> int:
     from .segmentation import evaluate, plot_res_scales, save_samples, segment, write_signatures_csv
 
     out = Path(args.out)
+    # the nearest part of the path that exists must be a folder (a file there made mkdir
+    # fail with a bare "[Errno 17] File exists")
+    existing = next(p for p in (out, *out.parents) if p.exists())
+    if not existing.is_dir():
+        raise NotADirectoryError(f"--out {out}: {existing} is a file, not a folder; give a "
+                                 "folder for the demo's files (it is created if missing).")
     out.mkdir(parents=True, exist_ok=True)
     for name in DEMO_FILES:                  # refuse before writing anything
         check_writable(out / name, force=args.force)

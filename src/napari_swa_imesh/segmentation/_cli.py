@@ -237,8 +237,10 @@ def _run_segment(args: argparse.Namespace) -> int:
         raise ValueError(f"--truth has shape {truth.shape} but the image has {image.shape}; "
                          "give the truth of this image.")
     materials = samples.labels if samples is not None else model.labels
-    check_label_format(args.output, label_array(np.zeros((1,) * image.ndim, np.int64)
-                                                + max(materials)))
+    # the format must hold labels of the image's shape up to the largest material (a
+    # broadcast view: no memory, and a refusal names the real shape)
+    check_label_format(args.output, np.broadcast_to(
+        label_array([max(materials)]).reshape((1,) * image.ndim), image.shape))
     gen = segment_steps(image, samples, scale=args.scale, feature_set=args.features,
                         classifier=args.classifier, sieve=args.sieve, model=model,
                         spacing=spacing, method=args.method)
