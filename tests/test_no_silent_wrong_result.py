@@ -434,3 +434,401 @@ def test_case5_singleton_axes_read_back(tmp_path, shape, suffix):
     assert got.shape == shape and np.array_equal(got, labels)
     if suffix != ".npy":
         assert spacing == (2.0,) * len(shape)
+
+
+# -- issue 22, section 2: headers and arrays other tools write -------------------------------
+# Every case was reproduced on main first; each file below is written the way another tool
+# (or a damaged copy) leaves it, byte by byte where nibabel would refuse to write it.
+
+def nifti_as_stored(path, data, affine=None, **fields):
+    """Write `data` as NIfTI, then overwrite header `fields` as stored (nibabel would fix
+    or refuse some of them, e.g. a zero pixdim or a singular sform)."""
+    import gzip
+
+    import nibabel as nib
+
+    plain = path.with_name(path.name.removesuffix(".gz"))
+    nib.save(nib.Nifti1Image(data, np.diag([2.0, 2.0, 2.0, 1.0]) if affine is None
+                             else affine), str(plain))
+    with open(plain, "r+b") as fh:
+        header = nib.Nifti1Header.from_fileobj(fh, check=False)
+        for key, value in fields.items():
+            header[key] = value
+        fh.seek(0)
+        fh.write(header.binaryblock)
+    if path.name.endswith(".gz"):
+        path.write_bytes(gzip.compress(plain.read_bytes()))
+        plain.unlink()
+    return path
+
+
+#: Headers no command may read: the standard's chosen placement gives no voxel size.
+BAD_HEADERS = {
+    "singular sform": dict(srow_z=[0.0, 0.0, 0.0, 0.0], sform_code=1, qform_code=1),
+    "NaN sform": dict(srow_x=[np.nan] * 4, sform_code=1, qform_code=1),
+    "singular sform, no qform": dict(srow_y=[0.0, 0.0, 0.0, 5.0], sform_code=2, qform_code=0),
+    "infinite sform": dict(srow_z=[0.0, 0.0, np.inf, 0.0], sform_code=1, qform_code=0),
+    "zero pixdim": dict(pixdim=[1, 1, 0, 1, 1, 1, 1, 1], sform_code=0, qform_code=0),
+    "zero pixdim, qform": dict(pixdim=[1, 1, 1, 0, 1, 1, 1, 1], sform_code=0, qform_code=1),
+    "negative pixdim": dict(pixdim=[1, -2, 1, 1, 1, 1, 1, 1], sform_code=0, qform_code=0),
+    "NaN pixdim, qform": dict(pixdim=[1, np.nan, 1, 1, 1, 1, 1, 1], sform_code=0,
+                              qform_code=1),
+    "NaN qoffset": dict(qoffset_x=np.nan, sform_code=0, qform_code=1),
+}
+
+COMMANDS_ON = {   # every command that reads an image or labels, on the file "bad"
+    "segment": ["segment", "{image}", "--samples", "s3.json", "-o", "out.nii.gz"],
+    "res": ["res", "{image}", "--samples", "s3.json"],
+    "mesh": ["mesh", "{labels}", "-o", "m.vtu"],
+    "mesh --index-space": ["mesh", "{labels}", "-o", "m.vtu", "--index-space"],
+    "simulate": ["simulate", "{labels}", "-k", "1=1", "2=2"],
+    "evaluate": ["evaluate", "{labels}", "--truth", "lab3.npy"],
+    "samples-from-truth": ["samples-from-truth", "{labels}", "-o", "t.json"],
+}
+
+
+@pytest.fixture()
+def volumes(tmp_path):
+    """A 12^3 two-material image and its labels (.npy), and sample boxes."""
+    rng = np.random.default_rng(3)
+    labels = np.ones((12, 12, 12), np.uint8)
+    labels[:, 6:] = 2
+    image = rng.normal(size=labels.shape) + 5.0 * (labels == 2)
+    np.save(tmp_path / "img3.npy", image)
+    np.save(tmp_path / "lab3.npy", labels)
+    save_samples(Samples.from_dict({
+        "materials": [{"label": 1, "name": "a"}, {"label": 2, "name": "b"}],
+        "boxes": [{"label": 1, "start": [0, 0, 0], "stop": [12, 6, 12]},
+                  {"label": 2, "start": [0, 6, 0], "stop": [12, 12, 12]}]}),
+        tmp_path / "s3.json")
+    return tmp_path, image, labels
+
+
+def refused_in(folder, capsys, argv) -> str:
+    """Run `argv` in `folder`; assert exit 2, one sentence, the folder byte-identical."""
+    before = folder_state(folder)
+    code, out, err = run(capsys, *argv)
+    assert code == 2, (out, err)
+    assert len(err.strip().splitlines()) == 1 and ": error: " in err, err
+    assert "Traceback" not in err and "HeaderDataError" not in err
+    assert folder_state(folder) == before
+    return err.strip()
+
+
+@settings(max_examples=40, deadline=None,
+          suppress_health_check=[HealthCheck.function_scoped_fixture])
+@given(header=st.sampled_from(sorted(BAD_HEADERS)), command=st.sampled_from(sorted(COMMANDS_ON)),
+       gz=st.booleans())
+def test_issue22_property_an_unusable_nifti_header_is_refused_at_the_door(
+        volumes, capsys, monkeypatch, header, command, gz):
+    folder, image, labels = volumes
+    monkeypatch.chdir(folder)
+    suffix = ".nii.gz" if gz else ".nii"
+    nifti_as_stored(folder / f"image{suffix}", image.astype(np.float32), **BAD_HEADERS[header])
+    nifti_as_stored(folder / f"labels{suffix}", labels, **BAD_HEADERS[header])
+    argv = [a.format(image=f"image{suffix}", labels=f"labels{suffix}")
+            for a in COMMANDS_ON[command]]
+    line = refused_in(folder, capsys, argv)
+    if "pixdim" in header:
+        assert "(pixdim), and a voxel size must be positive and finite; fix" in line, line
+    else:
+        assert "form of" in line and "gives no voxel size or position; fix" in line, line
+
+
+def test_issue22_segment_of_a_singular_sform_reads_no_pixels(volumes, capsys, monkeypatch):
+    # on main it segmented, then nibabel's HeaderDataError ended the run (exit 1)
+    import nibabel as nib
+
+    folder, image, _ = volumes
+    monkeypatch.chdir(folder)
+    nifti_as_stored(folder / "image.nii.gz", image.astype(np.float32),
+                    **BAD_HEADERS["singular sform"])
+    calls = []
+    monkeypatch.setattr(nib.arrayproxy.ArrayProxy, "__array__",
+                        lambda *a, **k: calls.append(1) or np.zeros(1))
+    line = refused_in(folder, capsys, COMMANDS_ON["segment"][:1] + ["image.nii.gz"]
+                      + COMMANDS_ON["segment"][2:])
+    assert "the sform of image.nii.gz is singular" in line and not calls
+
+
+@pytest.mark.parametrize("fields", [dict(pixdim=[1, 1, 0, 1, 1, 1, 1, 1], sform_code=1),
+                                    dict(pixdim=[1, 0, 0, 0, 1, 1, 1, 1], sform_code=1,
+                                         qform_code=0)])
+def test_issue22_a_zero_pixdim_beside_a_valid_sform_reads_the_sform(tmp_path, fields):
+    # the standard: sform_code > 0 places the voxels; pixdim is then not the voxel size
+    affine = np.diag([0.5, 1.5, 2.5, 1.0])
+    path = nifti_as_stored(tmp_path / "l.nii.gz", np.ones((3, 4, 5), np.uint8), affine,
+                           **fields)
+    from napari_swa_imesh.io import read_affine
+
+    assert read_image(path)[1] == (0.5, 1.5, 2.5)
+    np.testing.assert_array_equal(read_affine(path), affine)
+
+
+def random_rotation(draw_floats) -> np.ndarray:
+    q, r = np.linalg.qr(np.asarray(draw_floats, np.float64).reshape(3, 3))
+    return q * np.sign(np.diag(r))
+
+
+@settings(max_examples=60, deadline=None,
+          suppress_health_check=[HealthCheck.function_scoped_fixture])
+@given(ndim=st.sampled_from([2, 3]),
+       entries=st.lists(st.floats(-1, 1), min_size=9, max_size=9),
+       zooms=st.lists(st.floats(0.05, 20), min_size=3, max_size=3),
+       shift=st.lists(st.floats(-500, 500), min_size=3, max_size=3),
+       flip=st.booleans(), form=st.sampled_from(["both", "sform", "qform"]))
+def test_issue22_property_an_oblique_float32_affine_reads_with_its_voxel_sizes(
+        tmp_path, ndim, entries, zooms, shift, flip, form):
+    import nibabel as nib
+
+    from napari_swa_imesh.io import read_affine
+
+    a = np.asarray(entries).reshape(3, 3)
+    assume_rank = np.linalg.svd(a, compute_uv=False)
+    if not assume_rank[-1] > 1e-3 * max(assume_rank[0], 1e-300):
+        return                                        # no rotation in these numbers
+    rotation = random_rotation(entries) @ np.diag([1.0, 1.0, -1.0 if flip else 1.0])
+    affine = np.eye(4)
+    affine[:3, :3], affine[:3, 3] = rotation @ np.diag(zooms), shift
+    # float32 header values, as another tool leaves them (0.8 is 0.800000011920929)
+    affine[:3] = affine[:3].astype(np.float32)
+    img = nib.Nifti1Image(np.ones((3, 4, 5)[:ndim], np.uint8), affine)
+    if form == "sform":
+        img.set_qform(None, code=0)
+    elif form == "qform":
+        img.set_sform(None, code=0)
+    path = tmp_path / "l.nii.gz"
+    nib.save(img, str(path))
+    got = read_affine(path)
+    np.testing.assert_allclose(got, nib.load(str(path)).affine, rtol=0, atol=0)
+    _, spacing = read_image(path)
+    # exactly the norms of the affine's columns (what the world frame uses) ...
+    assert spacing == tuple(float(v) for v in np.linalg.norm(got[:3, :ndim], axis=0))
+    # ... and the voxel sizes meant, to the float32 rounding of the header
+    np.testing.assert_allclose(spacing, zooms[:ndim], rtol=1e-5)
+
+
+@settings(max_examples=30, deadline=None,
+          suppress_health_check=[HealthCheck.function_scoped_fixture])
+@given(shape=st.lists(st.integers(1, 4), min_size=1, max_size=5))
+def test_issue22_property_one_dimensionality_rule_for_every_door(shape):
+    from napari_swa_imesh.mesh import mesh_labels
+    from napari_swa_imesh.segmentation import evaluate, res_statistics, samples_from_truth
+
+    labels = (np.arange(int(np.prod(shape))).reshape(shape) % 2 + 1).astype(np.uint8)
+    image = labels + np.random.default_rng(0).normal(0, 0.1, labels.shape)
+    box = {"start": [0] * len(shape), "stop": list(shape)}
+    samples = Samples.from_dict({"boxes": [{"label": 1, **box}, {"label": 2, **box}]})
+    doors = [lambda: segment(image, samples), lambda: res_statistics(image, samples),
+             lambda: evaluate(labels, labels), lambda: samples_from_truth(labels),
+             lambda: mesh_labels(labels)]
+    for door in doors:
+        if len(shape) in (2, 3):
+            try:
+                door()
+            except ValueError as exc:             # refused for another reason, not the shape
+                assert "-D" not in str(exc), exc
+        else:
+            with pytest.raises(ValueError, match=r"must be 2-D to 3-D; got \d-D with shape"):
+                door()
+
+
+FOUR_D_CALLS = [
+    ["segment", "img4.npy", "--samples", "s4.json", "-o", "out.npy"],
+    ["segment", "img4.npy", "--samples", "s4.json", "-o", "out.npy", "--method", "reference"],
+    ["segment", "img4.npy", "--samples", "s4.json", "-o", "out.npy", "--memory", "1G"],
+    ["segment", "img4.npy", "--samples", "s4.json", "-o", "out.zarr"],
+    ["res", "img4.npy", "--samples", "s4.json"],
+    ["mesh", "lab4.npy", "-o", "m.vtu"],
+    ["simulate", "lab4.npy", "-k", "1=1", "2=2"],
+    ["evaluate", "lab4.npy", "--truth", "lab4.npy"],
+    ["samples-from-truth", "lab4.npy", "-o", "t.json"],
+    ["mesh", "lab4.nii.gz", "-o", "m.vtu"],
+    ["simulate", "lab4.nii.gz", "-k", "1=1", "2=2"],
+    ["segment", "img4.nii.gz", "--samples", "s4.json", "-o", "out.nii.gz"],
+]
+
+
+@pytest.mark.parametrize("argv", FOUR_D_CALLS, ids=[" ".join(a[:1] + a[-2:])
+                                                     for a in FOUR_D_CALLS])
+def test_issue22_4d_arrays_are_refused_by_every_command(volumes, capsys, monkeypatch, argv):
+    # on main, segment wrote 4-D labels (exit 0) while res and mesh refused them
+    folder, image, labels = volumes
+    monkeypatch.chdir(folder)
+    np.save(folder / "img4.npy", np.repeat(image[..., None], 3, -1))
+    np.save(folder / "lab4.npy", np.repeat(labels[..., None], 3, -1))
+    nifti_as_stored(folder / "img4.nii.gz", np.repeat(image[..., None], 3, -1).astype(
+        np.float32))
+    nifti_as_stored(folder / "lab4.nii.gz", np.repeat(labels[..., None], 3, -1))
+    save_samples(Samples.from_dict({"boxes": [
+        {"label": 1, "start": [0, 0, 0, 0], "stop": [12, 6, 12, 3]},
+        {"label": 2, "start": [0, 6, 0, 0], "stop": [12, 12, 12, 3]}]}), folder / "s4.json")
+    line = refused_in(folder, capsys, argv)
+    assert "must be 2-D to 3-D; got 4-D with shape (12, 12, 12, 3)" in line
+
+
+def damaged_store(folder, image, chunk, cut):
+    import zarr
+
+    z = zarr.create_array(str(folder / "img.zarr"), shape=image.shape, chunks=(6, 6, 6),
+                          dtype=np.float32)
+    z[:] = image.astype(np.float32)
+    part = folder / "img.zarr" / "c" / "/".join(map(str, chunk))
+    part.write_bytes(part.read_bytes()[:cut])
+
+
+@pytest.mark.parametrize("chunk", [(0, 0, 0), (1, 0, 1), (1, 1, 1)])
+@pytest.mark.parametrize("cut", [0, 10, 200])
+@pytest.mark.parametrize("argv", [["segment", "img.zarr", "--samples", "s3.json", "-o",
+                                   "out.zarr"],
+                                  ["segment", "img.zarr", "--samples", "s3.json", "-o",
+                                   "out.npy"],
+                                  ["res", "img.zarr", "--samples", "s3.json"]],
+                         ids=["segment to zarr", "segment to npy", "res"])
+def test_issue22_a_truncated_zarr_chunk_is_named(volumes, capsys, monkeypatch, chunk, cut,
+                                                 argv):
+    # on main: a raw "Zstd decompression error" traceback
+    folder, image, _ = volumes
+    monkeypatch.chdir(folder)
+    damaged_store(folder, image, chunk, cut)
+    line = refused_in(folder, capsys, argv)
+    assert f"chunk {chunk} of the Zarr store img.zarr cannot be read" in line
+    assert "truncated or damaged" in line
+
+
+@pytest.mark.parametrize("content, message", [
+    (b"hello world\n", "is not a .npy file"),
+    (b"", "is not a .npy file"),
+    (b"\x89PNG\r\n\x1a\n" + bytes(64), "is not a .npy file"),
+    (None, "holds Python objects"),
+])
+@pytest.mark.parametrize("command", ["segment", "res", "mesh", "simulate", "evaluate"])
+def test_issue22_a_file_that_is_not_a_npy_array_is_called_so(volumes, capsys, monkeypatch,
+                                                             content, message, command):
+    # on main: "pickled data ... use allow_pickle", an option no command has
+    folder, _, _ = volumes
+    monkeypatch.chdir(folder)
+    if content is None:
+        np.save(folder / "x.npy", np.array([{}, 1], dtype=object), allow_pickle=True)
+    else:
+        (folder / "x.npy").write_bytes(content)
+    argv = [a.format(image="x.npy", labels="x.npy") for a in COMMANDS_ON[command]]
+    line = refused_in(folder, capsys, argv)
+    assert message in line and "allow_pickle" not in line
+
+
+def test_issue22_a_png_refusal_names_the_real_shape(volumes, capsys, monkeypatch):
+    # on main: "got shape (1, 1, 1)", a placeholder
+    folder, _, _ = volumes
+    monkeypatch.chdir(folder)
+    line = refused_in(folder, capsys, ["segment", "img3.npy", "--samples", "s3.json", "-o",
+                                       "out.png"])
+    assert "got shape (12, 12, 12)" in line
+
+
+@settings(max_examples=40, deadline=None,
+          suppress_health_check=[HealthCheck.function_scoped_fixture])
+@given(fraction=st.floats(0.0, 0.999), suffix=st.sampled_from([".msh", ".vtu", ".inp"]))
+def test_issue22_property_a_truncated_mesh_file_is_refused_or_read_whole(
+        tmp_path_factory, fraction, suffix):
+    # on main: "cannot reshape array of size 27 into shape (35,3)" for a cut .msh
+    from napari_swa_imesh.mesh import mesh_labels, read_mesh, write_mesh
+
+    folder = tmp_path_factory.mktemp("cut")
+    labels = np.ones((3, 4, 3), np.uint8)
+    labels[:, 2:] = 2
+    whole = folder / f"m{suffix}"
+    write_mesh(mesh_labels(labels), whole, facet_groups="none")
+    full = read_mesh(whole)
+    data = whole.read_bytes()
+    cut = folder / f"cut{suffix}"
+    cut.write_bytes(data[:int(fraction * len(data))])
+    try:
+        got = read_mesh(cut)
+    except ValueError as exc:
+        assert "truncated or damaged" in str(exc) or "must hold triangles" in str(exc), exc
+        return
+    # what is read is the whole mesh (the cut fell in a trailing section)
+    assert len(got.cells) == len(full.cells)
+    np.testing.assert_array_equal(np.sort(got.material), np.sort(full.material))
+
+
+def test_issue22_a_truncated_msh_is_one_sentence(tmp_path, capsys, monkeypatch):
+    from napari_swa_imesh.mesh import mesh_labels, write_mesh
+
+    monkeypatch.chdir(tmp_path)
+    labels = np.ones((3, 4, 3), np.uint8)
+    labels[:, 2:] = 2
+    write_mesh(mesh_labels(labels), tmp_path / "m.msh", facet_groups="none")
+    data = (tmp_path / "m.msh").read_bytes()
+    (tmp_path / "m.msh").write_bytes(data[:len(data) // 3])
+    line = refused_in(tmp_path, capsys, ["simulate", "m.msh", "-k", "1=1", "2=2"])
+    assert "m.msh" in line and "truncated or damaged" in line
+
+
+@pytest.mark.parametrize("k", ["1e300", "1e31", "1e-31", "1e-300"])
+def test_issue22_conductivities_beyond_the_solvers_range_say_so(volumes, capsys,
+                                                                monkeypatch, k):
+    # on main: k = 1e300 everywhere (contrast 1) was blamed on "contrast above 1e8"
+    folder, _, _ = volumes
+    monkeypatch.chdir(folder)
+    line = refused_in(folder, capsys, ["simulate", "lab3.npy", "-k", f"1={k}", f"2={k}"])
+    assert "outside 1e-30 .. 1e+30" in line and "contrast" not in line
+
+
+@pytest.mark.parametrize("k", [1e-30, 1.0, 1e30])
+def test_issue22_conductivities_at_the_ends_of_the_range_solve(volumes, capsys,
+                                                               monkeypatch, k):
+    folder, _, _ = volumes
+    monkeypatch.chdir(folder)
+    code, out, err = run(capsys, "simulate", "lab3.npy", "-k", f"1={k!r}", f"2={k!r}",
+                         "--json", "--order", "1", "--adapt", "0")
+    assert code == 0, err
+    for value in json.loads(out)["k_eff"].values():
+        assert value == pytest.approx(k, rel=1e-9)        # one material: k_eff = k
+
+
+@pytest.mark.parametrize("out", ["f", "f/sub"])
+def test_issue22_demo_out_that_is_a_file(tmp_path, capsys, monkeypatch, out):
+    # on main: "[Errno 17] File exists: 'f'"
+    monkeypatch.chdir(tmp_path)
+    (tmp_path / "f").write_text("a file of the user's")
+    line = refused_in(tmp_path, capsys, ["demo", "--out", out])
+    assert "f is a file, not a folder" in line and "Errno" not in line
+
+
+@pytest.mark.filterwarnings("error")
+@pytest.mark.parametrize("top", [2.0, 2048.0, 65504.0])
+def test_issue22_float16_labels_give_no_numpy_warning(tmp_path, capsys, monkeypatch, top):
+    # on main: "overflow encountered in cast" (a float16 compared with int32's maximum)
+    from napari_swa_imesh._validation import as_labels
+
+    labels = np.ones((4, 5, 6), np.float16)
+    labels[:, 3:] = top
+    got = as_labels(labels)
+    assert got.dtype == np.int32 and int(got.max()) == int(top)
+    monkeypatch.chdir(tmp_path)
+    np.save(tmp_path / "f16.npy", labels)
+    code, _, err = run(capsys, "evaluate", "f16.npy", "--truth", "f16.npy")
+    assert code == 0 and "warning" not in err, err
+    code, _, err = run(capsys, "mesh", "f16.npy", "-o", "m.vtu")
+    assert code == 0 and "warning" not in err, err
+
+
+@pytest.mark.parametrize("value", [np.nan, np.inf, 0.5])
+def test_issue22_float16_labels_that_are_no_labels_are_refused(value):
+    from napari_swa_imesh._validation import as_labels
+
+    labels = np.ones((4, 5), np.float16)
+    labels[0, 0] = value
+    with pytest.raises(ValueError, match="non-integer values"):
+        as_labels(labels)
+
+
+@pytest.mark.parametrize("affine", [np.diag([1.0, 1.0, 0.0, 1.0]),
+                                    np.full((4, 4), np.nan), np.eye(3)])
+def test_issue22_write_labels_refuses_an_affine_nifti_cannot_place(tmp_path, affine):
+    # on main: nibabel's HeaderDataError ("Could not decompose affine")
+    with pytest.raises(ValueError, match="the affine to write must be a finite"):
+        write_labels(tmp_path / "l.nii.gz", np.ones((2, 3, 4), np.uint8), affine=affine)
+    assert list(tmp_path.iterdir()) == []
