@@ -9,7 +9,7 @@ from napari_swa_imesh._validation import as_image, as_labels, normalize_spacing
 def test_image_checks():
     with pytest.raises(ValueError, match="RGB"):
         as_image(np.zeros((32, 32, 3), np.uint8))
-    with pytest.raises(ValueError, match="2-D to 3-D"):
+    with pytest.raises(ValueError, match="at least 2-D"):
         as_image(np.zeros(10))
     with pytest.raises(ValueError, match="NaN"):
         as_image(np.array([[1.0, np.nan], [0, 0]]))

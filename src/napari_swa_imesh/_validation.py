@@ -46,27 +46,27 @@ def check_ndim(shape, *, name: str = "image", min_ndim: int = IMAGE_NDIM[0],
 
 
 def as_image(
-    image, *, name: str = "image", min_ndim: int = IMAGE_NDIM[0],
-    max_ndim: int | None = IMAGE_NDIM[-1], copy: bool = True,
+    image, *, name: str = "image", min_ndim: int = 2, max_ndim: int | None = None,
+    copy: bool = True,
 ) -> np.ndarray:
     """Return `image` as a float array after checking it is a single-channel image.
 
     Parameters
     ----------
     image : array_like
-        Grey-level image, 2-D or 3-D (:data:`IMAGE_NDIM`), axes in numpy/napari order.
+        Grey-level image, 2-D or more, axes in numpy/napari order.
     name : str
         What to call it in error messages.
     min_ndim, max_ndim : int
-        Accepted range of dimensionality (default :data:`IMAGE_NDIM`; see
-        :func:`check_ndim`).
+        Accepted range of dimensionality (:func:`check_ndim`): the pipeline's doors
+        pass :data:`IMAGE_NDIM`; the n-D feature transforms take any.
     copy : bool
         True: a new float64 array. False: float32 and float64 input come back as they
         are (no copy; read it, do not write to it), other numbers as float64.
 
     Returns
     -------
-    (M, N[, P]) ndarray of float64 (or float32 with ``copy=False``)
+    (M, N[, P, ...]) ndarray of float64 (or float32 with ``copy=False``)
 
     Raises
     ------

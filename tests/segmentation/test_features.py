@@ -91,5 +91,5 @@ def test_bad_inputs():
         feature_stack(image, 5)
     with pytest.raises(ValueError, match="mask must have the image's shape"):
         feature_stack(image, 2, mask=np.ones((16, 16), dtype=bool))
-    with pytest.raises(ValueError, match="must be 2-D to 3-D"):
+    with pytest.raises(ValueError, match="must be at least 2-D"):
         feature_stack(np.zeros(16), 2)

@@ -210,7 +210,7 @@ def tile_correlation_lengths(image, scale: int, *, mask=None) -> np.ndarray:
     Parameters
     ----------
     image : (N_0, ..., N_{d-1}) array_like of real numbers
-        Grey-level image, 2-D or 3-D, any real dtype (computed in float64). Not
+        Grey-level image, 2-D or more, any real dtype (computed in float64). Not
         modified.
     scale : int
         Tiles of ``2**scale`` pixels per axis; at least 2 (4 pixels per axis, lags

@@ -23,7 +23,7 @@ from pathlib import Path
 import numpy as np
 
 from .. import __version__
-from .._validation import as_image, label_dtype
+from .._validation import IMAGE_NDIM, as_image, label_dtype
 from ..io import atomic_write
 from ._samples import Material, check_contrast
 
@@ -75,7 +75,7 @@ class SegmentationModel:
             raise ValueError("this model is not fitted; call fit() or load a saved model.")
         if not check_input:
             return image
-        img = as_image(image, copy=False)
+        img = as_image(image, max_ndim=IMAGE_NDIM[-1], copy=False)
         if img.ndim != self.ndim:
             raise ValueError(
                 f"the model was fitted on {self.ndim}-D images; got a {img.ndim}-D image.")
@@ -88,7 +88,7 @@ class SegmentationModel:
         single-channel image that holds every box and some contrast in them."""
         if not check_input:
             return image
-        img = as_image(image, copy=False)
+        img = as_image(image, max_ndim=IMAGE_NDIM[-1], copy=False)
         samples.check(img.shape)
         check_contrast(img, samples)
         return img

@@ -206,7 +206,7 @@ def moment_pyramid(
     Parameters
     ----------
     image : (N_0, ..., N_{d-1}) array_like of real numbers
-        Grey-level image, 2-D or 3-D, any real dtype (computed in float64). Sides
+        Grey-level image, 2-D or more, any real dtype (computed in float64). Sides
         need not be powers of two. Not modified.
     max_scale : int
         Largest scale, in ``0 .. floor(log2(max(image.shape)))``.
@@ -273,7 +273,7 @@ def tile_moments(image, scale: int, *, mask=None) -> tuple[np.ndarray, np.ndarra
     Parameters
     ----------
     image : (N_0, ..., N_{d-1}) array_like of real numbers
-        Grey-level image, 2-D or 3-D.
+        Grey-level image, 2-D or more.
     scale : int
         Tiles of ``2**scale`` pixels per axis, ``0 .. floor(log2(max side))``.
     mask : (N_0, ..., N_{d-1}) array_like of bool, optional

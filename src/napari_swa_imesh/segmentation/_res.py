@@ -30,7 +30,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from .._validation import as_image, check_ndim
+from .._validation import IMAGE_NDIM, as_image, check_ndim
 from ._moments import MOMENT_NAMES, moment_pyramid_unchecked
 from ._samples import BoxCrops, Samples, check_box_contrast, check_contrast
 
@@ -138,7 +138,7 @@ def res_statistics(image, samples: Samples, *, max_scale: int | None = None,
     -------
     ResStatistics
     """
-    img = as_image(image, copy=False)
+    img = as_image(image, max_ndim=IMAGE_NDIM[-1], copy=False)
     samples.check(img.shape)
     check_contrast(img, samples)
     return res_statistics_unchecked(img, samples, max_scale=max_scale,

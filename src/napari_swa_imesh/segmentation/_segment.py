@@ -26,7 +26,7 @@ from dataclasses import dataclass, field
 import numpy as np
 from scipy import ndimage as ndi
 
-from .._validation import as_image
+from .._validation import IMAGE_NDIM, as_image
 from ._features import n_features
 from ._model import SWAModel, check_scale
 from ._moments import MOMENT_NAMES, tile_moments_worker
@@ -226,7 +226,7 @@ def segment_steps(image, samples: Samples | None = None, *, method: str = RECOMM
         raise ValueError("give either sample boxes (to fit a classifier) or a fitted model, "
                          "not both and not neither.")
     chosen = _resolve_method(method, model, feature_set, classifier)
-    img = as_image(image, copy=False)
+    img = as_image(image, max_ndim=IMAGE_NDIM[-1], copy=False)
     if model is None:
         samples.check(img.shape)
         check_contrast(img, samples)
