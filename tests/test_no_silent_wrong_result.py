@@ -832,3 +832,17 @@ def test_issue22_write_labels_refuses_an_affine_nifti_cannot_place(tmp_path, aff
     with pytest.raises(ValueError, match="the affine to write must be a finite"):
         write_labels(tmp_path / "l.nii.gz", np.ones((2, 3, 4), np.uint8), affine=affine)
     assert list(tmp_path.iterdir()) == []
+
+
+@pytest.mark.parametrize("command", ["segment", "res", "mesh", "simulate", "evaluate"])
+def test_issue22_a_zero_voxel_size_in_a_tiff_names_the_file(volumes, capsys, monkeypatch,
+                                                            command):
+    # the same rule as NIfTI's pixdim: a stored size of 0 is refused, never read as 1
+    import tifffile
+
+    folder, image, labels = volumes
+    monkeypatch.chdir(folder)
+    tifffile.imwrite(folder / "x.tif", labels, imagej=True, metadata={"spacing": 0.0})
+    argv = [a.format(image="x.tif", labels="x.tif") for a in COMMANDS_ON[command]]
+    line = refused_in(folder, capsys, argv)
+    assert "the voxel spacing stored in x.tif is unusable" in line and "got 0, 1, 1" in line

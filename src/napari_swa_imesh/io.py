@@ -260,8 +260,11 @@ def read_image(path, *, gray: bool = False) -> tuple[np.ndarray, tuple[float, ..
 
         rgb = rgba2rgb(image) if image.shape[-1] == 4 else image
         image = rgb2gray(rgb)
-    spacing = normalize_spacing(spacing, image.ndim) if spacing and len(spacing) in (1, image.ndim) \
-        else normalize_spacing(None, image.ndim)
+    try:
+        spacing = normalize_spacing(spacing if spacing and len(spacing) in (1, image.ndim)
+                                    else None, image.ndim)
+    except ValueError as exc:     # a zero ImageJ spacing, a size beyond SPACING_RANGE...
+        raise ValueError(f"the voxel spacing stored in {p.name} is unusable: {exc}") from None
     return image, spacing
 
 
