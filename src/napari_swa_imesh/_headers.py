@@ -36,7 +36,7 @@ def load_nifti(p: Path):
     try:
         return nib.load(str(p))
     except Exception as exc:  # a corrupt header surfaces as many nibabel errors
-        raise ValueError(f"cannot read the header of {p} as NIfTI: {exc}") from exc
+        raise Refused(f"cannot read the header of {p} as NIfTI: {exc}") from exc
     finally:
         logger.disabled = disabled
 
@@ -77,7 +77,7 @@ def nifti_placement(p: Path, img) -> tuple[np.ndarray, tuple[float, ...]]:
     except Refused:
         raise
     except Exception as exc:  # a corrupt header surfaces as many nibabel errors
-        raise ValueError(f"cannot read the header of {p} as NIfTI: {exc}") from exc
+        raise Refused(f"cannot read the header of {p} as NIfTI: {exc}") from exc
     what = "sform" if sform else "qform" if qform else "pixdim affine"
     used = affine[:3, list(range(ndim)) + [3]]
     columns = affine[:3, :ndim]
@@ -107,6 +107,17 @@ def check_affine(affine, ndim: int) -> None:
 def load_npy(path, *, mmap_mode: str | None = None) -> np.ndarray:
     """``numpy.load`` of a ``.npy`` array of numbers (no pickles), with refusals that say
     what the file is: not a ``.npy`` file at all, or an array of Python objects.
+
+    Parameters
+    ----------
+    path : str or Path
+        The file.
+    mmap_mode : {None, "r"}
+        As ``numpy.load``.
+
+    Returns
+    -------
+    ndarray (or memmap) of numbers
 
     Raises
     ------
