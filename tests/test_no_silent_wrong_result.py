@@ -846,3 +846,23 @@ def test_issue22_a_zero_voxel_size_in_a_tiff_names_the_file(volumes, capsys, mon
     argv = [a.format(image="x.tif", labels="x.tif") for a in COMMANDS_ON[command]]
     line = refused_in(folder, capsys, argv)
     assert "the voxel spacing stored in x.tif is unusable" in line and "got 0, 1, 1" in line
+
+
+def test_issue22_a_2d_nifti_without_a_z_axis_segments_to_nifti(tmp_path, capsys, monkeypatch):
+    # its sform places both image axes (so it is read), but its z column is 0: nibabel
+    # could not write the labels' header (HeaderDataError after the whole segmentation)
+    from napari_swa_imesh.io import read_affine
+
+    monkeypatch.chdir(tmp_path)
+    image, truth = three_regions((24, 36))
+    nifti_as_stored(tmp_path / "i.nii.gz", image.astype(np.float32),
+                    np.diag([0.5, 0.25, 1.0, 1.0]), srow_z=[0.0, 0.0, 0.0, 0.0],
+                    sform_code=1, qform_code=0)
+    save_samples(band_samples(truth), tmp_path / "s.json")
+    code, _, err = run(capsys, "segment", "i.nii.gz", "--samples", "s.json", "-o", "l.nii.gz")
+    assert code == 0, err
+    got = read_affine(tmp_path / "l.nii.gz")
+    np.testing.assert_array_equal(got[:, [0, 1, 3]], read_affine(tmp_path / "i.nii.gz")[
+        :, [0, 1, 3]])                       # both image axes and the origin kept
+    assert read_image(tmp_path / "l.nii.gz")[1] == (0.5, 0.25)
+    assert abs(np.linalg.det(got[:3, :3])) > 0

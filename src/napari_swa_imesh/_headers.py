@@ -5,7 +5,8 @@ standard chooses them from the header as stored) and whether it places them at a
 ``.npy``: whether the file is one, and whether it holds numbers. Every reader of the
 package (:func:`~napari_swa_imesh.io.read_image`, :func:`~napari_swa_imesh.io.read_affine`,
 the lazy readers of :mod:`~napari_swa_imesh._zarr_io`) goes through here, so every command
-refuses the same files with the same sentence.
+refuses the same files with the same sentence. Writing: the affine a NIfTI header can
+hold (:func:`check_affine`, :func:`complete_frame`).
 """
 
 from __future__ import annotations
@@ -14,7 +15,8 @@ from pathlib import Path
 
 import numpy as np
 
-__all__ = ["Refused", "load_nifti", "nifti_placement", "check_affine", "load_npy"]
+__all__ = ["Refused", "load_nifti", "nifti_placement", "check_affine", "complete_frame",
+           "load_npy"]
 
 
 class Refused(ValueError):
@@ -102,6 +104,18 @@ def check_affine(affine, ndim: int) -> None:
         raise ValueError(f"the affine to write must be a finite (4, 4) matrix whose voxel axes "
                          f"span {ndim}-D; got {a.tolist()}. Give the affine of the image the "
                          "labels belong to (read_affine).")
+
+
+def complete_frame(affine: np.ndarray, ndim: int) -> np.ndarray:
+    """`affine` with unit columns orthogonal to the image's axes where a 1-D or 2-D
+    image's affine has none (a zero z column): NIfTI stores a 3-D frame and nibabel
+    cannot write a singular one; the axes the image has keep their placement."""
+    if ndim >= 3 or abs(np.linalg.det(affine[:3, :3])) > 0:
+        return affine
+    u = np.linalg.svd(affine[:3, :ndim], full_matrices=True)[0]   # (3, 3)
+    out = affine.copy()
+    out[:3, ndim:3] = u[:, ndim:]
+    return out
 
 
 def load_npy(path, *, mmap_mode: str | None = None) -> np.ndarray:

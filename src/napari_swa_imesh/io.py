@@ -21,7 +21,8 @@ from pathlib import Path
 
 import numpy as np
 
-from ._headers import Refused, check_affine, load_nifti, load_npy, nifti_placement
+from ._headers import (Refused, check_affine, complete_frame, load_nifti, load_npy,
+                       nifti_placement)
 from ._validation import normalize_spacing
 
 __all__ = ["read_image", "read_affine", "is_nifti", "grid_affine", "write_labels",
@@ -457,7 +458,7 @@ def write_labels_to(tmp, data: np.ndarray, *, spacing=None, origin=None, affine=
                 affine[axis, axis] = sp[axis]
                 affine[axis, 3] = org[axis]
         else:
-            affine = np.asarray(affine, dtype=np.float64)
+            affine = complete_frame(np.asarray(affine, dtype=np.float64), data.ndim)
             sizes = np.linalg.norm(affine[:3, :3], axis=0)
             sp = tuple(float(sizes[a]) if a < 3 else sp[a] for a in range(data.ndim))
         img = nib.Nifti1Image(data, affine, dtype=data.dtype)
