@@ -866,3 +866,36 @@ def test_issue22_a_2d_nifti_without_a_z_axis_segments_to_nifti(tmp_path, capsys,
         :, [0, 1, 3]])                       # both image axes and the origin kept
     assert read_image(tmp_path / "l.nii.gz")[1] == (0.5, 0.25)
     assert abs(np.linalg.det(got[:3, :3])) > 0
+
+
+@settings(max_examples=60, deadline=None,
+          suppress_health_check=[HealthCheck.function_scoped_fixture])
+@given(ndim=st.sampled_from([2, 3]),
+       entries=st.lists(st.floats(-1, 1), min_size=9, max_size=9),
+       zooms=st.lists(st.floats(0.05, 20), min_size=3, max_size=3),
+       column=st.integers(0, 2), row=st.integers(0, 2),
+       fault=st.sampled_from(["zero column", "same column", "NaN", "inf", "NaN origin"]),
+       gz=st.booleans())
+def test_issue22_property_an_oblique_sform_made_unusable_is_refused_by_the_reader(
+        tmp_path_factory, ndim, entries, zooms, column, row, fault, gz):
+    from napari_swa_imesh.io import read_affine
+
+    sv = np.linalg.svd(np.asarray(entries).reshape(3, 3), compute_uv=False)
+    if not sv[-1] > 1e-3 * max(sv[0], 1e-300):
+        return
+    column = min(column, ndim - 1)     # a fault in an axis the image has
+    linear = (random_rotation(entries) @ np.diag(zooms)).astype(np.float32).astype(float)
+    if fault == "zero column":
+        linear[:, column] = 0.0
+    elif fault == "same column":
+        linear[:, column] = linear[:, (column + 1) % ndim] * 3.0
+    elif fault in ("NaN", "inf"):
+        linear[row, column] = np.nan if fault == "NaN" else -np.inf
+    rows = np.column_stack([linear, [np.nan if fault == "NaN origin" else 7.0, 0.0, 0.0]])
+    path = tmp_path_factory.mktemp("bad") / ("l.nii.gz" if gz else "l.nii")
+    nifti_as_stored(path, np.ones((3, 4, 5)[:ndim], np.uint8), sform_code=1, qform_code=1,
+                    srow_x=rows[0], srow_y=rows[1], srow_z=rows[2])
+    for read in (read_affine, read_image):
+        with pytest.raises(ValueError, match=f"the sform of {path.name} is (singular|not "
+                                             "finite).*gives no voxel size or position"):
+            read(path)

@@ -16,7 +16,7 @@ from pathlib import Path
 import numpy as np
 
 __all__ = ["Refused", "load_nifti", "nifti_placement", "check_affine", "complete_frame",
-           "load_npy"]
+           "load_npy", "spans", "SPAN_TOLERANCE"]
 
 
 class Refused(ValueError):
@@ -83,9 +83,9 @@ def nifti_placement(p: Path, img) -> tuple[np.ndarray, tuple[float, ...]]:
     what = "sform" if sform else "qform" if qform else "pixdim affine"
     used = affine[:3, list(range(ndim)) + [3]]
     columns = affine[:3, :ndim]
-    sv = np.linalg.svd(columns, compute_uv=False) if np.isfinite(used).all() else None
-    if sv is None or not sv[-1] > 1e-12 * sv[0]:
-        fault = "is not finite (NaN or infinite)" if sv is None else (
+    finite = bool(np.isfinite(used).all())
+    if not (finite and spans(columns)):
+        fault = "is not finite (NaN or infinite)" if not finite else (
             f"is singular (its voxel axes span less than {ndim}-D)")
         fix = ("fix the sform in the header, or set sform_code to 0 if the qform is right"
                if sform else "fix the qform in the header")
@@ -94,13 +94,26 @@ def nifti_placement(p: Path, img) -> tuple[np.ndarray, tuple[float, ...]]:
     return affine, tuple(float(v) for v in np.linalg.norm(columns, axis=0))
 
 
+#: Smallest singular value of an affine's unit voxel axes that still spans their space:
+#: NIfTI stores float32 (relative error ~6e-8), so parallel axes come back about 1e-7
+#: apart, and no scanner's axes are within 1e-5 rad of each other.
+SPAN_TOLERANCE = 1e-5
+
+
+def spans(columns: np.ndarray) -> bool:
+    """Whether the (3, k) voxel axes `columns` span k dimensions, up to float32 storage
+    (the angle between them, not their lengths: voxels may be of any aspect)."""
+    norms = np.linalg.norm(columns, axis=0)
+    if not (norms > 0).all():
+        return False
+    return bool(np.linalg.svd(columns / norms, compute_uv=False)[-1] > SPAN_TOLERANCE)
+
+
 def check_affine(affine, ndim: int) -> None:
     """Refuse an affine NIfTI cannot store or read back as a placement (nibabel raises
     HeaderDataError when it writes a singular one as the qform)."""
     a = np.asarray(affine, dtype=np.float64)
-    ok = a.shape == (4, 4) and np.isfinite(a).all()
-    sv = np.linalg.svd(a[:3, :ndim], compute_uv=False) if ok else None
-    if sv is None or not sv[-1] > 1e-12 * sv[0]:
+    if not (a.shape == (4, 4) and np.isfinite(a).all() and spans(a[:3, :ndim])):
         raise ValueError(f"the affine to write must be a finite (4, 4) matrix whose voxel axes "
                          f"span {ndim}-D; got {a.tolist()}. Give the affine of the image the "
                          "labels belong to (read_affine).")
