@@ -6,6 +6,7 @@ from pathlib import Path
 
 import numpy as np
 
+from .._atomic import hdf5_file
 from ..io import atomic_write, check_writable
 from ..mesh import to_meshio, write_mesh_vtu
 from ..mesh._common import export_vectors
@@ -90,8 +91,6 @@ def write_series(result, path, *, force: bool = False, name: str = "u") -> list[
     its file name only, so the pair can be moved together. (meshio's own time-series
     writer puts the ``.h5`` in the working directory, not beside the ``.xdmf``.)
     """
-    import h5py
-
     targets = check_series_path(path, force=force)
     m = to_meshio(result.mesh)
     points, cells = m.points, m.cells[0].data
@@ -108,7 +107,7 @@ def write_series(result, path, *, force: bool = False, name: str = "u") -> list[
 
     grids = []
     with atomic_write(targets, force=force) as (xdmf_tmp, h5_tmp):
-        with h5py.File(h5_tmp, "w") as h5:
+        with hdf5_file(h5_tmp) as h5:
             h5["points"] = points
             h5["cells"] = cells.astype(np.int64)
             h5["material"] = material.astype(np.int64)
