@@ -57,7 +57,7 @@ WRITER = textwrap.dedent("""
 """)
 
 
-@pytest.mark.parametrize("names", [["m.vtu"], ["m.xdmf", "m.h5", "m_facets.vtu"]])
+@pytest.mark.parametrize("names", [["m.vtu"], ["m.xdmf", "m.h5", "m_xdmf_facets.vtu"]])
 def test_two_runs_on_one_output_exactly_one_wins(tmp_path, names):
     for attempt in range(6):
         folder = tmp_path / str(attempt)
@@ -277,8 +277,9 @@ def test_a_real_full_disk_gives_one_sentence_exit_2(tmp_path, small_disk, suffix
     assert list(small_disk.iterdir()) == []
 
 
-def test_labels_onto_a_real_full_disk(small_disk):
+@pytest.mark.parametrize("suffix", [".npy", ".tif", ".nii.gz", ".nii"])
+def test_labels_onto_a_real_full_disk(small_disk, suffix):
     rng = np.random.default_rng(0)
     with pytest.raises(OSError, match="is full"):
-        write_labels(small_disk / "l.npy", rng.integers(0, 2**31, (600, 600), np.int64))
+        write_labels(small_disk / f"l{suffix}", rng.integers(0, 2**31, (600, 600), np.int64))
     assert list(small_disk.iterdir()) == []

@@ -62,7 +62,8 @@ def add_commands(subparsers) -> None:
     p.add_argument("--facet-groups", default="all", metavar="all|none|NAME,NAME",
                    help="facet groups to write (box sides xmin..zmax, interface_<A>_<B>, "
                         "exterior_<A>; * patterns allowed, e.g. xmin,xmax,interface_*): "
-                        "all (default) or none; .vtu/.xdmf get them in <stem>_facets.vtu, "
+                        "all (default) or none; .vtu gets them in <stem>_facets.vtu, .xdmf "
+                        "in <stem>_xdmf_facets.vtu, "
                         ".node/.ele in .poly (2-D) / .face (3-D), .msh as physical groups, "
                         ".inp as *NSET/*SURFACE")
     p.add_argument("--msh-ascii", action="store_true",
