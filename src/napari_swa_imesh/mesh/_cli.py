@@ -198,7 +198,7 @@ def _run_mesh(args: argparse.Namespace) -> int:
     from ._imesh import _mesh_labels, warn_lost_materials
 
     with timer("mesh"):
-        labels, coarse_report = coarsen_labels(labels, coarsen)
+        labels, coarse_report = coarsen_labels(labels, coarsen, exclude)
         mesh, tree = _mesh_labels(labels, method=args.method, exclude=exclude,
                                   spacing=spacing, material_names=names, lattice=lattice,
                                   max_size=max_size, periodic=args.periodic)
