@@ -177,6 +177,9 @@ def _run_mesh(args: argparse.Namespace) -> int:
         spacing=placement[0] if placement else args.spacing if args.spacing else file_spacing,
         name=f"labels in {Path(args.labels).name}")
     del image
+    if Path(args.output).suffix.lower() == ".msh":
+        from ._gmsh import check_gmsh_labels
+        check_gmsh_labels(labels, exclude)
     from ._imesh import resolution_arguments
 
     lattice, max_size, coarsen = resolution_arguments(
