@@ -37,7 +37,8 @@ from collections.abc import Iterator, Sequence
 from contextlib import contextmanager
 from pathlib import Path
 
-__all__ = ["check_writable", "atomic_write", "is_store", "hdf5_file", "TEMP_PREFIX"]
+__all__ = ["check_writable", "atomic_write", "is_store", "hdf5_file", "scratch_folder",
+           "remove_stale_temporaries", "TEMP_PREFIX"]
 
 TEMP_PREFIX = ".swa-imesh-"
 _UMASK_LOCK = threading.Lock()
@@ -317,6 +318,18 @@ def atomic_write(paths: Sequence, *, force: bool = False) -> Iterator[list[Path]
     finally:
         for folder in folders.values():
             shutil.rmtree(folder, ignore_errors=True)
+
+
+@contextmanager
+def scratch_folder(parent) -> Iterator[Path]:
+    """A hidden folder in `parent`, named and cleaned up like :func:`atomic_write`'s (a
+    stale one of a dead owner is removed by a later run), removed when the block ends."""
+    folder = Path(tempfile.mkdtemp(prefix=f"{TEMP_PREFIX}{os.getpid()}@{_host()}-",
+                                   dir=parent))
+    try:
+        yield folder
+    finally:
+        shutil.rmtree(folder, ignore_errors=True)
 
 
 @contextmanager
