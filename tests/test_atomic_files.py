@@ -89,6 +89,23 @@ def test_a_target_appearing_mid_run_takes_back_what_this_run_published(tmp_path)
     assert b.read_text() == "theirs"
 
 
+def test_an_interrupt_while_placing_takes_back_what_was_placed(tmp_path, monkeypatch):
+    real, placed = _atomic._claim, []
+
+    def stopped_at_the_second(tmp, target):
+        if placed:
+            raise KeyboardInterrupt
+        real(tmp, target)
+        placed.append(target)
+
+    monkeypatch.setattr(_atomic, "_claim", stopped_at_the_second)
+    with pytest.raises(KeyboardInterrupt):
+        with atomic_write([tmp_path / "a.txt", tmp_path / "b.txt"]) as temps:
+            for tmp in temps:
+                tmp.write_text("mine")
+    assert placed == [tmp_path / "a.txt"] and list(tmp_path.iterdir()) == []
+
+
 def test_a_store_appearing_mid_run_is_refused_and_kept(tmp_path):
     store = tmp_path / "s.zarr"
     with pytest.raises(FileExistsError, match="appeared"):

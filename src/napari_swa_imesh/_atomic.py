@@ -29,6 +29,7 @@ import io
 import os
 import re
 import shutil
+import signal
 import socket
 import stat
 import tempfile
@@ -101,13 +102,9 @@ def _umask() -> int:
 
 
 def _alive(pid: int) -> bool:
-    try:
-        os.kill(pid, 0)
-    except ProcessLookupError:
-        return False
-    except PermissionError:     # another user's live process
-        return True
-    return True
+    import psutil                       # not os.kill(pid, 0): on Windows that kills
+
+    return psutil.pid_exists(pid)
 
 
 def remove_stale_temporaries(folder) -> list[Path]:
@@ -123,7 +120,8 @@ def remove_stale_temporaries(folder) -> list[Path]:
         The folders removed.
     """
     removed = []
-    host, me, uid = _host(), os.getpid(), os.geteuid()
+    host, me = _host(), os.getpid()
+    uid = os.geteuid() if hasattr(os, "geteuid") else None
     try:
         entries = list(os.scandir(folder))
     except OSError:
@@ -136,7 +134,8 @@ def remove_stale_temporaries(folder) -> list[Path]:
             st = entry.stat(follow_symlinks=False)
         except OSError:
             continue
-        if not stat.S_ISDIR(st.st_mode) or st.st_uid != uid or _alive(int(match.group(1))):
+        mine = uid is None or st.st_uid == uid
+        if not stat.S_ISDIR(st.st_mode) or not mine or _alive(int(match.group(1))):
             continue
         shutil.rmtree(entry.path, ignore_errors=True)
         removed.append(Path(entry.path))
@@ -185,6 +184,21 @@ def _withdraw(target: Path, published: os.stat_result) -> None:
         os.unlink(target)
 
 
+@contextmanager
+def _signals_held() -> Iterator[None]:
+    """Hold SIGTERM and SIGINT back (this thread) while targets are placed: a stop
+    arriving then is handled right after, with every target placed or none."""
+    held = {signal.SIGTERM, signal.SIGINT}
+    if not hasattr(signal, "pthread_sigmask"):
+        yield
+        return
+    previous = signal.pthread_sigmask(signal.SIG_BLOCK, held)
+    try:
+        yield
+    finally:
+        signal.pthread_sigmask(signal.SIG_SETMASK, previous)
+
+
 def _publish(temps: list[Path], targets: list[Path], force: bool) -> None:
     if force:
         for tmp, t in zip(temps, targets):
@@ -196,14 +210,17 @@ def _publish(temps: list[Path], targets: list[Path], force: bool) -> None:
     # first at the same name, and exactly one of them gets every name
     order = sorted(zip(temps, targets), key=lambda pair: os.path.abspath(pair[1]))
     done: list[tuple[Path, os.stat_result]] = []
-    for tmp, t in order:
-        try:
-            _claim(tmp, t)
+    try:
+        for tmp, t in order:
+            try:
+                _claim(tmp, t)
+            except FileExistsError:
+                raise _appeared(t) from None
             done.append((t, os.lstat(t)))
-        except FileExistsError:
-            for path, st in reversed(done):
-                _withdraw(path, st)
-            raise _appeared(t) from None
+    except BaseException:
+        for path, st in reversed(done):
+            _withdraw(path, st)
+        raise
 
 
 def _disk_full(exc: BaseException, folders) -> bool:
@@ -309,7 +326,8 @@ def atomic_write(paths: Sequence, *, force: bool = False) -> Iterator[list[Path]
         mode = 0o666 & ~_umask()
         for tmp in temps:
             os.chmod(tmp, mode | (0o111 & ~_umask() if tmp.is_dir() else 0))
-        _publish(temps, targets, force)
+        with _signals_held():
+            _publish(temps, targets, force)
     except Exception as exc:
         if isinstance(exc, FileExistsError) or not _disk_full(exc, folders):
             raise
