@@ -198,6 +198,32 @@ def test_sigterm_during_a_write_leaves_nothing(tmp_path):
     assert {p.name: p.read_bytes() for p in tmp_path.iterdir()} == before
 
 
+def test_sigterm_during_a_real_mesh_write_leaves_nothing_or_everything(tmp_path):
+    labels = np.zeros((100, 100, 100), np.uint8)
+    labels[:, :, 51:] = 1
+    labels[20:77, 20:81, 10:95] = 2
+    np.save(tmp_path / "l.npy", labels)
+    before = {p.name: p.read_bytes() for p in tmp_path.iterdir()}
+    run = subprocess.Popen([sys.executable, "-m", "napari_swa_imesh.cli", "mesh",
+                            str(tmp_path / "l.npy"), "-o", str(tmp_path / "m.vtu")],
+                           env=ENV, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    try:
+        _wait_for(lambda: bool(_temporaries(tmp_path)) or run.poll() is not None,
+                  "the temporary folder")
+        run.send_signal(signal.SIGTERM)
+        code = run.wait(timeout=120)
+    finally:
+        run.kill()
+    err = run.stderr.read()
+    assert _temporaries(tmp_path) == []
+    if code == 0:           # the signal came after the files were placed: all of them
+        assert sorted(p.name for p in tmp_path.iterdir()) == ["l.npy", "m.vtu",
+                                                              "m_facets.vtu"]
+    else:
+        assert code == 128 + signal.SIGTERM and "stopped by SIGTERM" in err, err
+        assert {p.name: p.read_bytes() for p in tmp_path.iterdir()} == before
+
+
 # ------------------------------------------------------------------- stale temporaries
 
 def _dead_pid() -> int:
