@@ -306,14 +306,17 @@ def small_disk(tmp_path):
         subprocess.run(["umount", str(mount)], timeout=30)
 
 
-@pytest.mark.parametrize("suffix", [".xdmf", ".vtu", ".msh"])
-def test_a_real_full_disk_gives_one_sentence_exit_2(tmp_path, small_disk, suffix):
+@pytest.mark.parametrize("command,suffix", [("mesh", ".xdmf"), ("mesh", ".vtu"),
+                                            ("mesh", ".msh"), ("simulate", ".xdmf")])
+def test_a_real_full_disk_gives_one_sentence_exit_2(tmp_path, small_disk, command, suffix):
     labels = np.zeros((60, 60, 60), np.uint8)
     labels[:, :, 31:] = 1
     labels[10:37, 10:41, 5:45] = 2
     np.save(tmp_path / "l.npy", labels)
-    run = subprocess.run([sys.executable, "-m", "napari_swa_imesh.cli", "mesh",
-                          str(tmp_path / "l.npy"), "-o", str(small_disk / f"m{suffix}")],
+    extra = ["-k", "0=1", "1=2", "2=3"] if command == "simulate" else []
+    run = subprocess.run([sys.executable, "-m", "napari_swa_imesh.cli", command,
+                          str(tmp_path / "l.npy"), *extra,
+                          "-o", str(small_disk / f"m{suffix}")],
                          env=ENV, capture_output=True, text=True, timeout=600)
     assert run.returncode == 2, run.stderr[-2000:]
     assert run.stderr.count("\n") == 1 and "is full" in run.stderr
