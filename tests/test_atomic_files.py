@@ -76,6 +76,25 @@ def test_two_runs_on_one_output_exactly_one_wins(tmp_path, names):
         assert _temporaries(folder) == []
 
 
+def test_two_mesh_commands_on_one_output_never_both_succeed(tmp_path):
+    # no barrier: whichever way they interleave (refused at the door or when placing),
+    # exactly one run writes and the other says why in one sentence
+    np.save(tmp_path / "l.npy", np.arange(4 * 5 * 6).reshape(4, 5, 6) % 3)
+    for attempt in range(3):
+        out = tmp_path / f"m{attempt}.vtu"
+        runs = [subprocess.Popen([sys.executable, "-m", "napari_swa_imesh.cli", "mesh",
+                                  str(tmp_path / "l.npy"), "-o", str(out)], env=ENV,
+                                 stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+                for _ in range(2)]
+        codes = [r.wait(timeout=300) for r in runs]
+        errs = [r.stderr.read() for r in runs]
+        assert sorted(codes) == [0, 2], errs
+        loser = errs[codes.index(2)]
+        assert loser.count("\n") == 1 and ("already exists" in loser or "appeared" in loser)
+        assert sum("wrote " in r.stdout.read() for r in runs) == 1
+    assert _temporaries(tmp_path) == []
+
+
 def test_a_target_appearing_mid_run_takes_back_what_this_run_published(tmp_path):
     a, b, store = tmp_path / "a.txt", tmp_path / "b.txt", tmp_path / "s.zarr"
     with pytest.raises(FileExistsError, match="b.txt appeared while this run"):
