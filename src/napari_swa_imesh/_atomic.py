@@ -47,7 +47,13 @@ _MB = 1024 * 1024
 
 
 def _host() -> str:
-    return re.sub(r"[^A-Za-z0-9.]", "_", socket.gethostname())[:64] or "host"
+    """This host's name, and on Linux its process-id namespace: a container sharing the
+    host name and the folder counts pids apart, so its folders are never judged here."""
+    name = re.sub(r"[^A-Za-z0-9.]", "_", socket.gethostname())[:64] or "host"
+    try:
+        return f"{name}.ns{os.stat('/proc/self/ns/pid').st_ino}"
+    except OSError:
+        return name
 
 
 #: a temporary folder's name: prefix, owner pid, host, mkdtemp's random part
@@ -154,20 +160,28 @@ def _claim(tmp: Path, target: Path) -> None:
         os.mkdir(target)        # the claim; FileExistsError if the name is taken
         try:
             os.rename(tmp, target)   # onto the empty folder just made
-        except OSError:
+        except OSError as exc:
             try:
-                os.rmdir(target)
+                os.rmdir(target)     # still empty: ours
             except OSError:
                 pass
-            raise _appeared(target) from None
+            if exc.errno in (errno.ENOTEMPTY, errno.EEXIST):   # filled meanwhile
+                raise _appeared(target) from None
+            raise
         return
     try:
         os.link(tmp, target)
     except FileExistsError:
         raise
     except OSError:             # no hard links on this file system: claim the name
-        os.close(os.open(target, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o600))
-        os.replace(tmp, target)
+        fd = os.open(target, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o600)
+        claim = os.fstat(fd)
+        os.close(fd)
+        try:
+            os.replace(tmp, target)
+        except BaseException:
+            _withdraw(target, claim)
+            raise
 
 
 def _withdraw(target: Path, published: os.stat_result) -> None:
