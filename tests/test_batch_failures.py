@@ -91,6 +91,25 @@ def test_a_corrupt_image_is_not_retried(cohort, tmp_path, monkeypatch):
     assert list(tmp_path.iterdir()) == []
 
 
+@pytest.mark.parametrize("error,tries", [(OSError(28, "the disk is full"), 1),
+                                         (OSError("a flaky network disk"), 3)])
+def test_only_errors_that_may_pass_are_retried(cohort, tmp_path, monkeypatch, error, tries):
+    from distributed import Client, LocalCluster
+
+    seen = []
+
+    def failing(*args, **kwargs):
+        seen.append(1)
+        raise error
+
+    monkeypatch.setattr(_batch, "_segment_one", failing)
+    with LocalCluster(n_workers=1, threads_per_worker=1, processes=False,
+                      dashboard_address=None) as cluster, Client(cluster) as client:
+        (row,) = _batch.run_batch([cohort / "scan.npy"], cohort / "m.npz", tmp_path,
+                                  client=client, retries=2)
+    assert len(seen) == tries and str(error.args[-1]) in row["error"]
+
+
 def test_a_cluster_that_does_not_start_is_one_sentence(cohort, tmp_path, capsys,
                                                          monkeypatch):
     import distributed

@@ -203,8 +203,8 @@ def _load_package() -> None:
 
 
 
-#: errors a task raises the same way on every try (a corrupt image, a refusal): reported
-#: in the image's row at once, not retried; anything else (a lost worker) is retried
+#: errors a task raises the same way on every try (a corrupt image, a refusal; a full disk
+#: too): reported in the image's row at once, not retried; anything else is retried
 DETERMINISTIC = (ValueError, TypeError, KeyError, FileExistsError, FileNotFoundError,
                  IsADirectoryError, NotADirectoryError, PermissionError)
 
@@ -223,10 +223,15 @@ def segment_one(image: str, model_path: str, output: str, *, force: bool = False
     computes it again beside it and keeps the file when the contents are equal, else
     refuses. An error of :data:`DETERMINISTIC` comes back as ``{"error": sentence}``, so
     the scheduler does not retry it."""
+    import errno
+
     try:
         return _segment_one(image, model_path, output, force=force, memory=memory,
                             mesh=mesh, exclude=exclude, conductivity=conductivity)
-    except DETERMINISTIC as exc:
+    except (*DETERMINISTIC, OSError) as exc:
+        if not isinstance(exc, DETERMINISTIC) and exc.errno not in (errno.ENOSPC,
+                                                                     errno.EDQUOT):
+            raise               # may pass (a flaky network disk): the scheduler retries
         return {"image": image, "output": output, "error": f"{exc}"}
 
 
