@@ -293,7 +293,7 @@ def test_temporary_folders_carry_their_owner(tmp_path):
 ])
 def test_a_full_disk_is_one_sentence_and_leaves_nothing(tmp_path, error):
     with pytest.raises(OSError, match=r"^the disk holding .* is full \(it filled after "
-                                      r"0\.1 MB of output\); free space") as info:
+                                      r"100 kB of output\); free space") as info:
         with atomic_write([tmp_path / "a.npy", tmp_path / "b.npy"]) as (a, b):
             a.write_bytes(b"x" * (100 << 10))
             raise error

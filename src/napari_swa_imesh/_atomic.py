@@ -266,9 +266,10 @@ def _size(folder: Path) -> int:
 
 
 def _full_error(parent: Path, folder: Path | None) -> OSError:
-    written = _size(folder) / _MB if folder is not None else 0.0
-    err = OSError(f"the disk holding {parent} is full (it filled after {written:.1f} MB of "
-                  "output); free space there or write elsewhere. Nothing was written.")
+    written = _size(folder) if folder is not None else 0
+    amount = f"{written / _MB:.1f} MB" if written >= _MB / 10 else f"{written / 1024:.0f} kB"
+    err = OSError(f"the disk holding {parent} is full (it filled after {amount} of output); "
+                  "free space there or write elsewhere. Nothing was written.")
     err.errno = errno.ENOSPC
     return err
 
