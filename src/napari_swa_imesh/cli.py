@@ -1,7 +1,9 @@
 """The ``swa-imesh`` command line: one sub-command per step of the pipeline.
 
 Every sub-command returns 0 on success; bad input is reported as one sentence on
-stderr with exit status 2 (never a traceback).
+stderr with exit status 2 (never a traceback). SIGTERM (``kill``, ``timeout``, batch
+schedulers) and Ctrl-C stop a run the same way, through the atomic writer's cleanup: one
+sentence, exit status 143 or 130, no partial output.
 """
 
 from __future__ import annotations
@@ -9,7 +11,9 @@ from __future__ import annotations
 import argparse
 import importlib
 import re
+import signal
 import sys
+import threading
 import warnings
 
 __all__ = ["main", "build_parser"]
@@ -40,13 +44,40 @@ def build_parser(command: str | None = None) -> argparse.ArgumentParser:
     return parser
 
 
+class _Terminated(BaseException):
+    """SIGTERM, raised in the main thread so every ``finally`` (cleanup) runs."""
+
+
+def _on_sigterm(signum, frame):
+    # a second SIGTERM must not cut the cleanup of the first short
+    signal.signal(signal.SIGTERM, signal.SIG_IGN)
+    raise _Terminated
+
+
 def main(argv: list[str] | None = None) -> int:
     """Run the command line; return the exit status."""
     argv = sys.argv[1:] if argv is None else list(argv)
     parser = build_parser(argv[0] if argv else None)
     args = parser.parse_args(argv)
     prefix = f"swa-imesh {args.command}"
+    if threading.current_thread() is not threading.main_thread():
+        return _run(args, prefix)
+    previous = signal.signal(signal.SIGTERM, _on_sigterm)
+    try:
+        return _run(args, prefix)
+    except _Terminated:
+        print(f"{prefix}: stopped by SIGTERM; unfinished outputs were removed (files are "
+              "written whole or not at all), run it again to finish.", file=sys.stderr)
+        return 128 + signal.SIGTERM
+    except KeyboardInterrupt:
+        print(f"{prefix}: stopped (interrupted); unfinished outputs were removed, run it "
+              "again to finish.", file=sys.stderr)
+        return 128 + signal.SIGINT
+    finally:
+        signal.signal(signal.SIGTERM, previous)
 
+
+def _run(args, prefix: str) -> int:
     def show(message, category, filename, lineno, file=None, line=None):
         print(f"{prefix}: warning: {message}", file=sys.stderr)
 

@@ -6,21 +6,17 @@ the affine the standard chooses, see :func:`read_affine`). Arrays keep the order
 the file stores them; spacing is given per array axis in that same order. A NIfTI file
 also places its voxels in a world frame (:func:`read_affine`: nibabel's ``img.affine``,
 voxel centres at integer indices); the other formats place voxel corner 0 at the origin,
-axes scaled by the spacing.
+axes scaled by the spacing. The atomic writer every output goes through
+(:func:`check_writable`, :func:`atomic_write`) lives in ``_atomic`` and is re-exported here.
 """
 
 from __future__ import annotations
 
-import os
-import shutil
-import tempfile
-import threading
-from collections.abc import Iterator, Sequence
-from contextlib import contextmanager
 from pathlib import Path
 
 import numpy as np
 
+from ._atomic import atomic_write, check_writable, is_store
 from ._headers import (Refused, check_affine, complete_frame, load_nifti, load_npy,
                        nifti_placement)
 from ._validation import normalize_spacing
@@ -31,115 +27,6 @@ __all__ = ["read_image", "read_affine", "is_nifti", "grid_affine", "write_labels
            "check_figure_path", "write_figure", "load_npy"]
 
 LABEL_SUFFIXES = (".npy", ".tif", ".tiff", ".nii", ".nii.gz", ".png")
-_UMASK_LOCK = threading.Lock()
-
-
-def check_writable(path, *, force: bool = False) -> Path:
-    """Check that `path` may be written (before any work); return it as a Path.
-
-    Raises
-    ------
-    FileExistsError
-        `path` exists and `force` is false.
-    IsADirectoryError
-        `path` is a folder, other than a store (:func:`is_store`).
-    FileNotFoundError
-        Its folder does not exist.
-    """
-    p = Path(path)
-    if p.is_dir() and not is_store(p):
-        raise IsADirectoryError(f"{p} is a folder; give a file name to write.")
-    if p.exists() and not force:
-        raise FileExistsError(
-            f"{p} already exists; choose another output name, or allow replacing it "
-            "(--force on the command line)."
-        )
-    parent = p.parent if str(p.parent) else Path(".")
-    if not parent.is_dir():
-        raise FileNotFoundError(
-            f"folder {parent} does not exist; create it or choose another output path."
-        )
-    if not os.access(parent, os.W_OK | os.X_OK):
-        raise PermissionError(f"cannot write in folder {parent}; choose another output path.")
-    return p
-
-
-def is_store(path) -> bool:
-    """Whether `path` names a store (a folder written as one output): a ``.zarr`` name."""
-    return Path(path).name.lower().endswith(".zarr")
-
-
-def _umask() -> int:
-    # os.umask can only be read by setting it; the lock keeps other threads of this
-    # process from creating files in between
-    with _UMASK_LOCK:
-        mask = os.umask(0o077)
-        os.umask(mask)
-    return mask
-
-
-@contextmanager
-def atomic_write(paths: Sequence, *, force: bool = False) -> Iterator[list[Path]]:
-    """Write several files all or nothing: yield temporary paths, then move them in place.
-
-    The temporary files lie in a hidden folder beside each target and carry the target's
-    own file name (so twins such as ``.xdmf``/``.h5`` name each other right). A store
-    (:func:`is_store`, a ``.zarr`` folder) is written there as a folder and moved the same
-    way (a replaced store is set aside first, then removed). When the
-    block ends without an exception every file is given the mode a normal file would get
-    (``0o666`` less the umask) and moved over its target; on any exception the temporary
-    folder is removed and no target is touched. Every output of this package goes
-    through here.
-
-    Parameters
-    ----------
-    paths : sequence of str or Path
-        The files to write (checked with :func:`check_writable` first).
-    force : bool
-        Replace existing files.
-
-    Yields
-    ------
-    list of Path
-        One temporary path per target, in order; the caller writes each (a file not
-        written is an error).
-
-    Examples
-    --------
-    >>> import tempfile, pathlib
-    >>> folder = pathlib.Path(tempfile.mkdtemp())
-    >>> with atomic_write([folder / "a.txt"]) as (tmp,):
-    ...     _ = tmp.write_text("hello")
-    >>> (folder / "a.txt").read_text()
-    'hello'
-    """
-    targets = [check_writable(p, force=force) for p in paths]
-    if len({t.resolve() for t in targets}) != len(targets):
-        raise ValueError(f"two outputs name the same file ({', '.join(map(str, targets))}); "
-                         "give each output its own name.")
-    folders: dict[Path, Path] = {}
-    temps: list[Path] = []
-    try:
-        for t in targets:
-            parent = (t.parent if str(t.parent) else Path(".")).resolve()
-            if parent not in folders:
-                folders[parent] = Path(tempfile.mkdtemp(prefix=".swa-imesh-", dir=parent))
-            temps.append(folders[parent] / t.name)
-        yield temps
-        missing = [str(t) for t, tmp in zip(targets, temps)
-                   if not (tmp.is_dir() if is_store(t) else tmp.is_file())]
-        if missing:
-            raise RuntimeError(f"internal error: {', '.join(missing)} not written.")
-        mode = 0o666 & ~_umask()
-        for tmp in temps:
-            os.chmod(tmp, mode | (0o111 & ~_umask() if tmp.is_dir() else 0))
-        for tmp, t in zip(temps, targets):
-            if t.is_dir():      # a store being replaced: set aside, removed with the folder
-                os.replace(t, tmp.with_name(tmp.name + ".old"))
-            os.replace(tmp, t)
-    finally:
-        for folder in folders.values():
-            shutil.rmtree(folder, ignore_errors=True)
 
 IMAGE_SUFFIXES = (".tif", ".tiff", ".png", ".jpg", ".jpeg", ".npy", ".nii", ".nii.gz")
 

@@ -304,9 +304,9 @@ def test_suffix_table_matches_formats():
 def test_xdmf_writes_its_h5_twin_and_checks_both(tmp_path):
     mesh = sample_mesh(3)
     written = write_mesh(mesh, tmp_path / "m.xdmf")
-    assert [p.name for p in written] == ["m.xdmf", "m.h5", "m_facets.vtu"]
+    assert [p.name for p in written] == ["m.xdmf", "m.h5", "m_xdmf_facets.vtu"]
     # no temporaries
-    assert sorted(p.name for p in tmp_path.iterdir()) == ["m.h5", "m.xdmf", "m_facets.vtu"]
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["m.h5", "m.xdmf", "m_xdmf_facets.vtu"]
     text = written[0].read_text()
     assert "m.h5:/" in text and ".swa-imesh-" not in text
     (tmp_path / "m.h5").write_bytes(b"user")

@@ -126,7 +126,7 @@ def test_companion_file_read_by_pyvista_and_meshio(tmp_path, ndim, suffix):
     pv = pytest.importorskip("pyvista")
     mesh = labelled_mesh(ndim)
     written = write_mesh(mesh, tmp_path / f"m{suffix}")
-    companion = tmp_path / "m_facets.vtu"
+    companion = tmp_path / {".vtu": "m_facets.vtu", ".xdmf": "m_xdmf_facets.vtu"}[suffix]
     assert written[-1] == companion
     expected = facet_groups(mesh)
     ids = {name: k + 1 for k, name in enumerate(expected)}
@@ -217,6 +217,18 @@ def test_chosen_groups_only_with_ids_in_facet_groups_order(tmp_path, suffix):
         assert list(meshio.read(written[1]).field_data) == names
     else:
         assert list(_marker_file(written[2])[0].values()) == names
+
+
+@NEEDS_H5PY
+def test_vtu_and_xdmf_of_one_mesh_share_a_folder(tmp_path):
+    mesh = labelled_mesh(3)
+    vtu = write_mesh(mesh, tmp_path / "mesh.vtu")
+    xdmf = write_mesh(mesh, tmp_path / "mesh.xdmf")
+    assert [p.name for p in vtu + xdmf] == ["mesh.vtu", "mesh_facets.vtu", "mesh.xdmf",
+                                            "mesh.h5", "mesh_xdmf_facets.vtu"]
+    a, b = meshio.read(vtu[1]), meshio.read(xdmf[2])
+    np.testing.assert_array_equal(a.cells[0].data, b.cells[0].data)
+    np.testing.assert_array_equal(a.cell_data["group"][0], b.cell_data["group"][0])
 
 
 @pytest.mark.parametrize("suffix", [".msh", ".inp", ".vtu", ".xdmf", ".node"])

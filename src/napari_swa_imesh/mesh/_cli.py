@@ -62,7 +62,8 @@ def add_commands(subparsers) -> None:
     p.add_argument("--facet-groups", default="all", metavar="all|none|NAME,NAME",
                    help="facet groups to write (box sides xmin..zmax, interface_<A>_<B>, "
                         "exterior_<A>; * patterns allowed, e.g. xmin,xmax,interface_*): "
-                        "all (default) or none; .vtu/.xdmf get them in <stem>_facets.vtu, "
+                        "all (default) or none; .vtu gets them in <stem>_facets.vtu, .xdmf "
+                        "in <stem>_xdmf_facets.vtu, "
                         ".node/.ele in .poly (2-D) / .face (3-D), .msh as physical groups, "
                         ".inp as *NSET/*SURFACE")
     p.add_argument("--msh-ascii", action="store_true",
@@ -176,6 +177,9 @@ def _run_mesh(args: argparse.Namespace) -> int:
         spacing=placement[0] if placement else args.spacing if args.spacing else file_spacing,
         name=f"labels in {Path(args.labels).name}")
     del image
+    if Path(args.output).suffix.lower() == ".msh":
+        from ._gmsh import check_gmsh_labels
+        check_gmsh_labels(labels, exclude)
     from ._imesh import resolution_arguments
 
     lattice, max_size, coarsen = resolution_arguments(
@@ -197,7 +201,7 @@ def _run_mesh(args: argparse.Namespace) -> int:
     from ._imesh import _mesh_labels, warn_lost_materials
 
     with timer("mesh"):
-        labels, coarse_report = coarsen_labels(labels, coarsen)
+        labels, coarse_report = coarsen_labels(labels, coarsen, exclude)
         mesh, tree = _mesh_labels(labels, method=args.method, exclude=exclude,
                                   spacing=spacing, material_names=names, lattice=lattice,
                                   max_size=max_size, periodic=args.periodic)

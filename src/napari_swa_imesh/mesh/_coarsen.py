@@ -26,7 +26,7 @@ def check_coarsen(coarsen) -> int:
                        "labels are meshed in blocks of 2^coarsen voxels")
 
 
-def coarsen_labels(lab: np.ndarray, level: int) -> tuple[np.ndarray, dict]:
+def coarsen_labels(lab: np.ndarray, level: int, exclude=()) -> tuple[np.ndarray, dict]:
     """Replace every block of ``2**level`` voxels per axis by its majority label.
 
     Parameters
@@ -35,6 +35,9 @@ def coarsen_labels(lab: np.ndarray, level: int) -> tuple[np.ndarray, dict]:
         Checked label image (2-D or 3-D).
     level : int
         Block side ``2**level``; 0 returns `lab` itself.
+    exclude : sequence of int
+        Labels that will not be meshed: coarsened labels holding nothing else are
+        refused (ValueError), since nothing would be left to mesh.
 
     Returns
     -------
@@ -89,6 +92,13 @@ def coarsen_labels(lab: np.ndarray, level: int) -> tuple[np.ndarray, dict]:
     before = {int(v): int(c) for v, c in zip(values, counts)}
     values, counts = np.unique(out, return_counts=True)
     after = {int(v): int(c) for v, c in zip(values, counts)}
+    excluded = {int(v) for v in np.asarray(exclude, dtype=np.int64).ravel()}
+    if excluded and set(after) <= excluded:
+        kept = sorted(set(before) - excluded)
+        raise ValueError(
+            f"coarsening to blocks of {side} voxels per axis leaves only excluded labels "
+            f"({sorted(after)}): no block has a majority of the materials to mesh "
+            f"({kept}); use a lower --coarsen level, or exclude fewer materials.")
     return out, {
         "level": int(level),
         "voxels_before": before,

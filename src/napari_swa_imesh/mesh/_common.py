@@ -33,7 +33,7 @@ MESH_SUFFIXES = {
     ".vtu": "VTK XML unstructured grid (+ <stem>_facets.vtu)",
     ".vtk": "legacy VTK",
     ".msh": "Gmsh 4.1 with physical groups",
-    ".xdmf": "XDMF with its HDF5 .h5 file (+ <stem>_facets.vtu)",
+    ".xdmf": "XDMF with its HDF5 .h5 file (+ <stem>_xdmf_facets.vtu)",
     ".inp": "Abaqus with element sets and facet surfaces",
     ".node": "Triangle (2-D) / TetGen (3-D) .node + .ele (+ .poly / .face)",
     ".ele": "Triangle (2-D) / TetGen (3-D) .node + .ele (+ .poly / .face)",

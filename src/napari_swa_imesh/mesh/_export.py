@@ -22,7 +22,7 @@ What each format holds
           after them; every per-cell array as ``$ElementData`` (see ``_gmsh``).
 ``.xdmf`` XDMF 3 with its arrays in a ``.h5`` beside it (same stem; needs h5py; meshio's
           layout, written block by block by ``_xdmf``); every array; facet groups in
-          ``<stem>_facets.vtu`` as for ``.vtu``.
+          ``<stem>_xdmf_facets.vtu``, laid out as for ``.vtu``.
 ``.inp``  Abaqus; one ``*ELSET`` per material; ``*NSET`` and element-face ``*SURFACE``
           per facet group; no per-cell arrays (see ``_abaqus``).
 ``.node`` Triangle (2-D; attributes material, quality) or TetGen (3-D; region
@@ -179,9 +179,9 @@ def mesh_output_paths(path, *, force: bool = False, facet_groups="all",
     force : bool
         Whether existing files may be replaced.
     facet_groups : "all", "none" or list of str
-        As for :func:`write_mesh`: unless ``"none"``, ``.vtu`` and ``.xdmf`` add
-        ``<stem>_facets.vtu``, and ``.node``/``.ele`` add ``.poly`` (2-D) or ``.face``
-        (3-D).
+        As for :func:`write_mesh`: unless ``"none"``, ``.vtu`` adds
+        ``<stem>_facets.vtu``, ``.xdmf`` ``<stem>_xdmf_facets.vtu``, and ``.node``/``.ele``
+        add ``.poly`` (2-D) or ``.face`` (3-D).
     ndim : int, optional
         Dimension of the mesh; without it the ``.poly``/``.face`` file is not listed.
 
@@ -241,8 +241,10 @@ def write_mesh(mesh: Mesh, path, *, force: bool = False,
     facet_groups : "all", "none" or list of str
         Which facet groups (:func:`facet_groups`) to write: box sides, interfaces and
         exteriors by name, or patterns such as ``"interface_*"``. Every name must be a
-        group of this mesh. ``.vtu``/``.xdmf`` get them in ``<stem>_facets.vtu``,
-        ``.node``/``.ele`` in a ``.poly``/``.face`` file; legacy ``.vtk`` holds none.
+        group of this mesh. ``.vtu`` gets them in ``<stem>_facets.vtu``, ``.xdmf`` in
+        ``<stem>_xdmf_facets.vtu`` (:func:`._facet_vtu.facets_companion`; two formats of
+        one mesh can share a folder), ``.node``/``.ele`` in a ``.poly``/``.face`` file;
+        legacy ``.vtk`` holds none.
 
     Returns
     -------

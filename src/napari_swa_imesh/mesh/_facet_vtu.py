@@ -1,4 +1,7 @@
-"""The facet groups of a ``.vtu`` or ``.xdmf`` mesh, in a companion ``<stem>_facets.vtu``.
+"""The facet groups of a ``.vtu`` or ``.xdmf`` mesh, in a companion ``.vtu`` beside it.
+
+The companion of ``<stem>.vtu`` is ``<stem>_facets.vtu``, that of ``<stem>.xdmf`` is
+``<stem>_xdmf_facets.vtu`` (so the two formats of one mesh can lie side by side).
 
 The companion holds the same points as the mesh file, in the same order (so a facet's
 nodes are node ids of the mesh), and one cell per facet: lines in 2-D, triangles in 3-D
@@ -27,15 +30,20 @@ _VTK_FACET = {(2, 1): 3, (2, 2): 21, (3, 1): 5, (3, 2): 22}
 
 
 def facets_companion(path) -> Path:
-    """``<stem>_facets.vtu`` beside `path`.
+    """The facets file beside mesh file `path`: ``<stem>_facets.vtu`` for a ``.vtu``,
+    ``<stem>_<format>_facets.vtu`` for any other format (the two never collide).
 
     Examples
     --------
-    >>> facets_companion("out/brain.xdmf").as_posix()
+    >>> facets_companion("out/brain.vtu").as_posix()
     'out/brain_facets.vtu'
+    >>> facets_companion("out/brain.xdmf").as_posix()
+    'out/brain_xdmf_facets.vtu'
     """
     p = Path(path)
-    return p.with_name(f"{p.stem}{FACETS_STEM}.vtu")
+    kind = p.suffix.lower().lstrip(".")
+    middle = "" if kind == "vtu" else f"_{kind}"
+    return p.with_name(f"{p.stem}{middle}{FACETS_STEM}.vtu")
 
 
 def write_facets_vtu(ex, path) -> None:

@@ -2,9 +2,12 @@
 
 Layout (Gmsh reference manual, "MSH file format", version 4.1)
 ----------------------------------------------------------------
-* ``$PhysicalNames`` (always text): one group of dimension d per material (tag = material
-  id; material 0 gets ``max + 1``, Gmsh tags being positive) named after it, and one
-  group of dimension d-1 per facet group written (tag = its id 1..K), named after it.
+* ``$PhysicalNames`` (always text): one group of dimension d per material named after it
+  (tag = material id; material 0 gets ``max + 1``, Gmsh tags being positive 32-bit
+  integers; when some id does not fit so, negative ones or ids from 2^31 on, every
+  material gets its rank 1..K instead, and only the name, by default ``material_<id>``,
+  and the ``material`` element data tell the id), and one group of dimension d-1 per
+  facet group written (tag = its id 1..K), named after it.
 * ``$Entities``: one entity per physical group, with the same dimension and tag (entity
   and physical tags count per dimension), the mesh's bounding box and no bounding
   entities.
@@ -18,7 +21,8 @@ Layout (Gmsh reference manual, "MSH file format", version 4.1)
   owner element.
 * ``$ElementData``: ``material`` and every per-cell array, one component, for every
   element; a facet element carries the values of its owner (meshio reads element data
-  only when it covers every element).
+  only when it covers every element). Element data are doubles: material ids beyond
+  2^53 in size would be rounded, so they are refused (:func:`check_gmsh_labels`).
 
 Binary sections hold the same numbers as native ``int`` (4 bytes), ``size_t`` (8) and
 ``double``; the ``1`` after the format line tells readers the byte order. Everything is
@@ -32,7 +36,7 @@ import numpy as np
 from ._leaf_facets import material_codes
 from ._triangle_tetgen import write_rows
 
-__all__ = ["write_gmsh", "gmsh_materials", "gmsh_tags", "GMSH_TYPE"]
+__all__ = ["write_gmsh", "gmsh_materials", "gmsh_tags", "check_gmsh_labels", "GMSH_TYPE"]
 
 #: (nodes per element) -> Gmsh element type: line, triangle, tetrahedron; 3-node line,
 #: 6-node triangle, 10-node tetrahedron.
@@ -42,10 +46,43 @@ _ROWS = 1 << 16
 _SIZE_T, _INT = np.dtype(np.uint64), np.dtype(np.int32)
 
 
+_TAG_MAX = 2**31 - 1                # Gmsh tags are C ints
+_EXACT = 2**53                      # element data are doubles
+
+
 def gmsh_tags(materials: np.ndarray) -> dict[int, int]:
-    """Physical tag per material: its id, except 0 (Gmsh tags are positive) -> max+1."""
-    top = int(np.max(materials))
-    return {int(m): (int(m) if m > 0 else top + 1) for m in materials}
+    """Physical tag per material (sorted ids): its id, 0 -> max+1 (Gmsh tags are
+    positive), when every tag then fits a 32-bit int; else its rank 1..K.
+
+    Examples
+    --------
+    >>> gmsh_tags(np.array([0, 3, 7]))
+    {0: 8, 3: 3, 7: 7}
+    >>> gmsh_tags(np.array([-2, 0, 2**40]))
+    {-2: 1, 0: 2, 1099511627776: 3}
+    """
+    ids = [int(m) for m in materials]
+    top = max(ids)
+    if min(ids) >= 0 and top + (0 in ids) <= _TAG_MAX:
+        return {m: (m if m > 0 else top + 1) for m in ids}
+    return {m: k + 1 for k, m in enumerate(sorted(ids))}
+
+
+def check_gmsh_labels(labels: np.ndarray, exclude=()) -> None:
+    """Raise ValueError unless the material ids in `labels` (those not in `exclude`) are
+    exact in ``.msh`` element data (doubles: up to 2^53 in size)."""
+    lo, hi = (int(labels.min()), int(labels.max())) if labels.size else (0, 0)
+    if max(abs(lo), abs(hi)) <= _EXACT:
+        return
+    if len(exclude):                    # rare: only labels this large pay for the unique
+        kept = np.setdiff1d(np.unique(labels), np.asarray(exclude, dtype=np.int64))
+        lo, hi = (int(kept.min()), int(kept.max())) if kept.size else (0, 0)
+        if max(abs(lo), abs(hi)) <= _EXACT:
+            return
+    raise ValueError(
+        f"Gmsh .msh keeps material ids as doubles in its element data, exact up to 2^53, "
+        f"but the labels span {lo} .. {hi}; relabel them (for example 1..K) or write "
+        ".vtu or .xdmf, which keep 64-bit labels.")
 
 
 class _Out:
@@ -91,6 +128,7 @@ def write_gmsh(ex, path, *, binary: bool = True) -> None:
     """Write `ex` (an ``_prepare.ExportMesh``) as Gmsh 4.1 to `path`."""
     d = ex.ndim
     materials, code = material_codes(ex.material)
+    check_gmsh_labels(materials)
     tags = gmsh_tags(materials)
     order = np.argsort(code, kind="stable")     # (M,) by material: a radix sort of ranks
     bounds = np.searchsorted(ex.material[order], materials, side="left")

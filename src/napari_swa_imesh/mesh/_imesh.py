@@ -146,7 +146,7 @@ def mesh_labels(labels, *, method: str = "template", exclude=(), spacing=None,
         spacing_t, method=method, refine=refine, max_size=max_size, subdivide=subdivide,
         coarsen=coarsen)
     check_periodic(method, periodic)
-    lab, coarse_report = coarsen_labels(lab, coarsen)
+    lab, coarse_report = coarsen_labels(lab, coarsen, exclude_arr)
     mesh, tree = _mesh_labels(lab, method=method, exclude=exclude_arr, spacing=spacing_t,
                               material_names=material_names, lattice=lattice,
                               max_size=max_size, periodic=bool(periodic))

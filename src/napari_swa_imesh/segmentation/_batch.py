@@ -18,14 +18,60 @@ from __future__ import annotations
 
 import glob
 import uuid
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Iterator, Sequence
+from contextlib import contextmanager
 from pathlib import Path
 
 __all__ = ["expand_inputs", "output_for", "mesh_for", "connect", "run_batch", "segment_one",
-           "simulate_labels", "CONNECT_SECONDS"]
+           "simulate_labels", "missing_folders", "quiet_dask", "CONNECT_SECONDS",
+           "DETERMINISTIC"]
 
 CONNECT_SECONDS = 5        # an address that does not answer fails after this
 _GLOB = set("*?[")
+
+
+def missing_folders(output) -> list[Path]:
+    """The folders of `output` that do not exist yet, outermost first, once the nearest
+    existing one is known to be a writable folder (one sentence otherwise).
+
+    Examples
+    --------
+    >>> import tempfile
+    >>> base = Path(tempfile.mkdtemp())
+    >>> [p.relative_to(base).as_posix() for p in missing_folders(base / "a" / "b")]
+    ['a', 'a/b']
+    """
+    import os
+
+    path, missing = Path(output).absolute(), []
+    while not os.path.lexists(path):
+        missing.append(path)
+        path = path.parent
+    if not path.is_dir():
+        raise NotADirectoryError(f"{path} is a file, not a folder; choose another output "
+                                 "folder (-o).")
+    if missing and not os.access(path, os.W_OK | os.X_OK):
+        raise PermissionError(f"cannot create {missing[0]} in folder {path}; choose "
+                              "another output folder (-o).")
+    return missing[::-1]
+
+
+@contextmanager
+def quiet_dask() -> Iterator[None]:
+    """Silence distributed's own logs (worker restarts, tracebacks of lost workers) in
+    this process while the block runs: the batch's rows and one sentence say what
+    happened. Entered by the ``batch`` command only, never at import."""
+    import logging
+
+    loggers = [logging.getLogger(n) for n in ("distributed", "tornado", "asyncio")]
+    levels = [lg.level for lg in loggers]
+    for lg in loggers:
+        lg.setLevel(logging.CRITICAL + 1)
+    try:
+        yield
+    finally:
+        for lg, level in zip(loggers, levels):
+            lg.setLevel(level)
 
 
 def _stem_suffix(path: Path) -> tuple[str, str]:
@@ -133,12 +179,21 @@ def connect(scheduler: str | None = None, *, workers: int = 2, memory: int | Non
 
     # each task is a few long numpy calls: the workers' stack sampler (every 10 ms, under
     # the GIL) would only slow them down
-    with dask.config.set({"distributed.worker.profile.enabled": False}):
-        cluster = LocalCluster(n_workers=workers, threads_per_worker=1, processes=True,
-                               memory_limit=memory or "auto", dashboard_address=None,
-                               silence_logs=logging.ERROR)
-    client = Client(cluster)
-    client.run(_load_package)              # imports belong to starting the cluster
+    cluster = None
+    try:
+        with dask.config.set({"distributed.worker.profile.enabled": False}):
+            cluster = LocalCluster(n_workers=workers, threads_per_worker=1, processes=True,
+                                   memory_limit=memory or "auto", dashboard_address=None,
+                                   silence_logs=logging.CRITICAL)
+        client = Client(cluster)
+        client.run(_load_package)          # imports belong to starting the cluster
+    except Exception as exc:    # "Nanny failed to start", a worker killed while starting
+        if cluster is not None:
+            cluster.close()
+        raise ValueError(
+            f"the local Dask cluster of {workers} worker(s) did not start (a worker process "
+            f"died while starting: {type(exc).__name__}: {_sentence(str(exc))}); check the "
+            "memory left (--memory), try fewer --workers, or give --scheduler.") from exc
     return client
 
 
@@ -148,6 +203,12 @@ def _load_package() -> None:
 
 
 
+#: errors a task raises the same way on every try (a corrupt image, a refusal; a full disk
+#: too): reported in the image's row at once, not retried; anything else is retried
+DETERMINISTIC = (ValueError, TypeError, KeyError, FileExistsError, FileNotFoundError,
+                 IsADirectoryError, NotADirectoryError, PermissionError)
+
+
 def segment_one(image: str, model_path: str, output: str, *, force: bool = False,
                 memory: int | None = None, mesh: str | None = None,
                 exclude: Sequence[int] = (), conductivity: dict | None = None) -> dict:
@@ -155,19 +216,79 @@ def segment_one(image: str, model_path: str, output: str, *, force: bool = False
     a lone ``segment --model`` run would be (Zarr, or too big for `memory`), the chunks on
     this worker's own thread; then, with `mesh` (a mesh file path), the IMESH mesh of the
     labels (materials in `exclude` left out), written through ``mesh.write_mesh``; with
-    `conductivity` (by label), the steady k_eff run of the labels (:func:`simulate_labels`)."""
+    `conductivity` (by label), the steady k_eff run of the labels (:func:`simulate_labels`).
+
+    A try that finds an output already there without `force` (an earlier try of this
+    task whose worker died after writing it; the batch checked that none existed)
+    computes it again beside it and keeps the file when the contents are equal, else
+    refuses. An error of :data:`DETERMINISTIC` comes back as ``{"error": sentence}``, so
+    the scheduler does not retry it."""
+    import errno
+
+    try:
+        return _segment_one(image, model_path, output, force=force, memory=memory,
+                            mesh=mesh, exclude=exclude, conductivity=conductivity)
+    except (*DETERMINISTIC, OSError) as exc:
+        if not isinstance(exc, DETERMINISTIC) and exc.errno not in (errno.ENOSPC,
+                                                                     errno.EDQUOT):
+            raise               # may pass (a flaky network disk): the scheduler retries
+        return {"image": image, "output": output, "error": f"{exc}"}
+
+
+def _segment_one(image, model_path, output, *, force, memory, mesh, exclude,
+                 conductivity) -> dict:
     from ._apply import apply_model, wants_chunks
     from ._model_io import load_model
 
     model = load_model(model_path)
     chunked = wants_chunks(image, output, model, budget=memory)
-    row = apply_model(image, model, output, memory=memory, force=force, workers=1,
-                      chunked=chunked, scheduler="sync")
+    row = _once(output, force, "labels", lambda path: apply_model(
+        image, model, str(path), memory=memory, force=force, workers=1, chunked=chunked,
+        scheduler="sync"))
+    row["output"] = str(output)
     if mesh:
-        row["mesh"] = _mesh_labels_file(image, output, mesh, exclude=exclude, force=force)
+        row["mesh"] = _once(mesh, force, "mesh", lambda path: _mesh_labels_file(
+            image, output, str(path), exclude=exclude, force=force))
+        row["mesh"]["file"] = str(mesh)
     if conductivity:
         row["simulate"] = simulate_labels(output, conductivity, exclude=exclude)
     return row
+
+
+def _once(target: str, force: bool, kind: str, write: Callable[[Path], dict]) -> dict:
+    """``write(target)``, or, when `target` exists and `force` is false, ``write`` to a
+    scratch path beside it and keep `target` if the two hold the same labels or mesh."""
+    import os
+
+    from .._atomic import scratch_folder
+
+    target_p = Path(target)
+    if force or not os.path.lexists(target_p):
+        return write(target_p)
+    with scratch_folder(target_p.parent) as folder:
+        again = folder / target_p.name
+        row = write(again)
+        if not _same(kind, again, target_p):
+            raise FileExistsError(
+                f"{target_p} appeared while this batch ran and holds other {kind} than this "
+                "image gives; remove it or choose another output folder.")
+    return row
+
+
+def _same(kind: str, a: Path, b: Path) -> bool:
+    import numpy as np
+
+    try:
+        if kind == "labels":
+            (la, sa), (lb, sb) = _read_labels(str(a)), _read_labels(str(b))
+            return la.shape == lb.shape and np.array_equal(la, lb) and np.allclose(sa, sb)
+        from ..mesh import read_mesh
+
+        ma, mb = read_mesh(a), read_mesh(b)
+        return all(np.array_equal(getattr(ma, k), getattr(mb, k))
+                   for k in ("points", "cells", "material"))
+    except (ValueError, OSError):       # a truncated or foreign file is not ours
+        return False
 
 
 def _read_labels(path: str):
@@ -212,6 +333,12 @@ def _mesh_labels_file(image: str, labels_path: str, mesh_path: str, *, exclude,
     write_mesh(mesh, mesh_path, force=force)
     return {"file": str(mesh_path), "points": int(len(mesh.points)),
             "cells": int(len(mesh.cells))}
+
+
+def _sentence(error: str) -> str:
+    """The first line of a task's error (dask's KilledWorker and the like run on)."""
+    lines = [line for line in str(error).splitlines() if line.strip()]
+    return lines[0].strip() if lines else "the task failed without a message"
 
 
 def run_batch(images: Sequence, model_path, outdir, *, client, force: bool = False,
@@ -277,8 +404,10 @@ def run_batch(images: Sequence, model_path, outdir, *, client, force: bool = Fal
         try:
             rows[i] = fut.result()
         except Exception as exc:  # the task's own sentence (bad image, full disk...)
+            rows[i] = {"error": f"{exc}"}
+        if "error" in rows[i]:
             rows[i] = {"image": str(images[i]), "output": str(outputs[i]),
-                       "error": f"{exc}"}
+                       "error": _sentence(rows[i]["error"])}
         if progress is not None:
             progress(done, len(outputs), rows[i])
     return rows

@@ -355,16 +355,15 @@ def _run_batch(args: argparse.Namespace) -> int:
     import sys
 
     from ..io import check_writable
-    from ._batch import connect, expand_inputs, mesh_for, output_for, run_batch
+    from ._batch import (connect, expand_inputs, mesh_for, missing_folders, output_for,
+                         quiet_dask, run_batch)
     from ._chunked import default_memory, parse_memory
     from ._model_io import load_model
 
     timer = StepTimer()
     images = expand_inputs(args.images)
     model = load_model(args.model)                           # a bad model fails here
-    if not os.path.isdir(args.output):
-        raise FileNotFoundError(f"output folder {args.output} does not exist; create it "
-                                "first.")
+    new_folders = missing_folders(args.output)               # made once the checks pass
     if args.mesh:
         from ..mesh._export import MESH_SUFFIXES
 
@@ -375,7 +374,7 @@ def _run_batch(args: argparse.Namespace) -> int:
         raise ValueError("--exclude says what the meshes and simulations leave out; add "
                          "--mesh SUFFIX or --simulate.")
     conductivity = _batch_conductivity(args, model)
-    for p in images:
+    for p in images if not new_folders else ():
         check_writable(output_for(p, args.output), force=args.force)
         if args.mesh:
             check_writable(mesh_for(p, args.output, args.mesh), force=args.force)
@@ -392,21 +391,31 @@ def _run_batch(args: argparse.Namespace) -> int:
         print(f"[{bar:<20}] {done}/{total} {Path(row['image']).name}: {what}",
               file=sys.stderr, flush=True)
 
-    with timer("connect"):
-        client = connect(args.scheduler, workers=workers, memory=budget // workers)
+    for folder in new_folders:
+        os.mkdir(folder)
     try:
-        n = len(client.scheduler_info().get("workers", {})) or workers
-        with timer("segment"):
-            rows = run_batch(images, args.model, args.output, client=client,
-                             force=args.force, memory=budget // n, retries=args.retries,
-                             mesh=args.mesh, exclude=args.exclude,
-                             conductivity=conductivity,
-                             progress=None if args.json else progress)
+        with quiet_dask():
+            with timer("connect"):
+                client = connect(args.scheduler, workers=workers, memory=budget // workers)
+            try:
+                n = len(client.scheduler_info().get("workers", {})) or workers
+                with timer("segment"):
+                    rows = run_batch(images, args.model, args.output, client=client,
+                                     force=args.force, memory=budget // n,
+                                     retries=args.retries, mesh=args.mesh,
+                                     exclude=args.exclude, conductivity=conductivity,
+                                     progress=None if args.json else progress)
+            finally:
+                cluster = client.cluster
+                client.close()
+                if cluster is not None and not args.scheduler:
+                    cluster.close()
     finally:
-        cluster = client.cluster
-        client.close()
-        if cluster is not None and not args.scheduler:
-            cluster.close()
+        for folder in reversed(new_folders):     # only if nothing was written there
+            try:
+                os.rmdir(folder)
+            except OSError:
+                break
     failed = [r for r in rows if "error" in r]
     if args.json:
         print_json({"images": rows, "workers": n, "scheduler": args.scheduler or "local",

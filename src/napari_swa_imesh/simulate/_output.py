@@ -6,6 +6,7 @@ from pathlib import Path
 
 import numpy as np
 
+from .._atomic import hdf5_file
 from ..io import atomic_write, check_writable
 from ..mesh import to_meshio, write_mesh_vtu
 from ..mesh._common import export_vectors
@@ -58,8 +59,6 @@ def write_field(result, path, *, force: bool = False) -> list[Path]:
     list of Path
         The files written (all or none).
     """
-    import meshio
-
     targets = check_field_path(path, force=force)
     point_data, cell_data = _fields(result)
     with atomic_write(targets, force=force) as temps:
@@ -69,8 +68,46 @@ def write_field(result, path, *, force: bool = False) -> list[Path]:
             m = to_meshio(result.mesh)
             m.point_data.update(point_data)
             m.cell_data.update({k: [v] for k, v in cell_data.items()})
-            meshio.write(temps[0], m, file_format="xdmf", data_format="HDF")
+            _write_xdmf(m, temps[0], temps[1])
     return targets
+
+
+def _write_xdmf(m, xdmf_path, h5_path) -> None:
+    """meshio's XDMF layout (one grid; points, cells, then point and cell data as
+    ``<stem>.h5:/dataK``), the HDF5 file built in memory (:func:`hdf5_file`): meshio's
+    own writer lets HDF5 write to disk, which crashed on a full disk."""
+    from xml.etree import ElementTree as ET
+
+    from meshio.xdmf.common import attribute_type, meshio_to_xdmf_type, numpy_to_xdmf_dtype
+
+    (block,) = m.cells
+    grid = ET.Element("Grid", Name="Grid")
+    geometry = ET.SubElement(grid, "Geometry", GeometryType="XYZ"[:m.points.shape[1]])
+    topology = ET.SubElement(grid, "Topology", TopologyType=meshio_to_xdmf_type[block.type][0],
+                             NumberOfElements=str(len(block.data)),
+                             NodesPerElement=str(block.data.shape[1]))
+    items = [(geometry, m.points), (topology, block.data)]
+    for center, data in (("Node", m.point_data),
+                         ("Cell", {k: v[0] for k, v in m.cell_data.items()})):
+        for name, values in data.items():
+            values = np.asarray(values)
+            items.append((ET.SubElement(grid, "Attribute", Name=name, Center=center,
+                                        AttributeType=attribute_type(values)), values))
+    with hdf5_file(h5_path) as h5:
+        for k, (parent, values) in enumerate(items):
+            values = np.ascontiguousarray(values, dtype=np.int64 if values.dtype.kind in "biu"
+                                          else np.float64)
+            h5.create_dataset(f"data{k}", data=values, compression="gzip",
+                              compression_opts=1, shuffle=True)
+            dt, precision = numpy_to_xdmf_dtype[values.dtype.name]
+            item = ET.SubElement(parent, "DataItem", DataType=dt, Format="HDF",
+                                 Dimensions=" ".join(map(str, values.shape)),
+                                 Precision=precision)
+            item.text = f"{Path(h5_path).name}:/data{k}"
+    root = ET.Element("Xdmf", Version="3.0")
+    ET.SubElement(root, "Domain").append(grid)
+    ET.indent(root)
+    Path(xdmf_path).write_bytes(b'<?xml version="1.0"?>\n' + ET.tostring(root) + b"\n")
 
 
 def check_series_path(path, *, force: bool = False) -> list[Path]:
@@ -90,8 +127,6 @@ def write_series(result, path, *, force: bool = False, name: str = "u") -> list[
     its file name only, so the pair can be moved together. (meshio's own time-series
     writer puts the ``.h5`` in the working directory, not beside the ``.xdmf``.)
     """
-    import h5py
-
     targets = check_series_path(path, force=force)
     m = to_meshio(result.mesh)
     points, cells = m.points, m.cells[0].data
@@ -108,7 +143,7 @@ def write_series(result, path, *, force: bool = False, name: str = "u") -> list[
 
     grids = []
     with atomic_write(targets, force=force) as (xdmf_tmp, h5_tmp):
-        with h5py.File(h5_tmp, "w") as h5:
+        with hdf5_file(h5_tmp) as h5:
             h5["points"] = points
             h5["cells"] = cells.astype(np.int64)
             h5["material"] = material.astype(np.int64)
