@@ -51,6 +51,7 @@ def test_plain_install_into_a_napari_environment_docks_and_runs(tmp_path):
     start = time.monotonic()
     env = {k: v for k, v in os.environ.items()
            if k not in ("PYTHONPATH", "PYTHONHOME", "VIRTUAL_ENV", "PYTHONSTARTUP")}
+    env["NAPARI_CONFIG"] = str(tmp_path / "napari-settings.yaml")   # the user's stay as they are
     venv = tmp_path / "venv"
     _run([sys.executable, "-m", "venv", str(venv)], env=env, timeout=120)
     python = venv / "bin" / "python"
