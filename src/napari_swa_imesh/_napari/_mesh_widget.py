@@ -19,7 +19,7 @@ from ..mesh import (MeshClipper, check_mesh, mesh_labels, mesh_surface, quality_
                     write_mesh)
 from ..mesh._export import MESH_SUFFIXES
 from ._clip_panel import ClipPanel
-from ._dock import scroll_body, wrapped_label
+from ._dock import fit_dock, scroll_body, wrapped_label
 from ._layers import (
     MESH_KEY,
     default_color,
@@ -183,6 +183,7 @@ class MeshWidget(QWidget):
         self.clip_box = self.clip.widget()
         layout.addWidget(self.clip_box)
         layout.addWidget(self.export_button.native)
+        fit_dock(self)
         self.labels_combo.changed.connect(self._refresh_materials)
         self.color_combo.changed.connect(self.apply_colors)
         self.edges_box.changed.connect(self.apply_colors)

@@ -10,7 +10,7 @@ from qtpy.QtWidgets import QWidget
 
 from ..segmentation import plot_res, res_statistics
 from . import _samples_layer as sl
-from ._dock import scroll_body, wrapped_label
+from ._dock import fit_dock, scroll_body, wrapped_label
 from ._layers import layer_picker, pick
 from ._plots import ThemedFigure, dark_theme
 from ._tasks import TaskPanel, notify_error, notify_warning
@@ -78,6 +78,7 @@ class ResWidget(QWidget):
         layout.addWidget(Container(widgets=[self.scale_spin]).native)
         layout.addWidget(self.reason.native)
         layout.addWidget(self.plot, 1)
+        fit_dock(self)
         self.compute_button.changed.connect(self.compute)
         self.scale_spin.changed.connect(self.choose_scale)
         self.samples_combo.changed.connect(self._on_samples_layer_selected)
