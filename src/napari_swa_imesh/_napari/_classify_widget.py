@@ -25,6 +25,7 @@ from ._dock import Fold, button, fit_dock, scroll_body, side_by_side, wrapped_la
 from ._layers import (
     AFFINE_KEY,
     block_affine,
+    is_layer,
     labels_colormap,
     layer_picker,
     layer_spacing,
@@ -375,7 +376,7 @@ class ClassifyWidget(QWidget):
                     AFFINE_KEY: block_affine(image, 1 << result.scale if tiles else 1)}
         affine = image.affine.affine_matrix               # a NIfTI image's world placement
         if name in self.viewer.layers and \
-                type(self.viewer.layers[name]).__name__ == "Labels":
+                is_layer(self.viewer.layers[name], "Labels"):
             labels = self.viewer.layers[name]
             labels.data = data
             labels.scale, labels.translate, labels.affine = layer_scale, translate, affine

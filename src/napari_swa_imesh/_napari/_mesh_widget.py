@@ -23,6 +23,7 @@ from ._dock import fit_dock, scroll_body, wrapped_label
 from ._layers import (
     MESH_KEY,
     default_color,
+    is_layer,
     layer_picker,
     layer_spacing,
     mesh_translate,
@@ -289,7 +290,7 @@ class MeshWidget(QWidget):
         name = f"{labels.name} mesh"
         translate = mesh_translate(labels)
         existing = self.viewer.layers[name] if name in self.viewer.layers else None
-        if existing is not None and type(existing).__name__ == "Surface" and \
+        if existing is not None and is_layer(existing, "Surface") and \
                 existing.ndim == mesh.ndim:
             existing.vertex_colors = None
             existing.data = data
