@@ -224,6 +224,8 @@ class ResWidget(QWidget):
         figure.set_layout_engine("none")     # plot_res lays out once, tightly
         plot_res(self.stats, figure=figure, dark=dark_theme(self.viewer),
                  selected_scale=None if self.stale else self.scale_spin.value)
+        if figure.get_suptitle():    # wrapped to the dock's width instead of cut at its edges
+            figure.suptitle(figure.get_suptitle(), fontsize=10, wrap=True)
         # see the dock through the figure, as napari-matplotlib's own plots do
         figure.set_facecolor("none")
         for ax in figure.axes:
