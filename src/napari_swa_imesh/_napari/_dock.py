@@ -106,6 +106,12 @@ def fit_dock(widget: QWidget) -> None:
     check boxes whose text is wider than CHECK_TEXT_WIDTH px show it as a wrapped label that
     toggles the box when clicked, and tables and lists with a maximum height ask for the
     height of their rows up to that maximum. Call once the widget's controls are laid out.
+    A wrapped check box keeps its text as its accessible name; its ``text()`` is empty.
+
+    Parameters
+    ----------
+    widget : QWidget
+        A dock's widget; every combo box, check box and item view inside it is adjusted.
     """
     for view in widget.findChildren(QAbstractItemView):
         if view.maximumHeight() < _UNBOUNDED:

@@ -33,6 +33,16 @@ def is_layer(layer, kind: str) -> bool:
     By ``isinstance``, not by type name: napari hands a plugin's widgets the viewer and its
     layers through a ``PublicOnlyProxy``, whose type is the proxy's (docked from the Plugins
     menu, meshing again added a second mesh layer instead of updating the first).
+
+    Parameters
+    ----------
+    layer : napari layer, its proxy, or None
+    kind : str
+        A class name of ``napari.layers``.
+
+    Returns
+    -------
+    bool
     """
     import napari.layers
 
