@@ -2,11 +2,13 @@
 
 Run under a display, or under Xvfb on a headless machine::
 
-    xvfb-run -a -s "-screen 0 1600x1000x24" python docs/screenshots.py [mosaic] [phantom]
+    xvfb-run -a -s "-screen 0 1280x800x24" python docs/screenshots.py [mosaic] [phantom]
 
 It opens the plugin's two samples, runs samples -> RES -> classify -> mesh -> simulate
 through the workflow widget exactly as a user's clicks would (the same methods the buttons
-call), and writes PNGs (palette-quantised to stay small) to ``docs/images/``.
+call), and writes PNGs (palette-quantised to stay small) to ``docs/images/``. The window is
+a laptop's 1280x800, with the workflow docked through napari's plugin machinery as the menu
+docks it.
 """
 
 from __future__ import annotations
@@ -21,7 +23,7 @@ from napari_swa_imesh._napari._layers import pick
 from napari_swa_imesh._napari._mesh_widget import COLOR_BY_QUALITY
 
 OUT = Path(__file__).resolve().parent / "images"
-WINDOW = (1500, 940)
+WINDOW = (1280, 800)
 
 
 def wait(widget, timeout: float = 300.0) -> None:
@@ -62,11 +64,8 @@ def save(viewer, name: str) -> Path:
 
 
 def open_workflow(viewer):
-    from napari_swa_imesh._napari._workflow import WorkflowWidget
-
-    flow = WorkflowWidget(viewer)
-    viewer.window.add_dock_widget(flow, area="right", name="SWA-IMESH workflow")
     viewer.window._qt_window.resize(*WINDOW)
+    _, flow = viewer.window.add_plugin_dock_widget("napari-swa-imesh", "Segment and mesh")
     return flow
 
 
@@ -75,6 +74,7 @@ def mosaic_steps(viewer) -> None:
     image, truth = viewer.layers
     truth.visible = False
     flow = open_workflow(viewer)
+    save(viewer, "00_window_1280x800.png")         # what a laptop shows before the first step
     samples = flow.samples
     pick(samples.image_combo, image)
     pick(samples.truth_combo, truth)
@@ -143,8 +143,8 @@ def phantom_steps(viewer) -> None:
     flow.mesh.set_excluded([1])       # leave the CSF out: its box hides the brain
     flow.mesh.run_mesh()
     wait(flow.mesh)
-    for layer in viewer.layers:
-        layer.visible = layer is flow.mesh.surface_layer
+    for layer in viewer.layers:     # by name: a plugin's widget sees layers through a proxy
+        layer.visible = layer.name == flow.mesh.surface_layer.name
     viewer.dims.ndisplay = 3
     viewer.reset_view()
     scene = getattr(viewer, "scene", None)          # napari >= 0.9 moved the camera
@@ -161,6 +161,8 @@ def phantom_steps(viewer) -> None:
     clip.axis_combo.value = 0                 # z: the slider starts in the middle
     clip.keep_combo.value = "above"
     clip.enable_box.value = True
+    flow.mesh.clip_box.set_open(True)
+    settle()
     flow.mesh.findChild(QScrollArea).ensureWidgetVisible(flow.mesh.clip_box)
     camera.zoom *= 1.1
     save(viewer, "09_mesh_3d_clipped.png")
@@ -190,6 +192,8 @@ def phantom_steps(viewer) -> None:
     viewer.reset_view()
     camera.set_view_direction((-1, 0.5, 0.4), (0, -1, 0))
     camera.zoom *= 0.8
+    simulate.clip_box.set_open(True)
+    settle()
     simulate.findChild(QScrollArea).ensureWidgetVisible(simulate.clip_box)
     save(viewer, "10_simulate_3d_clipped.png")
 

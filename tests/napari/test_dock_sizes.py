@@ -4,8 +4,8 @@ napari window.
 The reported case: a new user docked the workflow and the four step widgets, napari grew to
 2363 px on a 1024-px screen, the canvas became a 230-px strip, and napari kept that size at
 the next start. A dock's minimum height adds to the window's, so each dock must be able to
-shrink well below a 1080-px screen, and all five docked together must still fit the screen
-the tests run on (Xvfb's 800x600). Measured before the docks scrolled: minimum heights of
+shrink well below a 1080-px screen, and all five docked together must still fit an 800x600
+screen (the tests' Xvfb screen is now a 1280x800 laptop's: test_laptop_screen.py). Measured before the docks scrolled: minimum heights of
 585, 328, 682 and 595 px for the four step docks, and the window grew from 630 to 2376 px;
 now every dock (the Simulate dock too) can shrink to 68-95 px and the window keeps its
 size.
@@ -19,6 +19,7 @@ PLUGIN = "napari-swa-imesh"
 DOCKS = ("Segment and mesh", "Sample boxes", "RES plots", "Classify (SWA)", "Mesh (IMESH)",
          "Simulate (k_eff)")
 MAX_HINT = 900          # px: room for napari's menus and title bar on a 1080-px screen
+SMALL_SCREEN_HEIGHT = 600
 
 
 def _fill(widgets, truth, qtbot):
@@ -72,7 +73,7 @@ def test_docks_fit_a_1080_px_screen(make_napari_viewer, qtbot):
     print(f"window {before} -> {window.height()} px (minimum "
           f"{window.minimumSizeHint().height()} px) on a screen of {screen.height()} px")
     assert window.height() == before               # docking did not grow the window
-    assert window.minimumSizeHint().height() <= screen.height()
+    assert window.minimumSizeHint().height() <= min(screen.height(), SMALL_SCREEN_HEIGHT)
 
 
 @pytest.mark.parametrize("kind", ["res", "mesh"])

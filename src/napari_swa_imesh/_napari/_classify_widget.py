@@ -21,10 +21,11 @@ from ..segmentation import (
 )
 from . import _samples_layer as sl
 from ._chunked_classify import add_lazy_labels, chunked_steps, lazy_level0
-from ._dock import button, group, scroll_body, side_by_side, wrapped_label
+from ._dock import Fold, button, fit_dock, scroll_body, side_by_side, wrapped_label
 from ._layers import (
     AFFINE_KEY,
     block_affine,
+    is_layer,
     labels_colormap,
     layer_picker,
     layer_spacing,
@@ -121,18 +122,19 @@ class ClassifyWidget(QWidget):
         layout.addWidget(Container(widgets=[
             self.image_combo, self.samples_combo, self.method_combo, self.feature_combo,
             self.classifier_combo, self.scale_combo]).native)
-        layout.addWidget(self.scale_note.native)
         layout.addWidget(Container(widgets=[self.sieve_spin, self.output_combo,
                                             self.truth_combo, self.classify_button]).native)
         layout.addWidget(self.tasks)
-        layout.addWidget(self.scores.native)
+        layout.addWidget(self.scores.native)       # the run's result next to its button
+        layout.addWidget(self.scale_note.native)
         layout.addWidget(wrapped_label("Material signatures (moments of the tiles of each "
                                        "material)").native)
         layout.addWidget(self.signature_table, 1)
         layout.addWidget(self.export_button.native)
-        layout.addWidget(group("Model", [
+        layout.addWidget(Fold("Model", [
             side_by_side(self.save_model_button, self.load_model_button), self.model_label,
             self.apply_model_button]))
+        fit_dock(self)
         self.method_combo.changed.connect(self._on_method_changed)
         self.scale_combo.changed.connect(self._on_scale_combo)
         self.samples_combo.changed.connect(self._on_samples_layer_selected)
@@ -374,7 +376,7 @@ class ClassifyWidget(QWidget):
                     AFFINE_KEY: block_affine(image, 1 << result.scale if tiles else 1)}
         affine = image.affine.affine_matrix               # a NIfTI image's world placement
         if name in self.viewer.layers and \
-                type(self.viewer.layers[name]).__name__ == "Labels":
+                is_layer(self.viewer.layers[name], "Labels"):
             labels = self.viewer.layers[name]
             labels.data = data
             labels.scale, labels.translate, labels.affine = layer_scale, translate, affine

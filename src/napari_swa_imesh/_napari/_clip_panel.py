@@ -11,16 +11,12 @@ event loop runs in between, so the slider never freezes.
 from __future__ import annotations
 
 from collections.abc import Callable
-from typing import TYPE_CHECKING
 
 from magicgui.widgets import CheckBox, ComboBox, Container, FloatSlider
 from qtpy.QtCore import QTimer
 
 from ..mesh import MeshClipper
-from ._dock import group, wrapped_label
-
-if TYPE_CHECKING:
-    from qtpy.QtWidgets import QGroupBox
+from ._dock import Fold, wrapped_label
 
 __all__ = ["ClipPanel", "AXIS_CHOICES", "KEEP_CHOICES", "THROTTLE_MS"]
 
@@ -66,10 +62,10 @@ class ClipPanel:
         self.axis_combo.changed.connect(self._axis_changed)
         self.set_clipper(None)
 
-    def widget(self) -> "QGroupBox":
-        """The controls in a titled box."""
+    def widget(self) -> Fold:
+        """The controls in a section that folds away (folded to start with)."""
         controls = Container(widgets=[self.axis_combo, self.keep_combo, self.position_slider])
-        return group("see inside", [self.enable_box, controls, self.status.native])
+        return Fold("see inside", [self.enable_box, controls, self.status.native])
 
     # -- state -----------------------------------------------------------------------------
     @property

@@ -12,7 +12,7 @@ if TYPE_CHECKING:
 __all__ = ["PALETTE", "material_palette", "labels_colormap", "layer_picker", "pick",
            "layer_spacing", "index_to_layer_data", "mesh_translate", "SAMPLES_KEY",
            "MATERIALS_KEY", "EXTENT_KEY", "MESH_KEY", "SCALE_KEY", "AFFINE_KEY",
-           "placed_by_affine", "block_affine"]
+           "placed_by_affine", "block_affine", "is_layer"]
 
 # tab10 without grey: distinct on dark and light napari themes
 PALETTE = ("#1f77b4", "#ff7f0e", "#2ca02c", "#d62728", "#9467bd", "#8c564b", "#e377c2",
@@ -25,6 +25,28 @@ SCALE_KEY = "swa_imesh_scale"          # on a Shapes layer: the scale chosen fro
 EXTENT_KEY = "swa_imesh_extent_of"     # on the 3-D extent overlay: its samples layer name
 MESH_KEY = "swa_imesh_mesh"            # on a Surface layer: the real Mesh (for the writer)
 AFFINE_KEY = "swa_imesh_affine"        # on a layer read from NIfTI: its index-to-world affine
+
+
+def is_layer(layer, kind: str) -> bool:
+    """Whether `layer` is a napari layer of `kind` (``"Shapes"``, ``"Labels"``, ...).
+
+    By ``isinstance``, not by type name: napari hands a plugin's widgets the viewer and its
+    layers through a ``PublicOnlyProxy``, whose type is the proxy's (docked from the Plugins
+    menu, meshing again added a second mesh layer instead of updating the first).
+
+    Parameters
+    ----------
+    layer : napari layer, its proxy, or None
+    kind : str
+        A class name of ``napari.layers``.
+
+    Returns
+    -------
+    bool
+    """
+    import napari.layers
+
+    return isinstance(layer, getattr(napari.layers, kind))
 
 
 def default_color(label: int) -> str:

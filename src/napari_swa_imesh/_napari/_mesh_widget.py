@@ -19,10 +19,11 @@ from ..mesh import (MeshClipper, check_mesh, mesh_labels, mesh_surface, quality_
                     write_mesh)
 from ..mesh._export import MESH_SUFFIXES
 from ._clip_panel import ClipPanel
-from ._dock import scroll_body, wrapped_label
+from ._dock import fit_dock, scroll_body, wrapped_label
 from ._layers import (
     MESH_KEY,
     default_color,
+    is_layer,
     layer_picker,
     layer_spacing,
     mesh_translate,
@@ -183,6 +184,7 @@ class MeshWidget(QWidget):
         self.clip_box = self.clip.widget()
         layout.addWidget(self.clip_box)
         layout.addWidget(self.export_button.native)
+        fit_dock(self)
         self.labels_combo.changed.connect(self._refresh_materials)
         self.color_combo.changed.connect(self.apply_colors)
         self.edges_box.changed.connect(self.apply_colors)
@@ -288,7 +290,7 @@ class MeshWidget(QWidget):
         name = f"{labels.name} mesh"
         translate = mesh_translate(labels)
         existing = self.viewer.layers[name] if name in self.viewer.layers else None
-        if existing is not None and type(existing).__name__ == "Surface" and \
+        if existing is not None and is_layer(existing, "Surface") and \
                 existing.ndim == mesh.ndim:
             existing.vertex_colors = None
             existing.data = data

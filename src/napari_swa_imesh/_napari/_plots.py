@@ -16,6 +16,7 @@ from typing import TYPE_CHECKING
 
 import matplotlib.style as mplstyle
 from napari_matplotlib.base import BaseNapariMPLWidget
+from qtpy.QtCore import QSize
 from qtpy.QtWidgets import QSizePolicy
 
 if TYPE_CHECKING:
@@ -60,6 +61,13 @@ class ThemedFigure(BaseNapariMPLWidget):
         self.canvas.setMinimumHeight(min_height)
         self.canvas.setSizePolicy(QSizePolicy.Expanding, QSizePolicy.Expanding)
         self.layout().setContentsMargins(0, 0, 0, 0)
+
+    def sizeHint(self) -> QSize:
+        # ask for the minimum and grow with the dock: the scroll area lays its body out at
+        # the preferred heights, and matplotlib's 480-px figure pushed results below a
+        # laptop screen's fold
+        hint = super().sizeHint()
+        return QSize(hint.width(), self.minimumSizeHint().height())
 
     def redraw(self) -> None:
         """Draw the figure again in the current theme's style."""

@@ -17,12 +17,10 @@ from qtpy.QtWidgets import QFileDialog, QTableWidget, QTableWidgetItem
 
 from ..simulate import read_signatures, simulation_report, write_report
 from ._classify_widget import SEGMENTATION_KEY
-from ._dock import button, group, side_by_side, wrapped_label
+from ._dock import Fold, button, side_by_side, wrapped_label
 from ._tasks import notify_error, notify_info, notify_warning
 
 if TYPE_CHECKING:
-    from qtpy.QtWidgets import QGroupBox
-
     from ..simulate import SimulationReport, SimulationResult
 
 __all__ = ["ReportPanel", "classification_signatures", "fill_table"]
@@ -77,8 +75,9 @@ class ReportPanel:
         self.warnings_label = wrapped_label()
         self._show_source()
 
-    def widget(self) -> "QGroupBox":
-        return group("signatures and k_eff report", [
+    def widget(self) -> Fold:
+        """The report in a section that folds away (folded to start with)."""
+        return Fold("signatures and k_eff report", [
             self.source_label, self.table, self.warnings_label,
             side_by_side(self.load_button, self.export_button)])
 

@@ -10,7 +10,7 @@ from qtpy.QtWidgets import QWidget
 
 from ..segmentation import plot_res, res_statistics
 from . import _samples_layer as sl
-from ._dock import scroll_body, wrapped_label
+from ._dock import fit_dock, scroll_body, wrapped_label
 from ._layers import layer_picker, pick
 from ._plots import ThemedFigure, dark_theme
 from ._tasks import TaskPanel, notify_error, notify_warning
@@ -78,6 +78,7 @@ class ResWidget(QWidget):
         layout.addWidget(Container(widgets=[self.scale_spin]).native)
         layout.addWidget(self.reason.native)
         layout.addWidget(self.plot, 1)
+        fit_dock(self)
         self.compute_button.changed.connect(self.compute)
         self.scale_spin.changed.connect(self.choose_scale)
         self.samples_combo.changed.connect(self._on_samples_layer_selected)
@@ -223,6 +224,8 @@ class ResWidget(QWidget):
         figure.set_layout_engine("none")     # plot_res lays out once, tightly
         plot_res(self.stats, figure=figure, dark=dark_theme(self.viewer),
                  selected_scale=None if self.stale else self.scale_spin.value)
+        if figure.get_suptitle():    # wrapped to the dock's width instead of cut at its edges
+            figure.suptitle(figure.get_suptitle(), fontsize=10, wrap=True)
         # see the dock through the figure, as napari-matplotlib's own plots do
         figure.set_facecolor("none")
         for ax in figure.axes:

@@ -30,6 +30,7 @@ from ._layers import (
     SCALE_KEY,
     default_color,
     index_to_layer_data,
+    is_layer,
 )
 
 if TYPE_CHECKING:
@@ -51,7 +52,7 @@ def is_extent_layer(layer) -> bool:
 
 def is_samples_layer(layer) -> bool:
     """Any Shapes layer but the 3-D extent overlay can hold samples."""
-    return type(layer).__name__ == "Shapes" and not is_extent_layer(layer)
+    return is_layer(layer, "Shapes") and not is_extent_layer(layer)
 
 
 def image_array(image_layer) -> np.ndarray:

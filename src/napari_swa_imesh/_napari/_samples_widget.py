@@ -12,7 +12,7 @@ from qtpy.QtWidgets import QFileDialog, QHeaderView, QTableWidget, QTableWidgetI
 
 from ..segmentation import Material, Samples, load_samples, samples_from_truth, save_samples
 from . import _samples_layer as sl
-from ._dock import button, group, scroll_body, side_by_side, wrapped_label
+from ._dock import button, fit_dock, group, scroll_body, side_by_side, wrapped_label
 from ._layers import default_color, layer_picker, pick
 from ._materials import MaterialTable
 from ._tasks import TaskPanel, notify_error, notify_info, notify_warning
@@ -80,14 +80,16 @@ class SamplesWidget(QWidget):
                                             self.new_button]).native)
         layout.addWidget(group("Materials (select one, then draw rectangles)", [
             self.material_table, side_by_side(self.add_material_button,
-                                              self.remove_material_button, self.assign_button)]))
+                                              self.remove_material_button),
+            self.assign_button]))
         layout.addWidget(Container(widgets=[self.depth_spin, self.scale_spin]).native)
-        layout.addWidget(self.box_table, 1)
-        layout.addWidget(self.summary.native)
-        layout.addWidget(side_by_side(self.import_button, self.export_button))
         layout.addWidget(group("From a ground truth", [Container(widgets=[
             self.truth_combo, self.per_material_spin, self.truth_button]).native]))
         layout.addWidget(self.tasks)
+        layout.addWidget(self.summary.native)      # the check's result above the fold
+        layout.addWidget(self.box_table, 1)
+        layout.addWidget(side_by_side(self.import_button, self.export_button))
+        fit_dock(self)
         self.material_table.edited.connect(self._store_materials)
         self.material_table.itemSelectionChanged.connect(self._on_current_material)
         self.depth_spin.changed.connect(self._on_depth_changed)

@@ -30,7 +30,7 @@ from ..simulate._adapt import P1_GROWTH
 from ..simulate._remesh import mesh_refine, needs_remesh, remesh
 from ._clip_panel import ClipPanel
 from ._conductivity_table import Conductivity, ConductivityTable, parse_conductivity
-from ._dock import scroll_body, side_by_side, wrapped_label
+from ._dock import fit_dock, scroll_body, side_by_side, wrapped_label
 from ._layers import MESH_KEY, layer_picker, pick
 from ._plots import ThemedFigure
 from ._report_panel import ReportPanel, classification_signatures, fill_table
@@ -115,9 +115,10 @@ class SimulateWidget(QWidget):
         layout.addWidget(self.mesh_note.native)
         layout.addWidget(QLabel("k_eff along (x = column, y = row, z = plane)"))
         layout.addWidget(side_by_side(*self.axis_boxes.values()))
-        layout.addWidget(Container(widgets=[self.show_combo, self.run_button]).native)
+        layout.addWidget(self.run_button.native)
         layout.addWidget(self.tasks)
-        layout.addWidget(self.summary.native)
+        layout.addWidget(self.summary.native)      # k_eff next to the button
+        layout.addWidget(Container(widgets=[self.show_combo]).native)
         layout.addWidget(self.tensor_table)
         layout.addWidget(self.plot, 1)
         self.clip_box = self.clip.widget()
@@ -125,6 +126,7 @@ class SimulateWidget(QWidget):
         self.report_box = self.report.widget()
         layout.addWidget(self.report_box)
         layout.addWidget(self.export_button.native)
+        fit_dock(self)
         self.mesh_combo.changed.connect(self._on_mesh_changed)
         self.labels_combo.changed.connect(self._on_labels_changed)
         for control in (self.protocol_combo, self.refine_spin, self.order_combo):
