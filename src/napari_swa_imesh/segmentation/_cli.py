@@ -24,6 +24,10 @@ def add_commands(subparsers) -> None:
     p.add_argument("image")
     p.add_argument("--samples", required=True, help="samples JSON (see README)")
     p.add_argument("--max-scale", type=int, default=None)
+    p.add_argument("--method", default="recommended", choices=["recommended", "reference"],
+                   help="the segment method the suggestion must train (default recommended: "
+                        "windows of 2^j + 1 px inside a box of every material; reference: "
+                        "enough full tiles of 2^j px)")
     p.add_argument("--plot", default=None, help="write the Figure 2.14-style plot (PNG/PDF/SVG)")
     p.add_argument("--gray", action="store_true", help="convert an RGB picture to grey")
     p.add_argument("--force", action="store_true", help="replace an existing plot file")
@@ -148,8 +152,10 @@ def _run_res(args: argparse.Namespace) -> int:
             image, _ = read_image(args.image, gray=args.gray)
         samples = load_samples(args.samples)
     with timer("res"):
-        stats = (res_statistics_of_boxes(image, samples, max_scale=args.max_scale) if lazy
-                 else res_statistics(image, samples, max_scale=args.max_scale))
+        stats = (res_statistics_of_boxes(image, samples, max_scale=args.max_scale,
+                                         method=args.method) if lazy
+                 else res_statistics(image, samples, max_scale=args.max_scale,
+                                     method=args.method))
     if args.plot:
         with timer("plot"):
             write_figure(plot_res(stats), args.plot, force=args.force)
@@ -163,14 +169,28 @@ def _run_res(args: argparse.Namespace) -> int:
 
 
 def _res_text(stats) -> str:
+    need = 1 << stats.ndim
     lines = [f"suggested RES: {stats.suggested_scale}  ({stats.reason})"]
+    short = False
     for i, name in enumerate(stats.names):
         lines.append(f"{name} (label {stats.materials[i]}), own RES "
                      f"{stats.material_res.get(stats.materials[i])}:")
         lines.append("  scale  tiles      mean(mean)   mean(var)   std(mean)")
         for j in stats.scales:
-            lines.append(f"  {j:5d} {stats.n_tiles[i, j]:6d} {stats.mean[i, j, 0]:12.5g} "
-                         f"{stats.mean[i, j, 1]:11.5g} {stats.std[i, j, 0]:11.5g}")
+            values = (stats.mean[i, j, 0], stats.mean[i, j, 1], stats.std[i, j, 0])
+            if stats.n_tiles[i, j] < need:     # too few tiles for statistics across tiles
+                short = True
+                cells = f"{'-':>12} {'-':>11} {'-':>11}  (*)"
+            else:
+                cells = f"{values[0]:12.5g} {values[1]:11.5g} {values[2]:11.5g}"
+            lines.append(f"  {j:5d} {stats.n_tiles[i, j]:6d} {cells}")
+    if short:
+        lines.append(f"(*) fewer than 2^d = {need} full tiles in the material's boxes at this "
+                     "scale: too few to say how tiles vary, so no statistics (draw larger or "
+                     "more boxes to see this scale).")
+    lines.append("columns: mean(mean) and mean(var) average each tile's mean and variance; "
+                 "std(mean) is how much the tile means differ. RES: representative "
+                 "elementary scale, where these stop changing with the tile size 2^j px.")
     return "\n".join(lines)
 
 

@@ -151,7 +151,9 @@ class SegmentationResult:
                      f"{model.feature_set} + {model.classifier_name.upper()}"]
         if self.eps_l is not None:
             lines.append(f"eps_l = {self.eps_l:.2f}% ({model.scores.get('eps_l_method')}), "
-                         f"eps_m = {self.eps_m:.3f}")
+                         f"eps_m = {self.eps_m:.3f} (= -#F x eps_l / 100 with #F = "
+                         f"{len(model.feature_names)} features, eq. 2.35: the error charged "
+                         f"for the feature count)")
         if model.scores.get("eps_blocked") is not None:
             lines.append(f"blocked CV error = {model.scores['eps_blocked']:.2f}% "
                          f"({model.scores['eps_blocked_method']})")
@@ -296,7 +298,7 @@ def _reference_steps(img, samples, *, scale, feature_set, classifier, sieve, mod
     if model is None:
         if scale is None:
             yield 0, STEPS, "tile statistics against scale (RES)"
-            res = res_statistics_unchecked(img, samples)
+            res = res_statistics_unchecked(img, samples, method="reference")
             scale = res.suggested_scale
             if scale is None:
                 raise ValueError(
