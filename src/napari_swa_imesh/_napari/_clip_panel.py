@@ -69,7 +69,10 @@ class ClipPanel:
     def widget(self) -> "QGroupBox":
         """The controls in a titled box."""
         controls = Container(widgets=[self.axis_combo, self.keep_combo, self.position_slider])
-        return group("see inside", [self.enable_box, controls, self.status.native])
+        box = group("see inside", [self.enable_box, controls, self.status.native])
+        # the throttle timer dies with the controls: it never fires into a deleted widget
+        self.timer.setParent(box)
+        return box
 
     # -- state -----------------------------------------------------------------------------
     @property

@@ -20,6 +20,7 @@ from ..mesh import (MeshClipper, check_mesh, mesh_labels, mesh_surface, quality_
 from ..mesh._export import MESH_SUFFIXES
 from ._clip_panel import ClipPanel
 from ._dock import scroll_body, wrapped_label
+from ._help import explain_terms
 from ._layers import (
     MESH_KEY,
     default_color,
@@ -189,6 +190,7 @@ class MeshWidget(QWidget):
         self.mesh_button.changed.connect(self.run_mesh)
         self.export_button.changed.connect(self._on_export_clicked)
         self._refresh_materials()
+        explain_terms(self)
 
     @property
     def figure(self) -> "Figure":

@@ -10,7 +10,9 @@ no widget repeats a library's step count. The generator runs in a worker thread;
 result is handed to a callback in the main thread, the only place where layers are created
 or changed.
 Cancel asks the worker to stop at the next step boundary (a library call that is running
-finishes first), and then no result callback runs.
+finishes first), and then no result callback runs. When the panel is destroyed (its widget
+closed, or the viewer closed while a computation runs) the worker is asked to stop the same
+way and cut off from every callback, so nothing it reports later reaches a deleted widget.
 """
 
 from __future__ import annotations
@@ -46,6 +48,19 @@ def notify_info(message: str) -> None:
     from napari.utils.notifications import show_info
 
     show_info(message)
+
+
+def _orphan(running: list) -> None:
+    """Stop the worker of a destroyed panel at its next step and cut it off from the
+    panel's callbacks (napari's own progress bar stays connected and closes itself)."""
+    for worker, connections in running:
+        worker.quit()
+        for signal, slot in connections:
+            try:
+                signal.disconnect(slot)
+            except (RuntimeError, TypeError):       # already gone
+                pass
+    running.clear()
 
 
 def _relay(steps: Steps):
@@ -105,6 +120,9 @@ class TaskPanel(QWidget):
         layout.setContentsMargins(0, 0, 0, 0)
         layout.addLayout(row)
         layout.addWidget(self.status)
+        # a plain holder, not self: the slot runs when the Qt side is already gone
+        self._running: list = []
+        self.destroyed.connect(lambda *_, running=self._running: _orphan(running))
 
     @property
     def busy(self) -> bool:
@@ -146,13 +164,16 @@ class TaskPanel(QWidget):
         self.progress_bar.setFormat(f"{title}: %v/%m")
         self.status.setText(f"{title}: starting")
         self.cancel_button.setEnabled(True)
-        worker.yielded.connect(self._on_yielded)
-        # napari also shows them as notifications; kept here so widgets can say them too
-        worker.warned.connect(self._on_warned)
-        worker.returned.connect(lambda result: self._on_returned(result, on_result))
-        worker.errored.connect(self._on_errored)
-        worker.aborted.connect(lambda: self._on_aborted(on_cancel))
-        worker.finished.connect(self._on_finished)
+        # napari also shows warnings as notifications; kept here so widgets can say them too
+        connections = [
+            (worker.yielded, self._on_yielded), (worker.warned, self._on_warned),
+            (worker.returned, lambda result: self._on_returned(result, on_result)),
+            (worker.errored, self._on_errored),
+            (worker.aborted, lambda: self._on_aborted(on_cancel)),
+            (worker.finished, self._on_finished)]
+        for signal, slot in connections:
+            signal.connect(slot)
+        self._running[:] = [(worker, connections)]
         self.busy_changed.emit(True)
         worker.start()
         return worker
@@ -211,5 +232,6 @@ class TaskPanel(QWidget):
 
     def _on_finished(self) -> None:
         self.worker = None
+        self._running.clear()
         self.cancel_button.setEnabled(False)
         self.busy_changed.emit(False)
