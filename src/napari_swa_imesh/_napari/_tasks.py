@@ -50,19 +50,6 @@ def notify_info(message: str) -> None:
     show_info(message)
 
 
-def _orphan(running: list) -> None:
-    """Stop the worker of a destroyed panel at its next step and cut it off from the
-    panel's callbacks (napari's own progress bar stays connected and closes itself)."""
-    for worker, connections in running:
-        worker.quit()
-        for signal, slot in connections:
-            try:
-                signal.disconnect(slot)
-            except (RuntimeError, TypeError):       # already gone
-                pass
-    running.clear()
-
-
 def _relay(steps: Steps):
     """Worker body: run the steps generator, passing its reports and result through."""
     return (yield from steps())
@@ -120,9 +107,7 @@ class TaskPanel(QWidget):
         layout.setContentsMargins(0, 0, 0, 0)
         layout.addLayout(row)
         layout.addWidget(self.status)
-        # a plain holder, not self: the slot runs when the Qt side is already gone
-        self._running: list = []
-        self.destroyed.connect(lambda *_, running=self._running: _orphan(running))
+        self._callbacks: tuple = (None, None)     # on_result, on_cancel of the running task
 
     @property
     def busy(self) -> bool:
@@ -164,16 +149,18 @@ class TaskPanel(QWidget):
         self.progress_bar.setFormat(f"{title}: %v/%m")
         self.status.setText(f"{title}: starting")
         self.cancel_button.setEnabled(True)
-        # napari also shows warnings as notifications; kept here so widgets can say them too
-        connections = [
-            (worker.yielded, self._on_yielded), (worker.warned, self._on_warned),
-            (worker.returned, lambda result: self._on_returned(result, on_result)),
-            (worker.errored, self._on_errored),
-            (worker.aborted, lambda: self._on_aborted(on_cancel)),
-            (worker.finished, self._on_finished)]
-        for signal, slot in connections:
-            signal.connect(slot)
-        self._running[:] = [(worker, connections)]
+        # only bound methods of this QObject: Qt drops them when the panel is destroyed
+        # (its dock closed, or the viewer closed while a computation runs), so nothing
+        # the worker reports later reaches a deleted widget; the worker is asked to stop
+        self._callbacks = (on_result, on_cancel)
+        worker.yielded.connect(self._on_yielded)
+        # napari also shows them as notifications; kept here so widgets can say them too
+        worker.warned.connect(self._on_warned)
+        worker.returned.connect(self._on_returned)
+        worker.errored.connect(self._on_errored)
+        worker.aborted.connect(self._on_aborted)
+        worker.finished.connect(self._on_finished)
+        self.destroyed.connect(worker.quit)
         self.busy_changed.emit(True)
         worker.start()
         return worker
@@ -206,7 +193,8 @@ class TaskPanel(QWidget):
         if message not in self.warnings:
             self.warnings.append(message)
 
-    def _on_returned(self, result, on_result) -> None:
+    def _on_returned(self, result) -> None:
+        on_result = self._callbacks[0]
         try:
             on_result(result)
         except Exception as exc:  # a result the widget cannot show must still reach the user
@@ -224,14 +212,19 @@ class TaskPanel(QWidget):
         self.status.setText(message)
         notify_error(message)
 
-    def _on_aborted(self, on_cancel) -> None:
+    def _on_aborted(self) -> None:
+        on_cancel = self._callbacks[1]
         self.status.setText(f"{self.title}: cancelled")
         notify_info(f"{self.title} cancelled; nothing was changed.")
         if on_cancel is not None:
             on_cancel()
 
     def _on_finished(self) -> None:
+        try:
+            self.destroyed.disconnect(self.worker.quit)
+        except (TypeError, RuntimeError, AttributeError):
+            pass
         self.worker = None
-        self._running.clear()
+        self._callbacks = (None, None)
         self.cancel_button.setEnabled(False)
         self.busy_changed.emit(False)
