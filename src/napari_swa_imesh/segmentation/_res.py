@@ -99,7 +99,8 @@ class ResStatistics:
     def to_dict(self) -> dict:
         """Plain-JSON form (what ``swa-imesh res --json`` prints)."""
         out = {"scales": self.scales.tolist(), "suggested_scale": self.suggested_scale,
-               "reason": self.reason, "method": self.method, "moments": list(MOMENT_NAMES), "materials": []}
+               "reason": self.reason, "method": self.method, "moments": list(MOMENT_NAMES),
+               "materials": []}
         for i, (m, name) in enumerate(zip(self.materials, self.names)):
             out["materials"].append({
                 "label": m, "name": name, "res": self.material_res.get(m),
