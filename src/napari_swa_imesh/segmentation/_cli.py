@@ -134,7 +134,7 @@ def add_commands(subparsers) -> None:
 
 def _run_res(args: argparse.Namespace) -> int:
     from ..io import check_figure_path, is_store, read_image, write_figure
-    from ._res import plot_res, res_statistics, res_statistics_of_boxes
+    from ._res import format_res_table, plot_res, res_statistics, res_statistics_of_boxes
     from ._samples import load_samples
 
     timer = StepTimer()
@@ -162,36 +162,10 @@ def _run_res(args: argparse.Namespace) -> int:
     if args.json:
         print_json({**stats.to_dict(), "plot": args.plot, "seconds": timer.seconds})
     else:
-        print(_res_text(stats))
+        print(format_res_table(stats))
         if args.plot:
             print(f"plot written to {args.plot}")
     return 0
-
-
-def _res_text(stats) -> str:
-    need = 1 << stats.ndim
-    lines = [f"suggested RES: {stats.suggested_scale}  ({stats.reason})"]
-    short = False
-    for i, name in enumerate(stats.names):
-        lines.append(f"{name} (label {stats.materials[i]}), own RES "
-                     f"{stats.material_res.get(stats.materials[i])}:")
-        lines.append("  scale  tiles      mean(mean)   mean(var)   std(mean)")
-        for j in stats.scales:
-            values = (stats.mean[i, j, 0], stats.mean[i, j, 1], stats.std[i, j, 0])
-            if stats.n_tiles[i, j] < need:     # too few tiles for statistics across tiles
-                short = True
-                cells = f"{'-':>12} {'-':>11} {'-':>11}  (*)"
-            else:
-                cells = f"{values[0]:12.5g} {values[1]:11.5g} {values[2]:11.5g}"
-            lines.append(f"  {j:5d} {stats.n_tiles[i, j]:6d} {cells}")
-    if short:
-        lines.append(f"(*) fewer than 2^d = {need} full tiles in the material's boxes at this "
-                     "scale: too few to say how tiles vary, so no statistics (draw larger or "
-                     "more boxes to see this scale).")
-    lines.append("columns: mean(mean) and mean(var) average each tile's mean and variance; "
-                 "std(mean) is how much the tile means differ. RES: representative "
-                 "elementary scale, where these stop changing with the tile size 2^j px.")
-    return "\n".join(lines)
 
 
 def _check_segment_args(args: argparse.Namespace) -> None:

@@ -42,7 +42,7 @@ from ._samples import BoxCrops, Samples, check_box_contrast, check_contrast
 
 __all__ = ["ResStatistics", "res_statistics", "res_statistics_unchecked", "suggest_res",
            "plot_res", "plot_res_scales", "MOMENT_NAMES", "box_tile_moments",
-           "trainable_scale", "METHODS"]
+           "trainable_scale", "METHODS", "format_res_table"]
 
 METHODS = ("recommended", "reference")    # the classifiers a suggestion can be capped for
 
@@ -260,7 +260,7 @@ def trainable_scale(samples: Samples, ndim: int, scale: int, *,
     >>> s = Samples.from_dict({"boxes": [{"label": 1, "start": [0, 0], "stop": [64, 64]},
     ...                                  {"label": 2, "start": [0, 0], "stop": [8, 40]}]})
     >>> trainable_scale(s, 2, 4)[0], trainable_scale(s, 2, 4, method="reference")[0]
-    (2, 1)
+    (2, 3)
     """
     if method == "recommended":
         limit = samples.window_limit(int(scale))
@@ -340,6 +340,35 @@ def suggest_res(stats: ResStatistics, *, change_tol: float = 0.1, spread_tol: fl
                                     "training tiles."))
         scale = cap
     return int(scale), material_res, reason
+
+
+def format_res_table(stats: ResStatistics) -> str:
+    """The table ``swa-imesh res`` prints: the suggestion and its reason, then per material
+    and scale the tiles, mean(mean), mean(var) and std(mean); a scale with fewer than 2^d
+    tiles shows ``-`` and a footnote says why, never a bare NaN."""
+    need = 1 << stats.ndim
+    lines = [f"suggested RES: {stats.suggested_scale}  ({stats.reason})"]
+    short = False
+    for i, name in enumerate(stats.names):
+        lines.append(f"{name} (label {stats.materials[i]}), own RES "
+                     f"{stats.material_res.get(stats.materials[i])}:")
+        lines.append("  scale  tiles      mean(mean)   mean(var)   std(mean)")
+        for j in stats.scales:
+            values = (stats.mean[i, j, 0], stats.mean[i, j, 1], stats.std[i, j, 0])
+            if stats.n_tiles[i, j] < need:     # too few tiles for statistics across tiles
+                short = True
+                cells = f"{'-':>12} {'-':>11} {'-':>11}  (*)"
+            else:
+                cells = f"{values[0]:12.5g} {values[1]:11.5g} {values[2]:11.5g}"
+            lines.append(f"  {j:5d} {stats.n_tiles[i, j]:6d} {cells}")
+    if short:
+        lines.append(f"(*) fewer than 2^d = {need} full tiles in the material's boxes at this "
+                     "scale: too few to say how tiles vary, so no statistics (draw larger or "
+                     "more boxes to see this scale).")
+    lines.append("columns: mean(mean) and mean(var) average each tile's mean and variance; "
+                 "std(mean) is how much the tile means differ. RES: representative "
+                 "elementary scale, where these stop changing with the tile size 2^j px.")
+    return "\n".join(lines)
 
 
 def plot_res(stats: ResStatistics, *, figure=None, selected_scale: int | None = None,
