@@ -120,6 +120,7 @@ class SegmentationResult:
             "eps_blocked_method": self.model.scores.get("eps_blocked_method"),
             "regularized": self.model.scores.get("regularized"),
             "suggested_scale": None if self.res is None else self.res.suggested_scale,
+            "suggested_reason": None if self.res is None else self.res.reason,
             "signatures": self.signatures, "seconds": self.seconds, "notes": self.notes,
         }
         if self.method == RECOMMENDED_METHOD:
@@ -149,6 +150,10 @@ class SegmentationResult:
         else:
             lines = [f"reference method: scale {self.scale} (tiles of {1 << self.scale} px), "
                      f"{model.feature_set} + {model.classifier_name.upper()}"]
+        if self.res is not None and " Capped at " in self.res.reason:
+            # the boxes, not the statistics, set the scale: say which box to enlarge
+            lines.append("suggested RES: c" + self.res.reason[self.res.reason.index("Capped")
+                                                               + 1:])
         if self.eps_l is not None:
             lines.append(f"eps_l = {self.eps_l:.2f}% ({model.scores.get('eps_l_method')}), "
                          f"eps_m = {self.eps_m:.3f} (= -#F x eps_l / 100 with #F = "
