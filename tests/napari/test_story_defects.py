@@ -1,6 +1,5 @@
 """Defects a user met in the GUI (issue 23, sec. 4), each reproduced as the user met it."""
 
-import numpy as np
 from swa_napari_helpers import add_layer_data, wait_idle
 
 from napari_swa_imesh._napari._classify_widget import METHOD_REFERENCE

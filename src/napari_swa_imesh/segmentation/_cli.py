@@ -8,6 +8,7 @@ from pathlib import Path
 import numpy as np
 
 from .._cli_util import StepTimer, print_json
+from .._glossary import define
 from ..io import check_writable
 # re-exported for the classify widget until it imports them from the library
 from ._signatures import signatures_csv_text
@@ -20,7 +21,9 @@ def add_commands(subparsers) -> None:
     p = subparsers.add_parser(
         "res", help="tile-moment statistics against scale and the suggested RES",
         description="Print (and plot) the statistics of tile moments per material against "
-                    "scale, and the suggested representative elementary scale.")
+                    "scale, and the suggested representative elementary scale, capped at "
+                    "the largest scale the --method classifier trains at on these boxes. "
+                    f"RES: {define('RES')}")
     p.add_argument("image")
     p.add_argument("--samples", required=True, help="samples JSON (see README)")
     p.add_argument("--max-scale", type=int, default=None)
@@ -36,7 +39,8 @@ def add_commands(subparsers) -> None:
 
     p = subparsers.add_parser(
         "segment", help="classify the image into a full-resolution label image",
-        description="Segment an image with SWA, fitted on sample boxes (or a saved model). "
+        description=f"SWA: {define('SWA')} "
+                    "Segment an image with SWA, fitted on sample boxes (or a saved model). "
                     "Default: the recommended method (multi-scale per-pixel statistics, "
                     "coarse-to-fine at boundaries, MRF, bias correction); --method reference "
                     "for the reference's tiles at one scale, feature set and classifier.")
