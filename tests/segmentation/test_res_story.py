@@ -6,6 +6,8 @@ import warnings
 
 import numpy as np
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 from napari_swa_imesh.cli import main
 from napari_swa_imesh.segmentation import segment
@@ -108,3 +110,21 @@ def test_cli_glossary_defines_eps_m_as_the_spec_does(capsys):
     assert "-#F x eps_l / 100" in capsys.readouterr().out
     assert main(["glossary", "nope"]) == 2
     assert "not in the glossary" in capsys.readouterr().err
+
+
+@settings(max_examples=40, deadline=None)
+@given(sides=st.lists(st.tuples(st.integers(2, 40), st.integers(2, 40)), min_size=2,
+                      max_size=4),
+       method=st.sampled_from(["recommended", "reference"]))
+def test_the_suggestion_always_trains(sides, method):
+    """Whatever the boxes, the suggested RES is one the method trains at unchanged."""
+    rng = np.random.default_rng(len(sides))
+    img = rng.gamma(2.0, 1.0, (48, 48 * len(sides)))
+    img += np.repeat(np.arange(len(sides)) * 3.0, 48)[None, :]
+    boxes = [{"label": i + 1, "start": [0, 48 * i], "stop": [r, 48 * i + c]}
+             for i, (r, c) in enumerate(sides)]
+    s = Samples.from_dict({"boxes": boxes})
+    st_ = res_statistics(img, s, method=method)
+    if st_.suggested_scale is not None:
+        assert trainable_scale(s, 2, st_.suggested_scale, method=method) == (
+            st_.suggested_scale, None)
