@@ -62,3 +62,14 @@ def test_demo_runs_the_whole_pipeline_and_refuses_to_overwrite(tmp_path):
     assert again.returncode == 2
     assert again.stderr.count("\n") == 1 and "--force" in again.stderr
     assert _snapshot(out) == before
+
+    # the text output defines the jargon it prints (eps_m is charged for the feature count)
+    text = _demo("--force", cwd=tmp_path)
+    assert text.returncode == 0, text.stderr
+    printed, terms = text.stdout.split("\nterms:\n")
+    from napari_swa_imesh._glossary import define, terms_in
+
+    assert {"eps_l", "eps_m", "k_eff", "radius-to-edge ratio"} <= set(terms_in(printed))
+    for term in terms_in(printed):
+        assert f"{term}: {define(term)}" in terms
+    assert "eps_m = " in printed and "-#F x eps_l / 100" in printed

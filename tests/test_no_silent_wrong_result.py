@@ -127,8 +127,15 @@ def test_case2_automatic_scale_is_capped_with_a_warning(tmp_path, capsys):
                          tmp_path / "s.json", "--method", "reference", "-o",
                          tmp_path / "l.npy", "--json")
     assert code == 0
-    assert "warning:" in err and "box #1" in err
-    assert json.loads(out)["scale"] <= 1
+    report = json.loads(out)
+    assert report["scale"] <= 1
+    # the suggested RES is already capped to what the boxes train (nothing is lowered
+    # later, so no warning): the output says so and names the box to enlarge
+    assert "Capped at" in report["suggested_reason"] and "box #1" in report["suggested_reason"]
+    code, out, _ = run(capsys, "segment", tmp_path / "img.npy", "--samples",
+                       tmp_path / "s.json", "--method", "reference", "-o",
+                       tmp_path / "l2.npy")
+    assert code == 0 and "suggested RES: capped at" in out and "box #1" in out
 
 
 # -- 3. constant image ---------------------------------------------------------------------

@@ -13,6 +13,7 @@ import time
 from pathlib import Path
 
 from ._cli_util import print_json
+from ._glossary import glossary_text, terms_in
 
 __all__ = ["add_command", "run_demo"]
 
@@ -113,20 +114,25 @@ def run_demo(args) -> int:
     if args.json:
         print_json(summary)
         return 0
-    print(f"texture mosaic ({args.layout}) of {', '.join(textures)}: trained on the photos' "
-          f"top halves, tested on their bottom halves")
-    print(result.describe(notes=False))        # warnings were shown as they came
-    print("Dice: " + ", ".join(f"{textures[m - 1]} {d:.3f}" for m, d in ev["dice"].items())
-          + f"  (mean {ev['mean_dice']:.3f})")
+    lines: list[str] = []
+    say = lines.append
+    say(f"texture mosaic ({args.layout}) of {', '.join(textures)}: trained on the photos' "
+        f"top halves, tested on their bottom halves")
+    say(result.describe(notes=False))        # warnings were shown as they came
+    say("Dice: " + ", ".join(f"{textures[m - 1]} {d:.3f}" for m, d in ev["dice"].items())
+        + f"  (mean {ev['mean_dice']:.3f})")
     if "mesh" in summary:
         m = summary["mesh"]
-        print(f"mesh: {m['elements']} triangles, {m['vertices']} vertices, worst "
-              f"radius-to-edge {m['worst_ratio']:.3f}, checks "
-              f"{'passed' if m['checks_passed'] else 'FAILED'}")
+        say(f"mesh: {m['elements']} triangles, {m['vertices']} vertices, worst "
+            f"radius-to-edge {m['worst_ratio']:.3f}, checks "
+            f"{'passed' if m['checks_passed'] else 'FAILED'}")
     if "simulate" in summary:
         sim = summary["simulate"]
-        print("k_eff (brick 1, grass 10): " + ", ".join(
+        say("k_eff (brick 1, grass 10): " + ", ".join(
             f"{a} = {k:.4f} (Reuss {sim['bounds'][a][0]:.3f} .. Voigt {sim['bounds'][a][1]:.3f})"
             for a, k in sim["k_eff"].items()) + f"; {sim['choice']}, {sim['dofs']} unknowns")
+    print("\n".join(lines))
+    print("terms:\n" + "\n".join(f"  {line}" for line in glossary_text(
+        terms_in("\n".join(lines))).splitlines()))
     print(f"files in {out}/: {', '.join(DEMO_FILES)}")
     return 0

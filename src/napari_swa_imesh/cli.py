@@ -26,6 +26,7 @@ COMMAND_MODULES = {
     ".mesh._cli": ("mesh", "bounds"),
     ".simulate._cli": ("simulate",),
     "._demo": ("demo",),
+    "._glossary": ("glossary",),
 }
 
 
@@ -35,6 +36,7 @@ def build_parser(command: str | None = None) -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(
         prog="swa-imesh",
         description="Image -> SWA segmentation -> IMESH finite-element mesh.",
+        epilog="Terms (SWA, IMESH, RES, eps_l, eps_m, k_eff, ...): swa-imesh glossary.",
     )
     sub = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
     groups = [m for m, names in COMMAND_MODULES.items() if command in names]

@@ -167,5 +167,5 @@ def test_library_warnings_of_a_run_reach_the_panel(mosaic_viewer, qtbot, monkeyp
     wait_idle(qtbot, flow.classify)
     assert flow.classify.result is not None
     note = flow.classify.scale_note.value
-    assert note.startswith("Last run used scale 3: scale 3, set in this panel")
+    assert note.startswith("Last run: tiles of scale 3: scale 3, set in this panel")
     assert "scale capped at 3: the largest box of 'grass' is 16x80 px" in note

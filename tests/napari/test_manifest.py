@@ -25,7 +25,14 @@ def test_npe2_discovers_and_validates_the_manifest():
     assert {c.rsplit(".", 1)[1] for c in widget_commands} == {
         f"{w}_widget" for w in ("workflow", "samples", "res", "classify", "mesh", "simulate")}
     segment_menu = [item.command for item in contributions.menus["napari/layers/segment"]]
-    assert segment_menu == ["napari-swa-imesh.workflow_widget"]
+    assert segment_menu == [f"napari-swa-imesh.{w}_widget"
+                            for w in ("workflow", "samples", "res", "classify")]
+    measure_menu = [item.command for item in contributions.menus["napari/layers/measure"]]
+    assert measure_menu == ["napari-swa-imesh.mesh_widget", "napari-swa-imesh.simulate_widget"]
+    readers = {r.command.rsplit(".", 1)[1]: set(r.filename_patterns)
+               for r in contributions.readers}
+    assert readers["get_tiff_reader"] == {"*.tif", "*.tiff"}
+    assert {"*.vtu", "*.msh"} <= readers["get_mesh_reader"]
     assert {s.key for s in contributions.sample_data} == {"texture_mosaic", "tissue_phantom"}
     (writer,) = contributions.writers
     assert writer.layer_types == ["surface"]

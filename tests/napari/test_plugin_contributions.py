@@ -40,7 +40,18 @@ def test_widgets_in_the_plugins_menu_and_the_workflow_under_layers_segment(make_
         return out
 
     segment = commands("napari/layers/segment")
-    assert f"{PLUGIN}.workflow_widget" in segment
+    assert {f"{PLUGIN}.{w}_widget" for w in ("workflow", "samples", "res", "classify")} \
+        <= segment
+    assert {f"{PLUGIN}.mesh_widget", f"{PLUGIN}.simulate_widget"} <= commands(
+        "napari/layers/measure")
+    # and they are in the window's own Layers menu, where a user looks
+    layers = next(a.menu() for a in viewer.window._qt_window.menuBar().actions()
+                  if a.text().replace("&", "") == "Layers")
+    shown = {(sub.text(), a.text()) for sub in layers.actions() if sub.menu()
+             for a in sub.menu().actions()}
+    assert {("Segment", "Segment and mesh (SWA-IMESH)"), ("Segment", "Classify (SWA) (SWA-IMESH)"),
+            ("Measure", "Mesh (IMESH) (SWA-IMESH)"),
+            ("Measure", "Simulate (k_eff) (SWA-IMESH)")} <= shown
     plugins = commands("napari/plugins")
     assert {f"{PLUGIN}.{w}_widget" for w in ("workflow", "samples", "res", "classify",
                                             "mesh", "simulate")} <= plugins

@@ -170,15 +170,15 @@ def test_classify_after_a_box_change_uses_the_current_suggested_res(mosaic_viewe
     layer.selected_data = set(range(0, len(layer.data), 2))
     layer.remove_selected()
     current = flow.samples.current_samples()
-    expected = res_statistics(image.data, current).suggested_scale
+    expected = res_statistics(image.data, current, method="reference").suggested_scale
     assert expected != 2       # otherwise the test could not tell the two apart
 
     flow.classify.classify()
     wait_idle(qtbot, flow.classify)
     assert flow.classify.result.scale == expected
     note = flow.classify.scale_note.value
-    assert note.startswith(f"Last run used scale {expected}: the suggested RES of the "
-                           "current sample boxes")
+    assert note.startswith(f"Last run: tiles of scale {expected}: the suggested RES of "
+                           f"these boxes, {expected}.")
     assert any("classifying at the suggested RES" in w and "scale 2" in w
                for w in notifications.messages("warning"))
     assert not notifications.errors

@@ -22,6 +22,7 @@ from ..segmentation import (
 from . import _samples_layer as sl
 from ._chunked_classify import add_lazy_labels, chunked_steps, lazy_level0
 from ._dock import Fold, button, fit_dock, scroll_body, side_by_side, wrapped_label
+from ._help import explain_terms
 from ._layers import (
     AFFINE_KEY,
     block_affine,
@@ -141,6 +142,7 @@ class ClassifyWidget(QWidget):
         self.image_combo.changed.connect(self._on_layers_changed)
         self._on_samples_layer_selected()
         self._on_method_changed()
+        explain_terms(self)
 
     def _on_method_changed(self, *_) -> None:
         # feature set and classifier belong to the reference method only
@@ -312,14 +314,29 @@ class ClassifyWidget(QWidget):
                               on_result=show)
 
     def _show_scale_used(self, result, samples, source: str, window: str | None) -> None:
-        """After a run: the scale used, where it came from, and every warning about it."""
+        """After a run: which scales ran, why, and every warning about them, once each."""
         self._dropped_scale = None
-        used = result.scale
-        text = f"Last run used scale {used}: {source}."
-        later = window or self.window_warning(samples, used)
-        notes = ([later] if later else []) + [w for w in self.tasks.warnings if w != later]
+        if result.res is not None and result.res.suggested_scale is not None \
+                and source.startswith("the suggested RES"):
+            source = f"the suggested RES of these boxes, {result.res.suggested_scale}"
+        if result.method == "recommended":
+            top = result.model.scores.get("top_scale")
+            text = (f"Last run: labels from scales {', '.join(map(str, result.scales))}; "
+                    f"coarse scale {result.scale} picked by cross-validation"
+                    + (f" among 0..{top}" if top is not None else "")
+                    + f". Largest scale asked: {source}.")
+        else:
+            text = f"Last run: tiles of scale {result.scale}: {source}."
+        later = window or self.window_warning(samples, result.scale)
+        notes: list[str] = []
+        for note in ([later] if later else []) + list(self.tasks.warnings):
+            note = note.rstrip(".")
+            # the fit's warning repeats the panel's sentence and adds what it did: keep one
+            notes = [n for n in notes if n not in note]
+            if not any(note in n for n in notes):
+                notes.append(note)
         if notes:
-            text += " Warning: " + " ".join(n.rstrip(".") + "." for n in notes)
+            text += " Warning: " + " ".join(n + "." for n in notes)
         self.scale_note.value = text
 
     def apply_model(self):

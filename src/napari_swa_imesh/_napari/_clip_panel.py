@@ -65,7 +65,10 @@ class ClipPanel:
     def widget(self) -> Fold:
         """The controls in a section that folds away (folded to start with)."""
         controls = Container(widgets=[self.axis_combo, self.keep_combo, self.position_slider])
-        return Fold("see inside", [self.enable_box, controls, self.status.native])
+        box = Fold("see inside", [self.enable_box, controls, self.status.native])
+        # the throttle timer dies with the controls: it never fires into a deleted widget
+        self.timer.setParent(box)
+        return box
 
     # -- state -----------------------------------------------------------------------------
     @property

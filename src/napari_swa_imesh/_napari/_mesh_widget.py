@@ -20,6 +20,7 @@ from ..mesh import (MeshClipper, check_mesh, mesh_labels, mesh_surface, quality_
 from ..mesh._export import MESH_SUFFIXES
 from ._clip_panel import ClipPanel
 from ._dock import fit_dock, scroll_body, wrapped_label
+from ._help import explain_terms
 from ._layers import (
     MESH_KEY,
     default_color,
@@ -87,6 +88,22 @@ def bound_label(mesh: "Mesh") -> str:
     if mesh.info.get("method", "template") != "template":
         return f"template bound, {voxels} ({mesh.info['method']} proves none)"
     return f"IMESH bound, {voxels}"
+
+
+def text_overlay(viewer):
+    """The viewer's canvas text overlay (``canvas.overlays.text`` from napari 0.9)."""
+    canvas = getattr(viewer, "canvas", None)
+    overlays = getattr(canvas, "overlays", None)
+    return overlays["text"] if overlays is not None and "text" in overlays \
+        else viewer.text_overlay
+
+
+def quality_legend(mesh: "Mesh", lo: float, hi: float, worst: float) -> str:
+    """The canvas text that goes with the quality colour bar: scale, bound and worst."""
+    holds = "within" if worst <= hi + 1e-9 else "ABOVE"
+    return (f"colour: radius-to-edge ratio of each face's worse element, {lo:.3f} (best) "
+            f"to {max(hi, worst):.3f}; {bound_label(mesh)}: <= {hi:.3f}; worst element "
+            f"{worst:.3f} ({holds} the bound)")
 
 
 def _labels_present(data: np.ndarray) -> list[int]:
@@ -191,6 +208,7 @@ class MeshWidget(QWidget):
         self.mesh_button.changed.connect(self.run_mesh)
         self.export_button.changed.connect(self._on_export_clicked)
         self._refresh_materials()
+        explain_terms(self)
 
     @property
     def figure(self) -> "Figure":
@@ -348,6 +366,7 @@ class MeshWidget(QWidget):
             materials = np.unique(mesh.material)
             table = np.stack([transform_color(default_color(m))[0] for m in materials])
             layer.vertex_colors = table[np.searchsorted(materials, values["material"])]
+            self._show_legend(None)
         else:
             # limits of the whole mesh, so colours keep their meaning as the clip moves
             lo, hi = bound_range(mesh.ndim, mesh.spacing, _subdivided(mesh))
@@ -358,6 +377,22 @@ class MeshWidget(QWidget):
                 layer.vertex_values = values["quality"]
             layer.colormap = "turbo"
             layer.contrast_limits = [lo, max(hi, worst) + 1e-9]
+            self._show_legend(quality_legend(mesh, lo, hi, worst))
+
+    def _show_legend(self, text: str | None) -> None:
+        """The colour bar of the quality colouring on the canvas, and its bound as text
+        (None: hide both, e.g. when coloured by material)."""
+        layer = self.surface_layer
+        colorbar = getattr(layer, "colorbar", None)     # napari >= 0.6 draws one per layer
+        if colorbar is not None:
+            colorbar.visible = text is not None
+        overlay = text_overlay(self.viewer)
+        if text is not None:
+            overlay.text, overlay.visible = text, True
+            overlay.position, overlay.font_size = "bottom_left", 10
+            self._legend_text = text
+        elif overlay.text == getattr(self, "_legend_text", None):   # ours: take it away
+            overlay.text, overlay.visible = "", False
 
     def _show_summary(self, mesh: "Mesh", checks, n_faces: int) -> None:
         info = mesh.info

@@ -1,4 +1,16 @@
-"""Reader for NIfTI volumes (.nii, .nii.gz): every voxel where the file's affine puts it.
+"""Readers: NIfTI and TIFF images with their voxel spacing, and meshes back as Surfaces.
+
+TIFF (.tif, .tiff): the voxel spacing the command line reads (:func:`..io.read_image`:
+ImageJ ``spacing`` and resolution tags, OME physical sizes) becomes the layer's ``scale``,
+so the sample boxes, the mesh and the simulation are in the file's units, as from the
+command line.
+
+Meshes (every suffix :func:`..mesh.write_mesh` writes): the boundary and material-interface
+faces as a Surface layer whose vertex values are the material (coloured with the plugin's
+material colours), the real mesh (tetrahedra in 3-D) in the layer's metadata, so the
+Simulate tab runs on it and napari's Save writes it again.
+
+NIfTI (.nii, .nii.gz): every voxel where the file's affine puts it.
 
 The layer's ``scale`` is the voxel size per array axis (what the widgets take as spacing)
 and its ``affine`` the rest of the NIfTI affine (rotation, flip, origin); the NIfTI affine
@@ -27,7 +39,11 @@ import numpy as np
 from ._layers import AFFINE_KEY
 
 __all__ = ["get_nifti_reader", "read_nifti", "napari_placement", "looks_like_labels",
-           "LABEL_WORDS", "MAX_LABELS"]
+           "LABEL_WORDS", "MAX_LABELS", "get_tiff_reader", "read_tiff", "get_mesh_reader",
+           "read_mesh_layer", "MESH_READ_SUFFIXES"]
+
+#: Mesh files the mesh reader opens (what the writer writes; .node/.ele as TetGen pairs).
+MESH_READ_SUFFIXES = (".vtu", ".vtk", ".msh", ".xdmf", ".inp", ".node", ".ele")
 
 #: Words of a file name that mark a label volume (BIDS ``dseg``, FreeSurfer ``aseg``...).
 LABEL_WORDS = frozenset({"seg", "dseg", "segmentation", "label", "labels", "mask", "masks",
@@ -121,3 +137,64 @@ def read_nifti(path) -> list[tuple]:
     if looks_like_labels(image, name):
         return [(label_array(image, name=name), kwargs, "labels")]
     return [(image, kwargs, "image")]
+
+
+def get_tiff_reader(path) -> Callable | None:
+    """npe2 reader command: a reader for one TIFF file, else None."""
+    if isinstance(path, (list, tuple)) or not str(path).lower().endswith((".tif", ".tiff")):
+        return None
+    return read_tiff
+
+
+def read_tiff(path) -> list[tuple]:
+    """Read a TIFF as an Image or Labels layer whose ``scale`` is the file's voxel spacing."""
+    from ..io import label_array, read_image
+
+    image, spacing = read_image(path)
+    name = Path(str(path)).stem
+    rgb = image.ndim == 3 and image.shape[-1] in (3, 4) and image.dtype == np.uint8
+    scale = tuple(float(v) for v in spacing)[: image.ndim - 1 if rgb else image.ndim]
+    kwargs: dict = {"name": name, "scale": scale}
+    if rgb:
+        return [(image, {**kwargs, "rgb": True}, "image")]
+    if looks_like_labels(image, name):
+        return [(label_array(image, name=name), kwargs, "labels")]
+    return [(image, kwargs, "image")]
+
+
+def get_mesh_reader(path) -> Callable | None:
+    """npe2 reader command: a reader for one mesh file, else None."""
+    if isinstance(path, (list, tuple)) or not str(path).lower().endswith(MESH_READ_SUFFIXES):
+        return None
+    return read_mesh_layer
+
+
+def read_mesh_layer(path) -> list[tuple]:
+    """Read a mesh file as a Surface layer coloured by material.
+
+    The Surface holds the faces :func:`..mesh.mesh_surface` draws (the boundary and every
+    material interface of a tetrahedral mesh; every triangle of a 2-D one), its vertex
+    values are the material of the face's element, and its metadata the mesh itself
+    (:data:`._layers.MESH_KEY`), with the element quality when the file has none.
+    """
+    from napari.utils.colormaps.standardize_color import transform_color
+
+    from ..mesh import mesh_surface, radius_edge_ratio, read_mesh
+    from ._layers import MESH_KEY, default_color
+    from ._mesh_widget import SURFACE_VALUES_KEY
+
+    mesh = read_mesh(path)
+    if "quality" not in mesh.cell_data:
+        mesh.cell_data["quality"] = radius_edge_ratio(mesh.points, mesh.cells)
+    surface = mesh_surface(mesh)
+    material = surface["material"]
+    materials = np.unique(mesh.material)
+    table = np.stack([transform_color(default_color(m))[0] for m in materials])
+    colors = table[np.searchsorted(materials, material)] if len(material) else None
+    metadata = {MESH_KEY: mesh, SURFACE_VALUES_KEY: {"quality": surface["quality"],
+                                                     "material": material},
+                "material_names": dict(mesh.material_names)}
+    kwargs = {"name": Path(str(path)).name, "metadata": metadata, "vertex_colors": colors,
+              "shading": "flat" if mesh.ndim == 3 else "none"}
+    data = (surface["vertices"], surface["triangles"], material.astype(np.float64))
+    return [(data, kwargs, "surface")]

@@ -11,6 +11,7 @@ from qtpy.QtWidgets import QWidget
 from ..segmentation import plot_res, res_statistics
 from . import _samples_layer as sl
 from ._dock import fit_dock, scroll_body, wrapped_label
+from ._help import explain_terms
 from ._layers import layer_picker, pick
 from ._plots import ThemedFigure, dark_theme
 from ._tasks import TaskPanel, notify_error, notify_warning
@@ -53,6 +54,7 @@ class ResWidget(QWidget):
         self.stats: ResStatistics | None = None
         self.stats_fingerprint: str | None = None   # of the samples `stats` were computed on
         self.stale = False
+        self.method = "recommended"    # the classifier the suggestion is capped for
         self._watcher = sl.SamplesWatcher(self._check_stale)
         self.image_combo = layer_picker(self.viewer, "Image", label="image")
         self.samples_combo = layer_picker(self.viewer, "Shapes", label="samples",
@@ -84,6 +86,7 @@ class ResWidget(QWidget):
         self.samples_combo.changed.connect(self._on_samples_layer_selected)
         self.image_combo.changed.connect(self._on_image_selected)
         self._on_samples_layer_selected()
+        explain_terms(self)
 
     @property
     def figure(self) -> "Figure":
@@ -170,11 +173,11 @@ class ResWidget(QWidget):
         except ValueError as exc:
             notify_error(f"cannot compute the RES: {exc}")
             return None
-        max_scale = self.max_scale.value
+        max_scale, method = self.max_scale.value, self.method
 
         def steps():
             yield 0, 1, "tile moments of every sample box at every scale"
-            stats = res_statistics(data, samples, max_scale=max_scale)
+            stats = res_statistics(data, samples, max_scale=max_scale, method=method)
             yield 1, 1, "done"
             return stats
 

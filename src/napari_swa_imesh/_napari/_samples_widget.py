@@ -13,6 +13,7 @@ from qtpy.QtWidgets import QFileDialog, QHeaderView, QTableWidget, QTableWidgetI
 from ..segmentation import Material, Samples, load_samples, samples_from_truth, save_samples
 from . import _samples_layer as sl
 from ._dock import button, fit_dock, group, scroll_body, side_by_side, wrapped_label
+from ._help import explain_terms
 from ._layers import default_color, layer_picker, pick
 from ._materials import MaterialTable
 from ._tasks import TaskPanel, notify_error, notify_info, notify_warning
@@ -98,6 +99,7 @@ class SamplesWidget(QWidget):
         self.samples_combo.changed.connect(self._on_samples_layer_selected)
         self.image_combo.changed.connect(self.check_boxes)
         self._on_samples_layer_selected()
+        explain_terms(self)
 
     # -- layers ----------------------------------------------------------------------------
     def image_layer(self):

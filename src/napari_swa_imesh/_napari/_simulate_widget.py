@@ -31,6 +31,7 @@ from ..simulate._remesh import mesh_refine, needs_remesh, remesh
 from ._clip_panel import ClipPanel
 from ._conductivity_table import Conductivity, ConductivityTable, parse_conductivity
 from ._dock import fit_dock, scroll_body, side_by_side, wrapped_label
+from ._help import explain_terms
 from ._layers import MESH_KEY, layer_picker, pick
 from ._plots import ThemedFigure
 from ._report_panel import ReportPanel, classification_signatures, fill_table
@@ -71,6 +72,7 @@ class SimulateWidget(QWidget):
         super().__init__(parent)
         self.viewer = napari_viewer
         self.result: SimulationResult | None = None
+        self._result_layer = None                   # the mesh layer `result` was run on
         self.field_layer = None
         self._faces: np.ndarray | None = None       # boundary and interface faces
         self.mesh_combo = layer_picker(self.viewer, "Surface", label="mesh",
@@ -135,6 +137,7 @@ class SimulateWidget(QWidget):
         self.run_button.changed.connect(self.run)
         self.export_button.changed.connect(self._on_export_clicked)
         self._on_mesh_changed()
+        explain_terms(self)
 
     @property
     def figure(self) -> "Figure":
@@ -155,6 +158,12 @@ class SimulateWidget(QWidget):
 
     def _on_mesh_changed(self, *_) -> None:
         layer = self.mesh_combo.value
+        if self.result is not None and layer is not self._result_layer:
+            # the last run belongs to another mesh (deleted or not picked): its report must
+            # not meet the signatures of the labels picked next
+            self.result, self._result_layer = None, None
+            self.report.set_result(None)
+            self.export_button.enabled = False
         if layer is None:
             self.table.set_records([])
             self._update_note()
@@ -272,7 +281,7 @@ class SimulateWidget(QWidget):
     # -- results (main thread) -------------------------------------------------------------
     def _show_result(self, mesh_layer, conductivity, result: "SimulationResult",
                      faces: np.ndarray, clipper: MeshClipper) -> None:
-        self.result, self._faces = result, faces
+        self.result, self._faces, self._result_layer = result, faces, mesh_layer
         self.summary.value = result.describe()
         self.clip.set_clipper(clipper)
         with self.show_combo.changed.blocked():

@@ -10,7 +10,9 @@ no widget repeats a library's step count. The generator runs in a worker thread;
 result is handed to a callback in the main thread, the only place where layers are created
 or changed.
 Cancel asks the worker to stop at the next step boundary (a library call that is running
-finishes first), and then no result callback runs.
+finishes first), and then no result callback runs. When the panel is destroyed (its widget
+closed, or the viewer closed while a computation runs) the worker is asked to stop the same
+way and cut off from every callback, so nothing it reports later reaches a deleted widget.
 """
 
 from __future__ import annotations
@@ -105,6 +107,7 @@ class TaskPanel(QWidget):
         layout.setContentsMargins(0, 0, 0, 0)
         layout.addLayout(row)
         layout.addWidget(self.status)
+        self._callbacks: tuple = (None, None)     # on_result, on_cancel of the running task
 
     @property
     def busy(self) -> bool:
@@ -146,13 +149,18 @@ class TaskPanel(QWidget):
         self.progress_bar.setFormat(f"{title}: %v/%m")
         self.status.setText(f"{title}: starting")
         self.cancel_button.setEnabled(True)
+        # only bound methods of this QObject: Qt drops them when the panel is destroyed
+        # (its dock closed, or the viewer closed while a computation runs), so nothing
+        # the worker reports later reaches a deleted widget; the worker is asked to stop
+        self._callbacks = (on_result, on_cancel)
         worker.yielded.connect(self._on_yielded)
         # napari also shows them as notifications; kept here so widgets can say them too
         worker.warned.connect(self._on_warned)
-        worker.returned.connect(lambda result: self._on_returned(result, on_result))
+        worker.returned.connect(self._on_returned)
         worker.errored.connect(self._on_errored)
-        worker.aborted.connect(lambda: self._on_aborted(on_cancel))
+        worker.aborted.connect(self._on_aborted)
         worker.finished.connect(self._on_finished)
+        self.destroyed.connect(worker.quit)
         self.busy_changed.emit(True)
         worker.start()
         return worker
@@ -185,7 +193,8 @@ class TaskPanel(QWidget):
         if message not in self.warnings:
             self.warnings.append(message)
 
-    def _on_returned(self, result, on_result) -> None:
+    def _on_returned(self, result) -> None:
+        on_result = self._callbacks[0]
         try:
             on_result(result)
         except Exception as exc:  # a result the widget cannot show must still reach the user
@@ -203,13 +212,19 @@ class TaskPanel(QWidget):
         self.status.setText(message)
         notify_error(message)
 
-    def _on_aborted(self, on_cancel) -> None:
+    def _on_aborted(self) -> None:
+        on_cancel = self._callbacks[1]
         self.status.setText(f"{self.title}: cancelled")
         notify_info(f"{self.title} cancelled; nothing was changed.")
         if on_cancel is not None:
             on_cancel()
 
     def _on_finished(self) -> None:
+        try:
+            self.destroyed.disconnect(self.worker.quit)
+        except (TypeError, RuntimeError, AttributeError):
+            pass
         self.worker = None
+        self._callbacks = (None, None)
         self.cancel_button.setEnabled(False)
         self.busy_changed.emit(False)

@@ -7,7 +7,8 @@ from typing import TYPE_CHECKING
 
 from qtpy.QtWidgets import QTabWidget, QVBoxLayout, QWidget
 
-from ._classify_widget import ClassifyWidget
+from ._classify_widget import METHOD_REFERENCE, ClassifyWidget
+from ._help import explain_terms
 from ._mesh_widget import MeshWidget
 from ._res_widget import ResWidget
 from ._samples_widget import SamplesWidget
@@ -49,9 +50,15 @@ class WorkflowWidget(QWidget):
         self.res.scale_chosen.connect(self.classify.set_scale)
         self.res.scale_chosen.connect(self.samples.set_scale)
         self.classify.scale_combo.changed.connect(self._on_classify_scale)
+        self.classify.method_combo.changed.connect(self._on_classify_method)
         self.classify.labels_ready.connect(self.mesh.select_labels)
         self.mesh.mesh_ready.connect(self.simulate.select_mesh)
         self._on_samples_layer(self.samples.samples_layer())
+        explain_terms(self)    # the tab titles (RES) too
+
+    def _on_classify_method(self, value: str) -> None:
+        # the RES tab suggests a scale the chosen method can train at (its next compute)
+        self.res.method = "reference" if value == METHOD_REFERENCE else "recommended"
 
     def _on_classify_scale(self, scale: int | None) -> None:
         # the samples tab flags boxes at the scale the next run will use

@@ -8,6 +8,7 @@ from pathlib import Path
 import numpy as np
 
 from .._cli_util import StepTimer, print_json
+from .._glossary import define
 from ..io import check_writable
 # re-exported for the classify widget until it imports them from the library
 from ._signatures import signatures_csv_text
@@ -20,10 +21,16 @@ def add_commands(subparsers) -> None:
     p = subparsers.add_parser(
         "res", help="tile-moment statistics against scale and the suggested RES",
         description="Print (and plot) the statistics of tile moments per material against "
-                    "scale, and the suggested representative elementary scale.")
+                    "scale, and the suggested representative elementary scale, capped at "
+                    "the largest scale the --method classifier trains at on these boxes. "
+                    f"RES: {define('RES')}")
     p.add_argument("image")
     p.add_argument("--samples", required=True, help="samples JSON (see README)")
     p.add_argument("--max-scale", type=int, default=None)
+    p.add_argument("--method", default="recommended", choices=["recommended", "reference"],
+                   help="the segment method the suggestion must train (default recommended: "
+                        "windows of 2^j + 1 px inside a box of every material; reference: "
+                        "enough full tiles of 2^j px)")
     p.add_argument("--plot", default=None, help="write the Figure 2.14-style plot (PNG/PDF/SVG)")
     p.add_argument("--gray", action="store_true", help="convert an RGB picture to grey")
     p.add_argument("--force", action="store_true", help="replace an existing plot file")
@@ -32,7 +39,8 @@ def add_commands(subparsers) -> None:
 
     p = subparsers.add_parser(
         "segment", help="classify the image into a full-resolution label image",
-        description="Segment an image with SWA, fitted on sample boxes (or a saved model). "
+        description=f"SWA: {define('SWA')} "
+                    "Segment an image with SWA, fitted on sample boxes (or a saved model). "
                     "Default: the recommended method (multi-scale per-pixel statistics, "
                     "coarse-to-fine at boundaries, MRF, bias correction); --method reference "
                     "for the reference's tiles at one scale, feature set and classifier.")
@@ -130,7 +138,7 @@ def add_commands(subparsers) -> None:
 
 def _run_res(args: argparse.Namespace) -> int:
     from ..io import check_figure_path, is_store, read_image, write_figure
-    from ._res import plot_res, res_statistics, res_statistics_of_boxes
+    from ._res import format_res_table, plot_res, res_statistics, res_statistics_of_boxes
     from ._samples import load_samples
 
     timer = StepTimer()
@@ -148,30 +156,20 @@ def _run_res(args: argparse.Namespace) -> int:
             image, _ = read_image(args.image, gray=args.gray)
         samples = load_samples(args.samples)
     with timer("res"):
-        stats = (res_statistics_of_boxes(image, samples, max_scale=args.max_scale) if lazy
-                 else res_statistics(image, samples, max_scale=args.max_scale))
+        stats = (res_statistics_of_boxes(image, samples, max_scale=args.max_scale,
+                                         method=args.method) if lazy
+                 else res_statistics(image, samples, max_scale=args.max_scale,
+                                     method=args.method))
     if args.plot:
         with timer("plot"):
             write_figure(plot_res(stats), args.plot, force=args.force)
     if args.json:
         print_json({**stats.to_dict(), "plot": args.plot, "seconds": timer.seconds})
     else:
-        print(_res_text(stats))
+        print(format_res_table(stats))
         if args.plot:
             print(f"plot written to {args.plot}")
     return 0
-
-
-def _res_text(stats) -> str:
-    lines = [f"suggested RES: {stats.suggested_scale}  ({stats.reason})"]
-    for i, name in enumerate(stats.names):
-        lines.append(f"{name} (label {stats.materials[i]}), own RES "
-                     f"{stats.material_res.get(stats.materials[i])}:")
-        lines.append("  scale  tiles      mean(mean)   mean(var)   std(mean)")
-        for j in stats.scales:
-            lines.append(f"  {j:5d} {stats.n_tiles[i, j]:6d} {stats.mean[i, j, 0]:12.5g} "
-                         f"{stats.mean[i, j, 1]:11.5g} {stats.std[i, j, 0]:11.5g}")
-    return "\n".join(lines)
 
 
 def _check_segment_args(args: argparse.Namespace) -> None:

@@ -263,6 +263,7 @@ class RecommendedModel(SegmentationModel):
             "bias_variance_reduction": reduction,
             "bias_range": bias_range,
             "notes": notes,
+            "top_scale": int(top),     # the largest scale considered, after any box limit
         }
         return self
 

@@ -19,7 +19,12 @@ is *stable* when, with v(j) the average tile variance and m(j) the average tile 
 
 A material's RES is the smallest scale from which every larger scale it can measure is
 stable; the suggestion is the largest of the materials' RES, capped at the largest scale
-where every material still has at least two tiles to train on. Skewness and kurtosis are
+where every material still has at least two tiles, and at the largest scale the classifier
+of `method` can train at on these boxes (:func:`trainable_scale`): the recommended method
+trains level j on windows of 2^j + 1 px, which must fit inside a box of every material;
+the reference method with GM needs more full tiles than features per material. So
+``segment`` at the suggested RES never has to lower it, and the reason names the box that
+limits it. Skewness and kurtosis are
 drawn but not used by the rule: their tile estimates are too noisy on small tiles to
 decide anything.
 """
@@ -31,11 +36,15 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from .._validation import IMAGE_NDIM, as_image, check_ndim
+from ._features import n_features
 from ._moments import MOMENT_NAMES, moment_pyramid_unchecked
 from ._samples import BoxCrops, Samples, check_box_contrast, check_contrast
 
 __all__ = ["ResStatistics", "res_statistics", "res_statistics_unchecked", "suggest_res",
-           "plot_res", "plot_res_scales", "MOMENT_NAMES", "box_tile_moments"]
+           "plot_res", "plot_res_scales", "MOMENT_NAMES", "box_tile_moments",
+           "trainable_scale", "METHODS", "format_res_table"]
+
+METHODS = ("recommended", "reference")    # the classifiers a suggestion can be capped for
 
 # Colours of the plot's marks (matplotlib's tab10 red and green, readable on light and dark
 # backgrounds); text, axes and background come from the caller or matplotlib's rcParams.
@@ -69,6 +78,8 @@ class ResStatistics:
         Each material's own RES.
     reason : str
         One sentence on how the suggestion was reached.
+    method : str
+        The classifier the suggestion is capped for ("recommended" or "reference").
     """
 
     scales: np.ndarray
@@ -83,11 +94,13 @@ class ResStatistics:
     suggested_scale: int | None = None
     material_res: dict[int, int | None] = field(default_factory=dict)
     reason: str = ""
+    method: str = "recommended"
 
     def to_dict(self) -> dict:
         """Plain-JSON form (what ``swa-imesh res --json`` prints)."""
         out = {"scales": self.scales.tolist(), "suggested_scale": self.suggested_scale,
-               "reason": self.reason, "moments": list(MOMENT_NAMES), "materials": []}
+               "reason": self.reason, "method": self.method, "moments": list(MOMENT_NAMES),
+               "materials": []}
         for i, (m, name) in enumerate(zip(self.materials, self.names)):
             out["materials"].append({
                 "label": m, "name": name, "res": self.material_res.get(m),
@@ -120,7 +133,8 @@ def box_tile_moments(image: np.ndarray, samples: Samples, label: int, max_scale:
 
 
 def res_statistics(image, samples: Samples, *, max_scale: int | None = None,
-                   change_tol: float = 0.1, spread_tol: float = 0.5) -> ResStatistics:
+                   change_tol: float = 0.1, spread_tol: float = 0.5,
+                   method: str = "recommended") -> ResStatistics:
     """Tile-moment statistics against scale for every material, and a suggested RES.
 
     Parameters
@@ -133,6 +147,8 @@ def res_statistics(image, samples: Samples, *, max_scale: int | None = None,
         Largest scale; default the largest at which some material still has 2^d tiles.
     change_tol, spread_tol : float
         Tolerances of the RES rule (module docstring).
+    method : {"recommended", "reference"}
+        The classifier the suggestion must be trainable for (:func:`trainable_scale`).
 
     Returns
     -------
@@ -142,11 +158,12 @@ def res_statistics(image, samples: Samples, *, max_scale: int | None = None,
     samples.check(img.shape)
     check_contrast(img, samples)
     return res_statistics_unchecked(img, samples, max_scale=max_scale,
-                                    change_tol=change_tol, spread_tol=spread_tol)
+                                    change_tol=change_tol, spread_tol=spread_tol,
+                                    method=method)
 
 
-def res_statistics_of_boxes(image, samples: Samples, *, max_scale: int | None = None
-                            ) -> ResStatistics:
+def res_statistics_of_boxes(image, samples: Samples, *, max_scale: int | None = None,
+                            method: str = "recommended") -> ResStatistics:
     """:func:`res_statistics` reading only the sample boxes of a large image.
 
     The statistics are moments of tiles inside the boxes, so nothing else is read: a Zarr
@@ -179,13 +196,16 @@ def res_statistics_of_boxes(image, samples: Samples, *, max_scale: int | None = 
     check_box_contrast(crops)
     # the statistics read the boxes only: from these crops, so each is read once
     return res_statistics_unchecked(BoxCrops(crops, samples.boxes), samples,
-                                    max_scale=max_scale)
+                                    max_scale=max_scale, method=method)
 
 
 def res_statistics_unchecked(img: np.ndarray, samples: Samples, *,
                              max_scale: int | None = None, change_tol: float = 0.1,
-                             spread_tol: float = 0.5) -> ResStatistics:
+                             spread_tol: float = 0.5, method: str = "recommended"
+                             ) -> ResStatistics:
     """:func:`res_statistics` of a float image and samples already checked against it."""
+    if method not in METHODS:
+        raise ValueError(f"method must be one of {', '.join(METHODS)}; got {method!r}.")
     d = img.ndim
     if max_scale is None:
         biggest = max(max(b.shape) for b in samples.boxes)
@@ -212,16 +232,51 @@ def res_statistics_unchecked(img: np.ndarray, samples: Samples, *,
         names=[samples.name_of(m) for m in labels],
         mean=stats["mean"][:, :last], std=stats["std"][:, :last],
         min=stats["min"][:, :last], max=stats["max"][:, :last],
-        n_tiles=n_tiles[:, :last], ndim=d,
+        n_tiles=n_tiles[:, :last], ndim=d, method=method,
     )
     res.suggested_scale, res.material_res, res.reason = suggest_res(
-        res, change_tol=change_tol, spread_tol=spread_tol)
+        res, change_tol=change_tol, spread_tol=spread_tol, samples=samples)
     return res
 
 
-def suggest_res(stats: ResStatistics, *, change_tol: float = 0.1, spread_tol: float = 0.5
+def trainable_scale(samples: Samples, ndim: int, scale: int, *,
+                    method: str = "recommended") -> tuple[int, str | None]:
+    """The largest scale up to `scale` the classifier of `method` can train at on `samples`.
+
+    The recommended method trains level j on windows of 2^j + 1 px, each inside one box
+    (:meth:`Samples.window_limit`); the reference method with its default GM on F1 needs
+    more full tiles of 2^j px than features in the boxes of every material
+    (:meth:`Samples.tile_limit`), as ``segment`` requires.
+
+    Returns
+    -------
+    scale : int
+        `scale` itself when it trains, else the largest that does (-1: none).
+    limit : str or None
+        None when `scale` trains; else one sentence naming the box that limits it and
+        what to do.
+
+    Examples
+    --------
+    >>> s = Samples.from_dict({"boxes": [{"label": 1, "start": [0, 0], "stop": [64, 64]},
+    ...                                  {"label": 2, "start": [0, 0], "stop": [8, 40]}]})
+    >>> trainable_scale(s, 2, 4)[0], trainable_scale(s, 2, 4, method="reference")[0]
+    (2, 3)
+    """
+    if method == "recommended":
+        limit = samples.window_limit(int(scale))
+    else:
+        limit = samples.tile_limit(int(scale), n_features("F1", ndim, int(scale)) + 1)
+    return (int(scale), None) if limit is None else (int(limit[0]), limit[1])
+
+
+def suggest_res(stats: ResStatistics, *, change_tol: float = 0.1, spread_tol: float = 0.5,
+                samples: Samples | None = None
                 ) -> tuple[int | None, dict[int, int | None], str]:
     """Apply the RES rule of the module docstring to a statistics table.
+
+    With `samples` (the boxes the table came from), the suggestion is also capped at the
+    largest scale the classifier of ``stats.method`` can train at (:func:`trainable_scale`).
 
     Returns
     -------
@@ -256,21 +311,65 @@ def suggest_res(stats: ResStatistics, *, change_tol: float = 0.1, spread_tol: fl
     cap = int(trainable.max())
     picks = [r for r in material_res.values() if r is not None]
     unstable = [stats.names[i] for i, m in enumerate(stats.materials) if material_res[m] is None]
+    wanted = max(picks) if picks else cap
+    limit = None
+    if samples is not None:
+        # the classifier's own limit at the scale the tiles allow (its sentence names the box)
+        trained, limit = trainable_scale(samples, stats.ndim, min(wanted, cap),
+                                         method=stats.method)
+        if limit is not None and trained < 0:
+            return None, material_res, (f"no scale trains the {stats.method} classifier: "
+                                        f"{limit}.")
+        cap = min(cap, trained)
     if not picks:
-        return cap, material_res, (
-            f"no material's statistics settle within its sample boxes; using the largest "
-            f"scale every material can train at ({cap}). Draw larger boxes for a firmer RES.")
-    scale = max(picks)
+        reason = ("no material's statistics settle within its sample boxes; using the "
+                  f"largest scale every material can train at ({cap}). Draw larger boxes "
+                  "for a firmer RES.")
+        if limit is not None:
+            reason += f" The {stats.method} classifier limits it: {limit}."
+        return cap, material_res, reason
+    scale = wanted
     reason = (f"smallest scale from which every material's tile mean and variance stop "
               f"drifting (< {change_tol:g}) and tile means agree (< {spread_tol:g} of the "
               f"within-tile std): {scale}.")
     if unstable:
         reason += f" Not settled within their boxes: {', '.join(unstable)}."
     if scale > cap:
-        reason += (f" Capped at {cap}: larger tiles leave some material fewer than two "
-                   "training tiles.")
+        reason += (f" Capped at {cap}, the largest scale the {stats.method} classifier can "
+                   f"train at: " + (f"{limit}." if limit is not None else
+                                    "larger tiles leave some material fewer than two "
+                                    "training tiles."))
         scale = cap
     return int(scale), material_res, reason
+
+
+def format_res_table(stats: ResStatistics) -> str:
+    """The table ``swa-imesh res`` prints: the suggestion and its reason, then per material
+    and scale the tiles, mean(mean), mean(var) and std(mean); a scale with fewer than 2^d
+    tiles shows ``-`` and a footnote says why, never a bare NaN."""
+    need = 1 << stats.ndim
+    lines = [f"suggested RES: {stats.suggested_scale}  ({stats.reason})"]
+    short = False
+    for i, name in enumerate(stats.names):
+        lines.append(f"{name} (label {stats.materials[i]}), own RES "
+                     f"{stats.material_res.get(stats.materials[i])}:")
+        lines.append("  scale  tiles      mean(mean)   mean(var)   std(mean)")
+        for j in stats.scales:
+            values = (stats.mean[i, j, 0], stats.mean[i, j, 1], stats.std[i, j, 0])
+            if stats.n_tiles[i, j] < need:     # too few tiles for statistics across tiles
+                short = True
+                cells = f"{'-':>12} {'-':>11} {'-':>11}  (*)"
+            else:
+                cells = f"{values[0]:12.5g} {values[1]:11.5g} {values[2]:11.5g}"
+            lines.append(f"  {j:5d} {stats.n_tiles[i, j]:6d} {cells}")
+    if short:
+        lines.append(f"(*) fewer than 2^d = {need} full tiles in the material's boxes at this "
+                     "scale: too few to say how tiles vary, so no statistics (draw larger or "
+                     "more boxes to see this scale).")
+    lines.append("columns: mean(mean) and mean(var) average each tile's mean and variance; "
+                 "std(mean) is how much the tile means differ. RES: representative "
+                 "elementary scale, where these stop changing with the tile size 2^j px.")
+    return "\n".join(lines)
 
 
 def plot_res(stats: ResStatistics, *, figure=None, selected_scale: int | None = None,

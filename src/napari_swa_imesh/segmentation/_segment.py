@@ -120,6 +120,7 @@ class SegmentationResult:
             "eps_blocked_method": self.model.scores.get("eps_blocked_method"),
             "regularized": self.model.scores.get("regularized"),
             "suggested_scale": None if self.res is None else self.res.suggested_scale,
+            "suggested_reason": None if self.res is None else self.res.reason,
             "signatures": self.signatures, "seconds": self.seconds, "notes": self.notes,
         }
         if self.method == RECOMMENDED_METHOD:
@@ -149,9 +150,15 @@ class SegmentationResult:
         else:
             lines = [f"reference method: scale {self.scale} (tiles of {1 << self.scale} px), "
                      f"{model.feature_set} + {model.classifier_name.upper()}"]
+        if self.res is not None and " Capped at " in self.res.reason:
+            # the boxes, not the statistics, set the scale: say which box to enlarge
+            lines.append("suggested RES: c" + self.res.reason[self.res.reason.index("Capped")
+                                                               + 1:])
         if self.eps_l is not None:
             lines.append(f"eps_l = {self.eps_l:.2f}% ({model.scores.get('eps_l_method')}), "
-                         f"eps_m = {self.eps_m:.3f}")
+                         f"eps_m = {self.eps_m:.3f} (= -#F x eps_l / 100 with #F = "
+                         f"{len(model.feature_names)} features, eq. 2.35: the error charged "
+                         f"for the feature count)")
         if model.scores.get("eps_blocked") is not None:
             lines.append(f"blocked CV error = {model.scores['eps_blocked']:.2f}% "
                          f"({model.scores['eps_blocked_method']})")
@@ -296,7 +303,7 @@ def _reference_steps(img, samples, *, scale, feature_set, classifier, sieve, mod
     if model is None:
         if scale is None:
             yield 0, STEPS, "tile statistics against scale (RES)"
-            res = res_statistics_unchecked(img, samples)
+            res = res_statistics_unchecked(img, samples, method="reference")
             scale = res.suggested_scale
             if scale is None:
                 raise ValueError(
