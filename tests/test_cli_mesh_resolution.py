@@ -35,9 +35,11 @@ def test_anisotropic_spacing_is_subdivided_and_reported(tmp_path, capsys):
                        "--spacing", "2.5", "1", "1", "--json")
     assert code == 0
     report = json.loads(out)
-    assert report["lattice"]["factors"] == [3, 1, 1]
-    assert report["worst_ratio"] <= np.sqrt(29) / 4
-    assert 30 <= report["min_dihedral"] and report["max_dihedral"] <= 135
+    # the default limit 1.25 takes 2.5 / 2 cells; its bound is 1.3754 and 29.50 deg
+    assert report["lattice"]["factors"] == [2, 1, 1]
+    assert report["lattice"]["max_aspect"] == 1.25
+    assert report["worst_ratio"] <= 1.37536
+    assert 29.49 <= report["min_dihedral"] and report["max_dihedral"] <= 135
     assert report["checks"]["all_passed"]
     mesh = read_mesh(tmp_path / "m.vtu")
     vol = signed_volumes(mesh.points, mesh.cells)
@@ -98,7 +100,7 @@ def test_bounds_prints_the_bound_per_residual_aspect_and_for_a_spacing(capsys):
     code, out, _ = run(capsys, "bounds", "--dim", "3", "--spacing", "2.5", "1", "1")
     assert code == 0
     assert "residual aspect" in out and "  1.20    1.3185" in out
-    assert "3 x 1 x 1 cells per voxel" in out
+    assert "chosen (--max-aspect 1.25): 2 x 1 x 1 cells per voxel" in out
     code, out, _ = run(capsys, "bounds", "--dim", "3", "--json")
     rows = json.loads(out)["by_residual_aspect"]
     assert rows[0]["aspect"] == 1.0 and rows[0]["worst_ratio"] == pytest.approx(np.sqrt(5) / 2)

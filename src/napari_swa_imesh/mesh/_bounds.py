@@ -233,8 +233,8 @@ def _bounds(d: int) -> tuple:
     return tuple(_ranges(d, worst_of).items())
 
 
-def quality_bounds(dim: int, spacing=None, *, subdivide: bool = True
-                   ) -> dict[str, tuple[float, float]]:
+def quality_bounds(dim: int, spacing=None, *, subdivide: bool = True,
+                   max_aspect: float | None = None) -> dict[str, tuple[float, float]]:
     """The range every element of a template mesh lies in, per metric (the IMESH bound).
 
     Derived from :func:`quality_table`: each range runs from the regular simplex's value
@@ -255,6 +255,9 @@ def quality_bounds(dim: int, spacing=None, *, subdivide: bool = True
     subdivide : bool
         Whether the mesh was made with the anisotropy subdivision (``mesh_labels``'s
         default) or of stretched voxels.
+    max_aspect : float, optional
+        The residual-aspect limit the mesh was subdivided with (``mesh_labels``'s
+        `max_aspect`; default its default).
 
     Returns
     -------
@@ -275,15 +278,15 @@ def quality_bounds(dim: int, spacing=None, *, subdivide: bool = True
     [0.5774, 0.7071, 45.0, 60.0]
     >>> round(quality_bounds(2, spacing=(2.0, 1.0), subdivide=False)["quality"][1], 4)
     1.118
-    >>> round(quality_bounds(3, spacing=(2.5, 1.0, 1.0))["quality"][1], 4)  # 3x1x1 cells
-    1.3
+    >>> round(quality_bounds(3, spacing=(2.5, 1.0, 1.0))["quality"][1], 4)  # 2x1x1 cells
+    1.3754
     """
     d = _check_dim(dim)
     spacing = normalize_spacing(spacing, d)
     if subdivide:
         from ._lattice import choose_lattice
 
-        spacing = choose_lattice(spacing).step
+        spacing = choose_lattice(spacing, max_aspect=max_aspect).step
     if all(abs(s / spacing[0] - 1) <= 1e-12 for s in spacing):
         return dict(_bounds(d))
     table = template_quality(d, spacing)

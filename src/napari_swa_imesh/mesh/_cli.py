@@ -25,6 +25,11 @@ from ._memory import (available_memory, count_boundary_voxels, current_rss,
 __all__ = ["add_commands", "parse_material_names"]
 
 
+MAX_ASPECT_HELP = ("anisotropic voxels are cut into the fewest cells of residual aspect "
+                   "(max/min cell size) <= A: default 1.25 (radius-to-edge <= 1.3754, "
+                   "dihedral angles 29.5-131.5 deg); larger, fewer elements and a looser "
+                   "bound (swa-imesh bounds --dim 3 --spacing ... lists the choices)")
+
 def add_commands(subparsers) -> None:
     """Register the meshing sub-commands on an argparse sub-parser group."""
     p = subparsers.add_parser(
@@ -83,6 +88,8 @@ def add_commands(subparsers) -> None:
     p.add_argument("--no-subdivide", action="store_true",
                    help="mesh anisotropic voxels as stretched templates (no physical "
                         "quality bound) instead of subdividing them into nearly cubic cells")
+    p.add_argument("--max-aspect", type=float, default=None, metavar="A",
+                   help=MAX_ASPECT_HELP)
     p.add_argument("--force", action="store_true", help="replace an existing output file")
     p.add_argument("--no-check", action="store_true",
                    help="skip the conformity/volume/label checks (less than the meshing)")
@@ -104,8 +111,11 @@ def add_commands(subparsers) -> None:
                     "radius-to-edge ratio and angles: the quality the mesher guarantees.")
     p.add_argument("--dim", type=int, required=True, metavar="D", help="dimension (2 or 3)")
     p.add_argument("--spacing", type=float, nargs="+", default=None, metavar="S",
-                   help="voxel spacing: also print the lattice the mesher uses for it and "
-                        "the bound that holds there")
+                   help="voxel spacing: also print what each --max-aspect gives for it "
+                        "(cells per voxel, residual aspect, bound, elements against cubic "
+                        "voxels) and the lattice the mesher uses")
+    p.add_argument("--max-aspect", type=float, default=None, metavar="A",
+                   help="with --spacing: the limit to mark (default 1.25, the mesher's)")
     p.add_argument("--json", action="store_true", help="print one JSON object on stdout")
     p.set_defaults(func=_run_bounds)
 
@@ -180,7 +190,7 @@ def _run_mesh(args: argparse.Namespace) -> int:
 
     lattice, max_size, coarsen = resolution_arguments(
         spacing, method=args.method, refine=args.refine, max_size=args.max_size,
-        subdivide=not args.no_subdivide, coarsen=args.coarsen)
+        subdivide=not args.no_subdivide, coarsen=args.coarsen, max_aspect=args.max_aspect)
     # the dimension is known now: the box sides it has, and .poly or .face
     write_options = _write_options(args, labels.ndim)
     mesh_output_paths(args.output, force=args.force,
@@ -240,6 +250,16 @@ def _timed_check(timer, mesh, labels, exclude, tree, full) -> dict:
         return _check_mesh(mesh, labels, exclude, tree, full=full).to_dict()
 
 
+def check_max_aspect_arg(value) -> float:
+    """``--max-aspect`` as a float >= 1, or ValueError naming the option."""
+    from ._lattice import check_max_aspect
+
+    try:
+        return check_max_aspect(value)
+    except ValueError as exc:
+        raise ValueError(str(exc).replace("max_aspect", "--max-aspect", 1)) from None
+
+
 def _check_resolution_args(args) -> None:
     """Refine and coarsen levels in range before any reading (the size cap needs the
     spacing, so it is checked with it)."""
@@ -248,6 +268,12 @@ def _check_resolution_args(args) -> None:
     from ._lattice import check_refine
 
     check_refine(args.refine)
+    if args.max_aspect is not None:
+        check_max_aspect_arg(args.max_aspect)
+        if args.no_subdivide:
+            raise ValueError("--max-aspect bounds the cells anisotropic voxels are cut into; "
+                             "--no-subdivide meshes the voxels as they are: give one or the "
+                             "other.")
     check_coarsen(args.coarsen)
     check_periodic(args.method, args.periodic)
     if args.max_size is not None and not (np.isfinite(args.max_size) and args.max_size > 0):
@@ -463,13 +489,20 @@ def _mesh_text(r: dict) -> str:
 
 def _run_bounds(args: argparse.Namespace) -> int:
     from ._bounds import format_quality_table, quality_table
-    from ._lattice import aspect_table, choose_lattice
+    from ._lattice import ASPECT_LIMIT, aspect_table, choose_lattice, lattice_choices
 
     if args.dim not in (2, 3):
         raise ValueError(f"--dim must be 2 or 3; got {args.dim}.")
-    lattice = None
+    if args.max_aspect is not None:
+        check_max_aspect_arg(args.max_aspect)
+        if not args.spacing:
+            raise ValueError("--max-aspect picks the lattice for a voxel spacing; give "
+                             "--spacing too.")
+    lattice = choices = None
     if args.spacing:
-        lattice = choose_lattice(normalize_spacing(args.spacing, args.dim))
+        spacing = normalize_spacing(args.spacing, args.dim)
+        choices = lattice_choices(spacing)
+        lattice = choose_lattice(spacing, max_aspect=args.max_aspect)
     rows = quality_table(args.dim)
     aspects = aspect_table(args.dim)
     if args.json:
@@ -477,20 +510,43 @@ def _run_bounds(args: argparse.Namespace) -> int:
                "by_residual_aspect": aspects}
         if lattice is not None:
             out["lattice"] = lattice.describe()
+            out["choices"] = [{**r, "factors": list(r["factors"])} for r in choices]
         print_json(out)
         return 0
     print(format_quality_table(rows))
     angle = "dihedral angles" if args.dim == 3 else "angles"
     print("\nbounds on lattice cells of residual aspect A (max/min cell size): anisotropic "
-          "voxels are cut into cells with A <= 1.2 unless --no-subdivide")
+          f"voxels are cut into the fewest cells with A <= --max-aspect (default "
+          f"{ASPECT_LIMIT}) unless --no-subdivide")
     print(f"{'A':>6s} {'ratio <=':>9s} {angle + ' (deg)':>22s}")
     for row in aspects:
         print(f"{row['aspect']:6.2f} {row['worst_ratio']:9.4f} "
               f"{row['min_angle']:10.2f} .. {row['max_angle']:7.2f}")
     if lattice is not None:
-        d = lattice.describe()
-        print(f"\nspacing {' x '.join(f'{s:g}' for s in lattice.spacing)}: "
-              f"{' x '.join(map(str, lattice.factors))} cells per voxel, residual aspect "
-              f"{d['residual_aspect']:.3f}: ratio <= {d['bounds']['worst_ratio']:.4f}, "
-              f"{angle} {d['bounds']['min_angle']:.2f} to {d['bounds']['max_angle']:.2f}")
+        print(_choices_text(lattice, choices, angle))
     return 0
+
+
+def _choices_text(lattice, choices: list[dict], angle: str) -> str:
+    """The table of what each --max-aspect gives for one spacing, the chosen row marked."""
+    d = lattice.describe()
+    lines = [f"\nspacing {' x '.join(f'{s:g}' for s in lattice.spacing)}: the lattice for "
+             "each --max-aspect (elements: about the interface cells per voxel face, against "
+             "cubic voxels of the same image)",
+             f"{'--max-aspect':>16s} {'cells per voxel':>18s} {'residual A':>10s} "
+             f"{'ratio <=':>9s} {angle + ' (deg)':>24s} {'elements':>9s}"]
+    for r in choices:
+        upper = r["max_aspect_below"]
+        span = (f">= {r['max_aspect_from']:.4g}" if upper is None
+                else f"{r['max_aspect_from']:.4g} .. <{upper:.4g}")
+        cells = " x ".join(map(str, r["factors"])) + f" = {r['cells_per_voxel']}"
+        b = r["bounds"]
+        mark = "  <- chosen" if tuple(r["factors"]) == tuple(lattice.factors) else ""
+        lines.append(f"{span:>16s} {cells:>18s} {r['residual_aspect']:10.4f} "
+                     f"{b['worst_ratio']:9.4f} {b['min_angle']:11.2f} .. {b['max_angle']:7.2f}"
+                     f" {'x' + format(r['interface_cells_per_voxel_face'], '.3g'):>9s}{mark}")
+    lines.append(f"chosen (--max-aspect {lattice.max_aspect:g}): "
+                 f"{' x '.join(map(str, lattice.factors))} cells per voxel, residual aspect "
+                 f"{d['residual_aspect']:.4f}: ratio <= {d['bounds']['worst_ratio']:.4f}, "
+                 f"{angle} {d['bounds']['min_angle']:.2f} to {d['bounds']['max_angle']:.2f}")
+    return "\n".join(lines)

@@ -5,12 +5,19 @@ Why a lattice
 -------------
 The templates' quality bounds hold for cubic lattice cells. A voxel of spacing
 (2.5, 1, 1) stretches every template by 2.5 along one axis (worst radius-to-edge 3.66).
-Subdividing each voxel into ``n_a`` cells along axis ``a`` (integers, chosen so the cells
-are nearly cubic) brings the *residual aspect* ``max(h) / min(h)`` of the cell size
-``h = spacing / n`` under :data:`ASPECT_LIMIT`, where the bounds of
-:func:`aspect_bounds` hold; the tree merges the cells again wherever the labels are
-uniform, so the interior stays coarse. Material boundaries stay on voxel faces, which are
-lattice planes, so every material keeps its exact volume.
+Subdividing each voxel into ``n_a`` cells along axis ``a`` (integers) brings the
+*residual aspect* ``max(h) / min(h)`` of the cell size ``h = spacing / n`` under a limit
+``max_aspect`` (default :data:`ASPECT_LIMIT`), where the bounds of :func:`aspect_bounds`
+hold; of the factors that do, the fewest cells per voxel are taken (elements grow with
+them). The tree merges the cells again wherever the labels are uniform, so the interior
+stays coarse. Material boundaries stay on voxel faces, which are lattice planes, so every
+material keeps its exact volume.
+
+Spacings are read as the rational numbers they mean: the ratios of the voxel sizes are
+taken as the simplest fractions within :data:`RATIO_TOLERANCE` (a float32 header's
+0.800000011920929 is 4/5) and every aspect is compared exactly, so float32 rounding and
+noise of 1e-6 never change the lattice, and equal cell counts are told apart by a rule
+that permutes with the axes.
 
 Refinement ``K`` divides every cell by ``2**K`` more and splits every leaf that shares a
 facet with a material interface down to one lattice cell: elements at interfaces are
@@ -23,21 +30,29 @@ diagonal) is longer than ``H``.
 
 from __future__ import annotations
 
+import functools
 import itertools
 import math
 from dataclasses import dataclass
+from fractions import Fraction
 
 import numpy as np
 
 from .._tree import PAD_LABEL, RegionTree, _build_tree
 
 __all__ = ["ASPECT_LIMIT", "MAX_REFINE", "Lattice", "aspect_bounds", "aspect_table",
-           "choose_lattice", "labels_on_lattice", "lattice_tree", "subdivision_factors"]
+           "check_max_aspect", "choose_lattice", "labels_on_lattice", "lattice_choices",
+           "lattice_tree", "subdivision_factors"]
 
-#: Residual aspect up to which the 3-D bounds stay within radius-to-edge sqrt(29)/4 and
-#: dihedral angles [30, 135] degrees (1.3185 and 30.5-130.3 at 1.2; 1.3754 and 29.5 at
-#: 1.25, see :func:`aspect_bounds`).
-ASPECT_LIMIT = 1.2
+#: Default largest residual aspect of the lattice cells: the 3-D bounds there are
+#: radius-to-edge 1.3754 and dihedral angles 29.50-131.47 degrees (1.3185 and 30.5-130.3
+#: at 1.2, 1.4349 and 28.5 at 1.3; see :func:`aspect_bounds`). 5/4 is the largest simple
+#: aspect keeping ratio <= 1.40 and dihedral angles >= 29 degrees, and it takes the most
+#: common clinical MR spacing, 0.9375 x 0.9375 x 1.5, with 2 cells per voxel instead of 12.
+ASPECT_LIMIT = 1.25
+#: Relative tolerance within which spacing ratios (and `max_aspect`) are read as the
+#: simplest fraction: 5x the 1e-6 noise of an affine's column norms, 300x float32 rounding.
+RATIO_TOLERANCE = 5e-6
 #: Largest subdivision of a voxel along one axis (spacing aspect up to about 19).
 MAX_FACTOR = 16
 #: Largest interface refinement level: 2**-4 voxels (4096 cells per voxel in 3-D).
@@ -57,11 +72,14 @@ class Lattice:
         voxels or when subdivision is off).
     refine : int
         Interface refinement level K: cells are a further ``2**K`` times smaller.
+    max_aspect : float or None
+        The residual-aspect limit `factors` were chosen for (None: not subdivided).
     """
 
     spacing: tuple[float, ...]
     factors: tuple[int, ...]
     refine: int = 0
+    max_aspect: float | None = ASPECT_LIMIT
 
     @property
     def ndim(self) -> int:
@@ -90,6 +108,7 @@ class Lattice:
     def describe(self) -> dict:
         """Plain-data summary for reports and ``--json``."""
         return {"factors": list(self.factors), "refine": self.refine,
+                "max_aspect": self.max_aspect,
                 "cells_per_voxel": list(self.cells_per_voxel),
                 "step": [float(s) for s in self.step],
                 "residual_aspect": float(self.residual_aspect),
@@ -153,8 +172,97 @@ def _aspect(values) -> float:
     return float(max(values) / min(values))
 
 
+def check_max_aspect(max_aspect) -> float:
+    """`max_aspect` as a float >= 1, or ValueError saying what it trades."""
+    if isinstance(max_aspect, bool) or not isinstance(max_aspect, (int, float, np.integer,
+                                                                   np.floating)) \
+            or not (math.isfinite(float(max_aspect)) and float(max_aspect) >= 1.0):
+        raise ValueError(f"max_aspect must be a finite number >= 1 (the largest residual "
+                         f"aspect of the lattice cells; default {ASPECT_LIMIT}: larger means "
+                         f"fewer elements and a looser bound); got {max_aspect!r}.")
+    return float(max_aspect)
+
+
+def _simplest_between(lo: Fraction, hi: Fraction) -> Fraction:
+    """The fraction of smallest denominator in ``[lo, hi]`` (``0 < lo <= hi``), by the
+    continued-fraction expansion both ends share."""
+    whole = math.floor(lo)
+    if whole == lo or whole + 1 <= hi:
+        return Fraction(whole if whole == lo else whole + 1)
+    return whole + 1 / _simplest_between(1 / (hi - whole), 1 / (lo - whole))
+
+
+def _as_fraction(value: float) -> Fraction:
+    """`value` as the simplest fraction within :data:`RATIO_TOLERANCE` of it."""
+    v = Fraction(float(value))
+    return _simplest_between(v * (1 - Fraction(RATIO_TOLERANCE)),
+                             v * (1 + Fraction(RATIO_TOLERANCE)))
+
+
+def _rational_ratios(spacing) -> tuple[Fraction, ...]:
+    """Each voxel size over the smallest, as the fraction it means (1, 5/4, 3/2 for
+    float32 0.8, 1, 1.2)."""
+    s = [float(v) for v in spacing]
+    if not all(math.isfinite(v) and v > 0 for v in s):
+        raise ValueError(f"spacing must be positive and finite; got {tuple(s)}.")
+    smallest = min(s)
+    return tuple(_as_fraction(v / smallest) for v in s)
+
+
+def _candidates(ratios: tuple[Fraction, ...], bound: Fraction, strict: bool):
+    """Every factor tuple that is the fewest cells for its smallest cell: (factors, exact
+    residual aspect) with aspect <= `bound` (< with `strict`), factors <= MAX_FACTOR.
+
+    A tuple of fewest cells has some axis ``a`` with the smallest cell ``m = r_a / n_a``;
+    every other axis then takes the fewest cells keeping ``r_i / n_i`` in ``[m, bound*m]``.
+    Any admissible tuple is at least these factorwise, so the minimum over ``(a, n_a)``
+    is the minimum over all tuples, and every tuple of that minimum is among them.
+    """
+    out = []
+    for a, n_a in itertools.product(range(len(ratios)), range(1, MAX_FACTOR + 1)):
+        m = ratios[a] / n_a
+        factors = []
+        for i, r in enumerate(ratios):
+            if i == a:
+                factors.append(n_a)
+                continue
+            n = max(1, math.ceil(r / (bound * m)))
+            if strict and r / n == bound * m:
+                n += 1
+            if n > MAX_FACTOR or r / n < m:
+                break
+            factors.append(n)
+        else:
+            h = [r / n for r, n in zip(ratios, factors)]
+            aspect = max(h) / min(h)
+            if aspect < bound or (aspect == bound and not strict):
+                out.append((tuple(factors), aspect))
+    return out
+
+
+def _best(ratios: tuple[Fraction, ...], candidates):
+    """The fewest cells; then the smallest residual aspect; then, over the axes sorted by
+    spacing, the smaller factors first. Axes of equal spacing have equal factors in any
+    tuple of fewest cells (the larger of two can drop to the smaller), so this order
+    permutes with the axes."""
+    order = sorted(range(len(ratios)), key=lambda i: ratios[i])
+    return min(candidates, key=lambda c: (math.prod(c[0]), c[1],
+                                          tuple(c[0][i] for i in order)))
+
+
+@functools.lru_cache(maxsize=256)
+def _factors(ratios: tuple[Fraction, ...], bound: Fraction) -> tuple[int, ...] | None:
+    candidates = _candidates(ratios, bound, strict=False)
+    return _best(ratios, candidates)[0] if candidates else None
+
+
 def subdivision_factors(spacing, *, max_aspect: float = ASPECT_LIMIT) -> tuple[int, ...]:
     """Fewest cells per voxel (product of integer factors) with residual aspect <= `max_aspect`.
+
+    Spacing ratios and `max_aspect` are read as the simplest fractions within
+    :data:`RATIO_TOLERANCE` and compared exactly, so float32 rounding and relative noise
+    of 1e-6 give the same factors. Of equally few cells, the smallest residual aspect is
+    taken, then the smaller factors on the finer axes.
 
     Parameters
     ----------
@@ -173,41 +281,88 @@ def subdivision_factors(spacing, *, max_aspect: float = ASPECT_LIMIT) -> tuple[i
     ------
     ValueError
         When no factors up to :data:`MAX_FACTOR` reach `max_aspect` (spacing aspect above
-        about 19).
+        about ``16 * max_aspect``).
 
     Examples
     --------
-    >>> subdivision_factors((2.5, 1.0, 1.0))
-    (3, 1, 1)
-    >>> subdivision_factors((1.0, 1.0))
-    (1, 1)
+    >>> subdivision_factors((2.5, 1.0, 1.0))          # cells 1.25 x 1 x 1
+    (2, 1, 1)
+    >>> subdivision_factors((0.9375, 0.9375, 1.5))    # cells 0.9375 x 0.9375 x 0.75
+    (1, 1, 2)
+    >>> subdivision_factors((1.0, 0.800000011920929, 1.2), max_aspect=1.0)   # float32 0.8
+    (5, 4, 6)
     """
-    s = np.asarray(spacing, dtype=float)
-    if _aspect(s) <= max_aspect:
-        return (1,) * len(s)
-    best: tuple[int, tuple[int, ...]] | None = None
-    # the cell size h is one axis's spacing over some factor; every other axis then takes
-    # the factor on either side of s_b / h
-    for a, n in itertools.product(range(len(s)), range(1, MAX_FACTOR + 1)):
-        h = s[a] / n
-        options = [sorted({max(1, math.floor(v / h)), max(1, math.ceil(v / h))}) for v in s]
-        for combo in itertools.product(*options):
-            if max(combo) > MAX_FACTOR or _aspect(s / np.asarray(combo)) > max_aspect:
-                continue
-            key = (math.prod(combo), tuple(combo))
-            if best is None or key < best:
-                best = key
-    if best is None:
+    max_aspect = check_max_aspect(max_aspect)
+    ratios = _rational_ratios(spacing)
+    factors = _factors(ratios, _as_fraction(max_aspect))
+    if factors is None:
+        s = tuple(float(v) for v in spacing)
         raise ValueError(
-            f"voxel spacing {tuple(float(v) for v in s)} has aspect {_aspect(s):.3g}: no "
-            f"subdivision of up to {MAX_FACTOR} cells per axis makes cells within aspect "
-            f"{max_aspect}; resample the image closer to cubic voxels, or pass "
-            "subdivide=False (--no-subdivide) to mesh the stretched voxels without a bound."
+            f"voxel spacing {s} has aspect {_aspect(s):.3g}: no subdivision of up to "
+            f"{MAX_FACTOR} cells per axis makes cells within aspect {max_aspect}; resample "
+            "the image closer to cubic voxels, allow a larger max_aspect (--max-aspect), or "
+            "pass subdivide=False (--no-subdivide) to mesh the stretched voxels without a "
+            "bound."
         )
-    return best[1]
+    return factors
 
 
-def choose_lattice(spacing, *, refine: int = 0, subdivide: bool = True) -> Lattice:
+def lattice_choices(spacing, *, max_rows: int = 8) -> list[dict]:
+    """What each `max_aspect` gives for voxels of `spacing`: the trade-off of cells per
+    voxel against the quality bound, fewest cells first.
+
+    Each row is the subdivision of fewest cells for a range of `max_aspect`; the next row
+    is the best with a strictly smaller residual aspect, until the cells are cubic, the
+    factors run out, or `max_rows`.
+
+    Parameters
+    ----------
+    spacing : sequence of float
+        Voxel size per axis (2 or 3 axes).
+    max_rows : int
+        Most rows.
+
+    Returns
+    -------
+    list of dict
+        ``factors``, ``cells_per_voxel`` (their product), ``residual_aspect``,
+        ``max_aspect_from`` (the smallest `max_aspect` choosing these factors: their
+        residual aspect) and ``max_aspect_below`` (the largest, exclusive; None for the
+        voxels themselves), ``bounds`` (:func:`aspect_bounds`) and
+        ``interface_cells_per_voxel_face`` (lattice cells on one voxel face, averaged over
+        the axes: the element count near interfaces grows about with it).
+
+    Examples
+    --------
+    >>> [(r["factors"], round(r["residual_aspect"], 3))
+    ...  for r in lattice_choices((0.9375, 0.9375, 1.5), max_rows=3)]
+    [((1, 1, 1), 1.6), ((1, 1, 2), 1.25), ((3, 3, 4), 1.067)]
+    """
+    ratios = _rational_ratios(spacing)
+    d = len(ratios)
+    rows, below = [], None
+    bound = max(ratios) / min(ratios)
+    strict = False
+    while len(rows) < max_rows:
+        candidates = _candidates(ratios, bound, strict)
+        if not candidates:
+            break
+        factors, aspect = _best(ratios, candidates)
+        faces = sum(math.prod(f for b, f in enumerate(factors) if b != a)
+                    for a in range(d)) / d
+        rows.append({"factors": factors, "cells_per_voxel": math.prod(factors),
+                     "residual_aspect": float(aspect), "max_aspect_from": float(aspect),
+                     "max_aspect_below": below,
+                     "bounds": aspect_bounds(d, float(aspect)),
+                     "interface_cells_per_voxel_face": float(faces)})
+        if aspect == 1:
+            break
+        bound, strict, below = aspect, True, float(aspect)
+    return rows
+
+
+def choose_lattice(spacing, *, refine: int = 0, subdivide: bool = True,
+                   max_aspect: float | None = None) -> Lattice:
     """The lattice for voxels of `spacing`: anisotropy subdivision and interface refinement.
 
     Parameters
@@ -218,8 +373,12 @@ def choose_lattice(spacing, *, refine: int = 0, subdivide: bool = True) -> Latti
         Interface refinement level, ``0 .. MAX_REFINE``.
     subdivide : bool
         Subdivide anisotropic voxels so the bounds of :func:`aspect_bounds` at
-        :data:`ASPECT_LIMIT` hold in physical space. Off: voxels are stretched templates
-        and no bound is claimed beyond the stretched one.
+        `max_aspect` hold in physical space. Off: voxels are stretched templates and no
+        bound is claimed beyond the stretched one.
+    max_aspect : float, optional
+        Largest residual aspect of the cells (default :data:`ASPECT_LIMIT`): larger gives
+        fewer cells per voxel and a looser bound (``swa-imesh bounds --spacing`` prints
+        the choices). Not with ``subdivide=False``.
 
     Examples
     --------
@@ -227,8 +386,15 @@ def choose_lattice(spacing, *, refine: int = 0, subdivide: bool = True) -> Latti
     (6, 2, 2)
     """
     refine = check_refine(refine)
-    factors = subdivision_factors(spacing) if subdivide else (1,) * len(spacing)
-    return Lattice(tuple(float(s) for s in spacing), factors, refine)
+    if max_aspect is not None and not subdivide:
+        raise ValueError("max_aspect bounds the subdivided cells; with subdivide=False "
+                         "(--no-subdivide) the voxels are meshed as they are, so give one "
+                         "or the other.")
+    max_aspect = ASPECT_LIMIT if max_aspect is None else check_max_aspect(max_aspect)
+    factors = (subdivision_factors(spacing, max_aspect=max_aspect) if subdivide
+               else (1,) * len(spacing))
+    return Lattice(tuple(float(s) for s in spacing), factors, refine,
+                   max_aspect if subdivide else None)
 
 
 def check_level(value, name: str, top: int, meaning: str) -> int:
