@@ -160,7 +160,7 @@ def prepare_mesh(mesh_or_labels, *, spacing=None, exclude=(),
     voxels cut into cells of residual aspect at most `max_aspect`)."""
     if isinstance(mesh_or_labels, Mesh):
         if spacing is not None or tuple(exclude) or refine or max_aspect is not None:
-            raise ValueError("spacing, exclude, refine and max_aspect apply to a label "
+            raise ValueError("spacing, exclude, max_aspect and refine apply to a label "
                              "image; a mesh already has them.")
         if not material_names:
             return mesh_or_labels
@@ -275,6 +275,7 @@ def simulate_steps(mesh_or_labels, conductivity: Mapping, *, spacing=None,
         # mark whole leaves (the unit the mesher splits) by their summed indicator
         leaf = np.asarray(mesh.cell_data["leaf"])
         indicator = np.bincount(leaf, flux_jump_indicator(mesh, [first.flux[a] for a in names]))
+        del first          # its fields would stay alive through the next mesh and solve
         if growth is None:
             mesh, tree = _refine_marked(source, mesh, doerfler(indicator)[leaf], tree)
         else:              # P1's default: each step its share of the vertex budget
