@@ -73,8 +73,9 @@ def add_commands(subparsers) -> None:
     p.add_argument("--msh-ascii", action="store_true",
                    help="write .msh as Gmsh 4.1 ASCII instead of binary")
     p.add_argument("--refine", type=int, default=0, metavar="K",
-                   help="elements sharing a facet with a material interface are 2^-K voxels "
-                        "(0..4; default 0); the interior coarsens as before, bounds unchanged")
+                   help="elements sharing a facet with a material interface are at most 2^-K "
+                        "voxels along every axis (0..4; default 0; anisotropy cells count "
+                        "toward it); the interior coarsens as before, bounds unchanged")
     p.add_argument("--max-size", type=float, default=None, metavar="H",
                    help="longest element edge allowed, in physical units (larger leaves "
                         "are split); at least the diagonal of one lattice cell")

@@ -336,7 +336,7 @@ def lattice_choices(spacing, *, max_rows: int = 8) -> list[dict]:
     --------
     >>> [(r["factors"], round(r["residual_aspect"], 3))
     ...  for r in lattice_choices((0.9375, 0.9375, 1.5), max_rows=3)]
-    [((1, 1, 1), 1.6), ((1, 1, 2), 1.25), ((3, 3, 4), 1.067)]
+    [((1, 1, 1), 1.6), ((1, 1, 2), 1.25), ((2, 2, 3), 1.067)]
     """
     ratios = _rational_ratios(spacing)
     d = len(ratios)
@@ -370,7 +370,10 @@ def choose_lattice(spacing, *, refine: int = 0, subdivide: bool = True,
     spacing : tuple of float
         Voxel size per axis (already checked).
     refine : int
-        Interface refinement level, ``0 .. MAX_REFINE``.
+        Interface refinement level, ``0 .. MAX_REFINE``: cells at interfaces at most
+        ``2**-refine`` voxels along every axis. The subdivision counts toward it: voxels
+        cut into at least ``2**j`` cells along every axis take ``j`` levels fewer
+        (``Lattice.refine``), instead of multiplying the cells again.
     subdivide : bool
         Subdivide anisotropic voxels so the bounds of :func:`aspect_bounds` at
         `max_aspect` hold in physical space. Off: voxels are stretched templates and no
@@ -384,6 +387,8 @@ def choose_lattice(spacing, *, refine: int = 0, subdivide: bool = True,
     --------
     >>> choose_lattice((3.0, 1.0, 1.0), refine=1).cells_per_voxel
     (6, 2, 2)
+    >>> choose_lattice((1.0, 0.8, 1.2), refine=2).cells_per_voxel    # 2 x 2 x 3, one level
+    (4, 4, 6)
     """
     refine = check_refine(refine)
     if max_aspect is not None and not subdivide:
@@ -393,6 +398,8 @@ def choose_lattice(spacing, *, refine: int = 0, subdivide: bool = True,
     max_aspect = ASPECT_LIMIT if max_aspect is None else check_max_aspect(max_aspect)
     factors = (subdivision_factors(spacing, max_aspect=max_aspect) if subdivide
                else (1,) * len(spacing))
+    # every axis has at least 2**j cells already: j levels of the refinement are there
+    refine = max(0, refine - (min(factors).bit_length() - 1))
     return Lattice(tuple(float(s) for s in spacing), factors, refine,
                    max_aspect if subdivide else None)
 
