@@ -72,7 +72,8 @@ def mesh_labels(labels, *, method: str = "template", exclude=(), spacing=None,
         rotations, flips and an origin included). Give it instead of `spacing`.
     refine : int
         Interface refinement ``0 .. 4``: elements sharing a facet with a material
-        interface are ``2**-refine`` voxels; the interior coarsens as before.
+        interface are at most ``2**-refine`` voxels along every axis (cells of the
+        anisotropy subdivision count toward it); the interior coarsens as before.
     max_size : float, optional
         Longest element edge allowed (physical units); larger leaves are split.
     subdivide : bool
