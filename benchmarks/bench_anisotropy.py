@@ -105,7 +105,9 @@ def run(code: str, *args) -> dict:
     if proc.returncode != 0:
         tail = proc.stderr.strip().splitlines()[-1:] or ["(no message)"]
         return {"error": tail[0]}
-    return json.loads(proc.stdout.strip().splitlines()[-1])
+    out = json.loads(proc.stdout.strip().splitlines()[-1])
+    out["stderr"] = (proc.stderr.strip().splitlines() or [""])[-1]
+    return out
 
 
 def mesh_rows(labels: np.ndarray, folder: Path, old: bool) -> list[dict]:
@@ -173,8 +175,9 @@ def print_float32_table(rows: list[dict]) -> None:
     print(f"{'labels':26s} {'command':9s} {'rc':>3s} {'elements':>10s} {'unknowns':>9s}"
           f" {'s':>7s} {'peak MB':>8s}")
     for r in rows:
-        if "error" in r:
-            print(f"{r['case']:26s} {r['command']:9s} failed: {r['error']}")
+        if "error" in r or r.get("rc") != 0:
+            print(f"{r['case']:26s} {r['command']:9s} failed: "
+                  f"{r.get('error') or r.get('stderr')}")
             continue
         print(f"{r['case']:26s} {r['command']:9s} {r['rc']:3d} {str(r.get('elements')):>10s}"
               f" {str(r.get('unknowns', '')):>9s} {r['seconds']:7.1f} {r['peak'] / 2**20:8.0f}")
@@ -188,7 +191,7 @@ def big_row(folder: Path) -> None:
             "0.9375", "0.9375", "1.5", "--no-check", "--json")
     print("\n256^3 blobs at 0.9375 x 0.9375 x 1.5 (swa-imesh mesh --no-check)")
     if "error" in r or r.get("rc") != 0:
-        print(f"failed: {r.get('error', r.get('out'))}")
+        print(f"failed: {r.get('error') or r.get('stderr')}")
         return
     out = json.loads(r["out"])
     print(f"elements {out['elements']}, lattice {out['lattice']['factors']}, "
