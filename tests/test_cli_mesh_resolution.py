@@ -145,4 +145,4 @@ def test_bounds_lists_every_choice_for_a_spacing_and_marks_the_chosen(capsys):
     chosen = [line for line in out.splitlines() if line.endswith("<- chosen")]
     assert len(chosen) == 1 and "2 x 2 x 3 = 12" in chosen[0]
     code, _, err = run(capsys, "bounds", "--dim", "3", "--max-aspect", "1.2")
-    assert code == 2 and "give --spacing too" in err
+    assert code == 2 and "give --spacing" in err

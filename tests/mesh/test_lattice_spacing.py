@@ -17,8 +17,7 @@ import pytest
 from hypothesis import HealthCheck, assume, given, settings
 from hypothesis import strategies as st
 
-from napari_swa_imesh.mesh import mesh_labels
-from napari_swa_imesh.mesh import _templates
+from napari_swa_imesh.mesh import _templates, mesh_labels
 from napari_swa_imesh.mesh._checks import check_mesh
 from napari_swa_imesh.mesh._lattice import (
     ASPECT_LIMIT,
@@ -28,7 +27,11 @@ from napari_swa_imesh.mesh._lattice import (
     lattice_choices,
     subdivision_factors,
 )
-from napari_swa_imesh.mesh._quality import dihedral_angles, radius_edge_ratio, triangle_angles
+from napari_swa_imesh.mesh._quality import (
+    dihedral_angles,
+    radius_edge_ratio,
+    triangle_angles,
+)
 
 DENOMINATORS = (1, 2, 4, 5, 8, 10, 16, 20, 32, 64)
 LIMITS = (1.0, 1.1, 1.2, ASPECT_LIMIT, 1.3, 1.5, 2.0)
@@ -132,7 +135,7 @@ def test_the_choices_table_is_a_strict_trade_off_that_contains_every_limit(spaci
     cells = [r["cells_per_voxel"] for r in rows]
     aspects = [r["residual_aspect"] for r in rows]
     assert cells == sorted(cells) and len(set(cells)) == len(cells)
-    assert all(a > b for a, b in zip(aspects, aspects[1:]))
+    assert all(a > b for a, b in itertools.pairwise(aspects))
     assert rows[0]["factors"] == (1,) * len(spacing)
     for limit in LIMITS:
         try:

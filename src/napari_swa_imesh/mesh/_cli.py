@@ -19,16 +19,12 @@ from .._cli_util import StepTimer, print_json
 from .._validation import normalize_spacing
 from ._checks import _check_mesh
 from ._export import MESH_SUFFIXES
+from ._subdivision import check_max_aspect
 from ._memory import (available_memory, count_boundary_voxels, current_rss,
                       estimate_mesh_memory, format_bytes, parse_memory_size)
 
 __all__ = ["add_commands", "parse_material_names"]
 
-
-MAX_ASPECT_HELP = ("anisotropic voxels are cut into the fewest cells of residual aspect "
-                   "(max/min cell size) <= A: default 1.25 (radius-to-edge <= 1.3754, "
-                   "dihedral angles 29.5-131.5 deg); larger, fewer elements and a looser "
-                   "bound (swa-imesh bounds --dim 3 --spacing ... lists the choices)")
 
 def add_commands(subparsers) -> None:
     """Register the meshing sub-commands on an argparse sub-parser group."""
@@ -73,9 +69,8 @@ def add_commands(subparsers) -> None:
     p.add_argument("--msh-ascii", action="store_true",
                    help="write .msh as Gmsh 4.1 ASCII instead of binary")
     p.add_argument("--refine", type=int, default=0, metavar="K",
-                   help="elements sharing a facet with a material interface are at most 2^-K "
-                        "voxels along every axis (0..4; default 0; anisotropy cells count "
-                        "toward it); the interior coarsens as before, bounds unchanged")
+                   help="elements at material interfaces are at most 2^-K voxels per axis "
+                        "(0..4, default 0; anisotropy cells count); bounds unchanged")
     p.add_argument("--max-size", type=float, default=None, metavar="H",
                    help="longest element edge allowed, in physical units (larger leaves "
                         "are split); at least the diagonal of one lattice cell")
@@ -90,7 +85,9 @@ def add_commands(subparsers) -> None:
                    help="mesh anisotropic voxels as stretched templates (no physical "
                         "quality bound) instead of subdividing them into nearly cubic cells")
     p.add_argument("--max-aspect", type=float, default=None, metavar="A",
-                   help=MAX_ASPECT_HELP)
+                   help="cut voxels into the fewest cells of aspect <= A (default 1.25: "
+                        "ratio <= 1.3754, dihedral >= 29.5 deg); larger A, fewer elements, "
+                        "looser bound (see: swa-imesh bounds --dim 3 --spacing ...)")
     p.add_argument("--force", action="store_true", help="replace an existing output file")
     p.add_argument("--no-check", action="store_true",
                    help="skip the conformity/volume/label checks (less than the meshing)")
@@ -113,8 +110,7 @@ def add_commands(subparsers) -> None:
     p.add_argument("--dim", type=int, required=True, metavar="D", help="dimension (2 or 3)")
     p.add_argument("--spacing", type=float, nargs="+", default=None, metavar="S",
                    help="voxel spacing: also print what each --max-aspect gives for it "
-                        "(cells per voxel, residual aspect, bound, elements against cubic "
-                        "voxels) and the lattice the mesher uses")
+                        "(cells per voxel, bound, elements) and the lattice used")
     p.add_argument("--max-aspect", type=float, default=None, metavar="A",
                    help="with --spacing: the limit to mark (default 1.25, the mesher's)")
     p.add_argument("--json", action="store_true", help="print one JSON object on stdout")
@@ -251,16 +247,6 @@ def _timed_check(timer, mesh, labels, exclude, tree, full) -> dict:
         return _check_mesh(mesh, labels, exclude, tree, full=full).to_dict()
 
 
-def check_max_aspect_arg(value) -> float:
-    """``--max-aspect`` as a float >= 1, or ValueError naming the option."""
-    from ._lattice import check_max_aspect
-
-    try:
-        return check_max_aspect(value)
-    except ValueError as exc:
-        raise ValueError(str(exc).replace("max_aspect", "--max-aspect", 1)) from None
-
-
 def _check_resolution_args(args) -> None:
     """Refine and coarsen levels in range before any reading (the size cap needs the
     spacing, so it is checked with it)."""
@@ -270,11 +256,7 @@ def _check_resolution_args(args) -> None:
 
     check_refine(args.refine)
     if args.max_aspect is not None:
-        check_max_aspect_arg(args.max_aspect)
-        if args.no_subdivide:
-            raise ValueError("--max-aspect bounds the cells anisotropic voxels are cut into; "
-                             "--no-subdivide meshes the voxels as they are: give one or the "
-                             "other.")
+        check_max_aspect(args.max_aspect, "--max-aspect", subdivide=not args.no_subdivide)
     check_coarsen(args.coarsen)
     check_periodic(args.method, args.periodic)
     if args.max_size is not None and not (np.isfinite(args.max_size) and args.max_size > 0):
@@ -489,23 +471,21 @@ def _mesh_text(r: dict) -> str:
 
 
 def _run_bounds(args: argparse.Namespace) -> int:
-    from ._bounds import format_quality_table, quality_table
-    from ._lattice import ASPECT_LIMIT, aspect_table, choose_lattice, lattice_choices
+    from ._bounds import format_lattice_bounds, format_quality_table, quality_table
+    from ._lattice import aspect_table, choose_lattice, lattice_choices
 
     if args.dim not in (2, 3):
         raise ValueError(f"--dim must be 2 or 3; got {args.dim}.")
     if args.max_aspect is not None:
-        check_max_aspect_arg(args.max_aspect)
+        check_max_aspect(args.max_aspect, "--max-aspect")
         if not args.spacing:
-            raise ValueError("--max-aspect picks the lattice for a voxel spacing; give "
-                             "--spacing too.")
+            raise ValueError("--max-aspect picks the lattice for a spacing; give --spacing.")
     lattice = choices = None
     if args.spacing:
         spacing = normalize_spacing(args.spacing, args.dim)
         choices = lattice_choices(spacing)
         lattice = choose_lattice(spacing, max_aspect=args.max_aspect)
-    rows = quality_table(args.dim)
-    aspects = aspect_table(args.dim)
+    rows, aspects = quality_table(args.dim), aspect_table(args.dim)
     if args.json:
         out = {"command": "bounds", "dim": args.dim, "simplices": rows,
                "by_residual_aspect": aspects}
@@ -515,39 +495,5 @@ def _run_bounds(args: argparse.Namespace) -> int:
         print_json(out)
         return 0
     print(format_quality_table(rows))
-    angle = "dihedral angles" if args.dim == 3 else "angles"
-    print("\nbounds on lattice cells of residual aspect A (max/min cell size): anisotropic "
-          f"voxels are cut into the fewest cells with A <= --max-aspect (default "
-          f"{ASPECT_LIMIT}) unless --no-subdivide")
-    print(f"{'A':>6s} {'ratio <=':>9s} {angle + ' (deg)':>22s}")
-    for row in aspects:
-        print(f"{row['aspect']:6.2f} {row['worst_ratio']:9.4f} "
-              f"{row['min_angle']:10.2f} .. {row['max_angle']:7.2f}")
-    if lattice is not None:
-        print(_choices_text(lattice, choices, angle))
+    print(format_lattice_bounds(args.dim, aspects, lattice, choices))
     return 0
-
-
-def _choices_text(lattice, choices: list[dict], angle: str) -> str:
-    """The table of what each --max-aspect gives for one spacing, the chosen row marked."""
-    d = lattice.describe()
-    lines = [f"\nspacing {' x '.join(f'{s:g}' for s in lattice.spacing)}: the lattice for "
-             "each --max-aspect (elements: about the interface cells per voxel face, against "
-             "cubic voxels of the same image)",
-             f"{'--max-aspect':>16s} {'cells per voxel':>18s} {'residual A':>10s} "
-             f"{'ratio <=':>9s} {angle + ' (deg)':>24s} {'elements':>9s}"]
-    for r in choices:
-        upper = r["max_aspect_below"]
-        span = (f">= {r['max_aspect_from']:.4g}" if upper is None
-                else f"{r['max_aspect_from']:.4g} .. <{upper:.4g}")
-        cells = " x ".join(map(str, r["factors"])) + f" = {r['cells_per_voxel']}"
-        b = r["bounds"]
-        mark = "  <- chosen" if tuple(r["factors"]) == tuple(lattice.factors) else ""
-        lines.append(f"{span:>16s} {cells:>18s} {r['residual_aspect']:10.4f} "
-                     f"{b['worst_ratio']:9.4f} {b['min_angle']:11.2f} .. {b['max_angle']:7.2f}"
-                     f" {'x' + format(r['interface_cells_per_voxel_face'], '.3g'):>9s}{mark}")
-    lines.append(f"chosen (--max-aspect {lattice.max_aspect:g}): "
-                 f"{' x '.join(map(str, lattice.factors))} cells per voxel, residual aspect "
-                 f"{d['residual_aspect']:.4f}: ratio <= {d['bounds']['worst_ratio']:.4f}, "
-                 f"{angle} {d['bounds']['min_angle']:.2f} to {d['bounds']['max_angle']:.2f}")
-    return "\n".join(lines)

@@ -251,6 +251,7 @@ def refine_within(labels, mesh: Mesh, leaf_indicator: np.ndarray, target: float,
             best = out if best is None or reached > len(best[0].points) else best
             if reached >= (1 - BUDGET_SLACK) * target or count == useful:
                 break
+        out = None       # a try not kept must not stay alive while the next one is made
         # scattered splits cost more each (their balance), so aim a little under
         again = int(min(useful, count * (target - vertices) / max(reached - vertices, 1)
                         * (1 - BUDGET_SLACK / 2)))

@@ -175,9 +175,9 @@ def _run_simulate(args: argparse.Namespace) -> int:
 
     check_refine(args.refine)
     if args.max_aspect is not None:
-        from ..mesh._cli import check_max_aspect_arg
+        from ..mesh._lattice import check_max_aspect
 
-        check_max_aspect_arg(args.max_aspect)
+        check_max_aspect(args.max_aspect, "--max-aspect")
     if transient is not None and args.protocol != "mixed":
         raise ValueError("--protocol is for the steady k_eff run, not --transient.")
     if transient is not None and args.refine:
