@@ -35,9 +35,11 @@ def test_anisotropic_spacing_is_subdivided_and_reported(tmp_path, capsys):
                        "--spacing", "2.5", "1", "1", "--json")
     assert code == 0
     report = json.loads(out)
-    assert report["lattice"]["factors"] == [3, 1, 1]
-    assert report["worst_ratio"] <= np.sqrt(29) / 4
-    assert 30 <= report["min_dihedral"] and report["max_dihedral"] <= 135
+    # the default limit 1.25 takes 2.5 / 2 cells; its bound is 1.3754 and 29.50 deg
+    assert report["lattice"]["factors"] == [2, 1, 1]
+    assert report["lattice"]["max_aspect"] == 1.25
+    assert report["worst_ratio"] <= 1.37536
+    assert 29.49 <= report["min_dihedral"] and report["max_dihedral"] <= 135
     assert report["checks"]["all_passed"]
     mesh = read_mesh(tmp_path / "m.vtu")
     vol = signed_volumes(mesh.points, mesh.cells)
@@ -81,6 +83,9 @@ def test_coarsen_that_removes_a_material_warns_naming_it(tmp_path, capsys):
     (["--method", "delaunay", "--refine", "1"], "the delaunay method meshes voxels"),
     (["--method", "delaunay", "--periodic"], "periodic meshes need the template method"),
     (["--spacing", "100", "1", "1"], "resample the image closer to cubic voxels"),
+    (["--max-aspect", "0.9"], "--max-aspect must be a finite number >= 1"),
+    (["--max-aspect", "nan"], "--max-aspect must be a finite number >= 1"),
+    (["--max-aspect", "1.3", "--no-subdivide"], "give one or the other"),
 ])
 def test_bad_resolution_options_exit_2_and_leave_the_folder_unchanged(tmp_path, capsys,
                                                                       extra, message):
@@ -98,8 +103,46 @@ def test_bounds_prints_the_bound_per_residual_aspect_and_for_a_spacing(capsys):
     code, out, _ = run(capsys, "bounds", "--dim", "3", "--spacing", "2.5", "1", "1")
     assert code == 0
     assert "residual aspect" in out and "  1.20    1.3185" in out
-    assert "3 x 1 x 1 cells per voxel" in out
+    assert "chosen (--max-aspect 1.25): 2 x 1 x 1 cells per voxel" in out
     code, out, _ = run(capsys, "bounds", "--dim", "3", "--json")
     rows = json.loads(out)["by_residual_aspect"]
     assert rows[0]["aspect"] == 1.0 and rows[0]["worst_ratio"] == pytest.approx(np.sqrt(5) / 2)
     assert all(a["worst_ratio"] <= b["worst_ratio"] for a, b in zip(rows, rows[1:]))
+
+
+def test_max_aspect_trades_cells_for_the_bound(tmp_path, capsys):
+    np.save(tmp_path / "lab.npy", blob())
+    reports = {}
+    for limit in ("1.2", "1.25", "1.5"):
+        code, out, _ = run(capsys, "mesh", tmp_path / "lab.npy", "-o", tmp_path / "m.vtu",
+                           "--force", "--spacing", "2.5", "1", "1", "--max-aspect", limit,
+                           "--json")
+        assert code == 0
+        reports[limit] = json.loads(out)
+    # 2.5 / 3 -> 1.2, 2.5 / 2 -> 1.25, 2.5 / 2 too at 1.5 (2.5 / 1 is beyond it)
+    assert [reports[k]["lattice"]["factors"][0] for k in ("1.2", "1.25", "1.5")] == [3, 2, 2]
+    for limit, r in reports.items():
+        assert r["lattice"]["max_aspect"] == float(limit)
+        assert r["worst_ratio"] <= r["lattice"]["bounds"]["worst_ratio"] + 1e-9
+        assert r["checks"]["all_passed"]
+    assert reports["1.2"]["elements"] > reports["1.25"]["elements"]
+
+
+def test_bounds_lists_every_choice_for_a_spacing_and_marks_the_chosen(capsys):
+    code, out, _ = run(capsys, "bounds", "--dim", "3", "--spacing", "0.9375", "0.9375", "1.5",
+                       "--json")
+    assert code == 0
+    report = json.loads(out)
+    choices = report["choices"]
+    assert [c["factors"] for c in choices[:3]] == [[1, 1, 1], [1, 1, 2], [2, 2, 3]]
+    assert [c["cells_per_voxel"] for c in choices[:3]] == [1, 2, 12]
+    assert choices[1]["residual_aspect"] == pytest.approx(1.25)
+    assert choices[1]["bounds"]["worst_ratio"] <= 1.40
+    assert report["lattice"]["factors"] == [1, 1, 2]
+    code, out, _ = run(capsys, "bounds", "--dim", "3", "--spacing", "0.9375", "0.9375", "1.5",
+                       "--max-aspect", "1.2")
+    assert code == 0
+    chosen = [line for line in out.splitlines() if line.endswith("<- chosen")]
+    assert len(chosen) == 1 and "2 x 2 x 3 = 12" in chosen[0]
+    code, _, err = run(capsys, "bounds", "--dim", "3", "--max-aspect", "1.2")
+    assert code == 2 and "give --spacing" in err

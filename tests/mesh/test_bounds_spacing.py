@@ -49,9 +49,10 @@ def test_every_element_of_a_subdivided_mesh_lies_in_its_bound(d, spacing):
         for metric, (lo, hi) in bounds.items():
             values = mesh.cell_data[metric]
             assert (values >= lo - 1e-9).all() and (values <= hi + 1e-9).all(), (name, metric)
-    # far better than stretching, and within the limit every subdivided lattice meets
+    # far better than stretching, and within the default limit's bound (aspect 1.25:
+    # 1.3754 in 3-D, 0.8004 in 2-D), which every subdivided lattice meets
     assert bounds["quality"][1] < stretched["quality"][1] - 0.1
-    assert bounds["quality"][1] <= (1.31852 if d == 3 else 0.78103)
+    assert bounds["quality"][1] <= (1.37536 if d == 3 else 0.80040)
 
 
 def test_a_bad_spacing_is_refused():

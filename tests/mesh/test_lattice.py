@@ -31,9 +31,11 @@ from napari_swa_imesh.mesh._quality import dihedral_angles, radius_edge_ratio, s
 from napari_swa_imesh.mesh._quality import triangle_angles
 from napari_swa_imesh.mesh._templates import template_quality
 
-#: The issue's physical bound for any spacing (the reference's own 3-D claim).
-RATIO_3D = math.sqrt(29) / 4
-ANGLES_3D = (30.0, 135.0)
+#: The physical bound for any spacing at the default limit (issue 22: radius-to-edge <=
+#: 1.40, dihedral angles >= 29 deg; the reference's own sqrt(29)/4 and 30 deg hold at
+#: max_aspect 1.2, tested below).
+RATIO_3D = 1.40
+ANGLES_3D = (29.0, 135.0)
 
 
 def random_labels(rng, d: int, n_max: int = 7, n_labels: int = 3) -> np.ndarray:
@@ -114,9 +116,11 @@ def test_aspect_bounds_at_the_box_corners_are_the_worst_over_a_grid_of_cell_shap
             assert q["quality"].max() <= corners["worst_ratio"] + 1e-12
             assert np.nanmin(q[lo_key]) >= corners["min_angle"] - 1e-9
             assert np.nanmax(q[hi_key]) <= corners["max_angle"] + 1e-9
-    # the limit the mesher uses keeps the issue's bound
+    # the limit the mesher uses keeps the issue's bound; 1.2 keeps the reference's
     b = aspect_bounds(3, ASPECT_LIMIT)
-    assert b["worst_ratio"] <= RATIO_3D and b["min_angle"] >= 30 and b["max_angle"] <= 135
+    assert b["worst_ratio"] <= RATIO_3D and b["min_angle"] >= 29 and b["max_angle"] <= 135
+    b = aspect_bounds(3, 1.2)
+    assert b["worst_ratio"] <= math.sqrt(29) / 4 and b["min_angle"] >= 30
 
 
 @pytest.mark.parametrize("spacing", [(2.5, 1.0, 1.0), (1.5, 0.94, 0.94), (4.0, 2.0, 1.0),
@@ -264,8 +268,10 @@ def test_memory_estimate_grows_with_the_lattice():
 
 
 def test_choose_lattice_describes_itself():
+    # 2.5/2 = 1.25 is within the default limit, so two cells along the first axis
     lat = choose_lattice((2.5, 1.0, 1.0), refine=1)
     info = lat.describe()
-    assert info["factors"] == [3, 1, 1] and info["cells_per_voxel"] == [6, 2, 2]
-    assert info["step"] == pytest.approx([2.5 / 6, 0.5, 0.5])
-    assert info["bounds"]["worst_ratio"] == pytest.approx(aspect_bounds(3, 1.2)["worst_ratio"])
+    assert info["factors"] == [2, 1, 1] and info["cells_per_voxel"] == [4, 2, 2]
+    assert info["step"] == pytest.approx([2.5 / 4, 0.5, 0.5])
+    assert info["max_aspect"] == ASPECT_LIMIT == 1.25
+    assert info["bounds"]["worst_ratio"] == pytest.approx(aspect_bounds(3, 1.25)["worst_ratio"])

@@ -75,6 +75,26 @@ def test_anisotropic_voxels_shade_their_own_bound_not_the_cubic_one(make_napari_
     assert f"cubic {cubic:.3f} does not hold" in widget.summary.value
 
 
+def test_max_aspect_reaches_the_mesher_and_its_bound_is_shaded(make_napari_viewer, qtbot):
+    rng = np.random.default_rng(6)
+    viewer = make_napari_viewer()
+    data = rng.integers(1, 3, (6, 8, 8)).astype(np.uint8)
+    # 2.5:1:1 voxels: 2 x 1 x 1 cells at the default 1.25, 3 x 1 x 1 at 1.2 (2.5/3 = 0.83)
+    widget = _meshed(viewer, qtbot, data, scale=(2.5, 1.0, 1.0))
+    assert widget.max_aspect_spin.value == 1.25
+    assert widget.mesh.info["lattice"]["factors"] == [2, 1, 1]
+    widget.max_aspect_spin.value = 1.2
+    widget.run_mesh()
+    wait_idle(qtbot, widget, timeout=120_000)
+    info = widget.mesh.info["lattice"]
+    assert info["factors"] == [3, 1, 1] and info["max_aspect"] == 1.2
+    lo, hi, label = _band(widget)
+    assert label == "IMESH bound, 2.5:1:1 voxels in 3 x 1 x 1 cells"
+    assert hi == pytest.approx(
+        quality_bounds(3, spacing=(2.5, 1.0, 1.0), max_aspect=1.2)["quality"][1])
+    assert widget.mesh.quality.max() <= hi + 1e-9 < 1.32
+
+
 def test_refine_and_max_edge_reach_the_mesher(make_napari_viewer, qtbot):
     viewer = make_napari_viewer()
     data = np.ones((12, 12, 12), np.uint8)

@@ -77,6 +77,9 @@ def test_simulate_a_mesh_file_gives_the_labels_result(labels_file, capsys, tmp_p
     (["-k", "1=1", "2=1", "3=1", "-o", "existing.vtu"], "--force"),
     (["-k", "1=", "2=1"], "MATERIAL=VALUE"),
     (["-k", "1=1", "2=1", "3=1", "--spacing", "1", "-2", "1"], "spacing"),
+    (["-k", "1=1", "2=1", "3=1", "--max-aspect", "0.5"], "--max-aspect must be a finite"),
+    (["-k", "1=1", "2=1", "3=1", "--max-aspect", "1.3", "--transient", "1"],
+     "--max-aspect is for the steady k_eff run"),
 ])
 def test_bad_input_exits_2_with_one_line_and_writes_nothing(labels_file, capsys, args,
                                                            message):
@@ -101,6 +104,9 @@ def test_a_mesh_input_refuses_label_options(labels_file, capsys, tmp_path):
     assert _run(capsys, "mesh", path, "-o", mesh_path)[0] == 0
     rc, _, err = _run(capsys, "simulate", mesh_path, "-k", "1=1", "2=1", "3=1",
                       "--spacing", "2")
+    assert rc == 2 and "label image" in err
+    rc, _, err = _run(capsys, "simulate", mesh_path, "-k", "1=1", "2=1", "3=1",
+                      "--max-aspect", "1.3")
     assert rc == 2 and "label image" in err
 
 

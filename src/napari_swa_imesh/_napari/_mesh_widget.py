@@ -18,6 +18,7 @@ from qtpy.QtWidgets import QFileDialog, QLabel, QListWidget, QListWidgetItem, QW
 from ..mesh import (MeshClipper, check_mesh, mesh_labels, mesh_surface, quality_bounds,
                     write_mesh)
 from ..mesh._export import MESH_SUFFIXES
+from ..mesh._lattice import ASPECT_LIMIT
 from ._clip_panel import ClipPanel
 from ._dock import fit_dock, scroll_body, wrapped_label
 from ._help import explain_terms
@@ -52,19 +53,27 @@ _ELEMENT = {2: "triangles", 3: "tetrahedra"}
 
 
 @lru_cache(maxsize=None)
-def bound_range(ndim: int, spacing: tuple[float, ...] = (), subdivide: bool = True
-                ) -> tuple[float, float]:
+def bound_range(ndim: int, spacing: tuple[float, ...] = (), subdivide: bool = True,
+                max_aspect: float | None = None) -> tuple[float, float]:
     """Radius-to-edge range of every IMESH template element for these voxels (shaded).
 
     From the regular simplex (the best any element can be) to the worst template simplex
     stretched by the lattice cells the mesher cuts voxels of `spacing` into
     (:func:`napari_swa_imesh.mesh.quality_bounds`; the voxels themselves with
-    ``subdivide=False``): for cubic cells the proven bound of
+    ``subdivide=False``; cells of residual aspect at most `max_aspect`): for cubic cells the proven bound of
     :func:`~napari_swa_imesh.mesh.quality_table`, which meshes every leaf configuration
     with the mesher's own templates, not a number copied here. About 1.5 s in 3-D the
     first time, so call it in a worker first; it is cached.
     """
-    return quality_bounds(ndim, spacing or None, subdivide=subdivide)["quality"]
+    return quality_bounds(ndim, spacing or None, subdivide=subdivide,
+                          max_aspect=max_aspect if subdivide else None)["quality"]
+
+
+def _mesh_bound(mesh: "Mesh") -> tuple[float, float]:
+    """:func:`bound_range` for the lattice `mesh` was cut on (its recorded max aspect)."""
+    subdivided = _subdivided(mesh)
+    return bound_range(mesh.ndim, mesh.spacing, subdivided,
+                       mesh.info.get("lattice", {}).get("max_aspect") if subdivided else None)
 
 
 def _subdivided(mesh: "Mesh") -> bool:
@@ -121,7 +130,7 @@ def _values(surface: dict) -> dict[str, np.ndarray]:
 def _bound_line(mesh: "Mesh") -> str:
     """The summary's sentence on the quality bound that holds for `mesh`'s voxels."""
     subdivided = _subdivided(mesh)
-    hi = bound_range(mesh.ndim, mesh.spacing, subdivided)[1]
+    hi = _mesh_bound(mesh)[1]
     if mesh.info.get("method", "template") != "template":
         return (f"no quality bound is proven for the {mesh.info['method']} method "
                 f"(shaded: the template mesher's, {hi:.3f})")
@@ -170,6 +179,12 @@ class MeshWidget(QWidget):
         self.max_size_spin = FloatSpinBox(
             label="max edge", value=0.0, min=0.0, max=1e9, step=1.0,
             tooltip="Longest element edge allowed, in the layer's units (0: no cap).")
+        self.max_aspect_spin = FloatSpinBox(
+            label="max aspect", value=ASPECT_LIMIT, min=1.0, max=4.0, step=0.05,
+            tooltip="Anisotropic voxels are cut into the fewest cells whose sides differ by "
+                    "at most this factor: 1.25 (default) keeps radius-to-edge <= 1.38 and "
+                    "dihedral angles >= 29.5 deg; larger gives fewer elements and a looser "
+                    "bound (swa-imesh bounds --dim 3 --spacing ... lists the choices).")
         self.subdivide_box = CheckBox(
             text="cut anisotropic voxels into near-cubic cells (quality bound)", value=True)
         self.checks_box = CheckBox(
@@ -190,7 +205,8 @@ class MeshWidget(QWidget):
         layout = scroll_body(self)
         layout.addWidget(Container(widgets=[self.labels_combo, self.method_combo,
                                             self.refine_spin, self.max_size_spin,
-                                            self.subdivide_box]).native)
+                                            self.subdivide_box,
+                                            self.max_aspect_spin]).native)
         layout.addWidget(QLabel("exclude"))
         layout.addWidget(self.exclude_list)
         layout.addWidget(Container(widgets=[self.checks_box, self.color_combo, self.edges_box,
@@ -268,6 +284,8 @@ class MeshWidget(QWidget):
         if method == "template":
             resolution = {"refine": int(self.refine_spin.value),
                           "subdivide": bool(self.subdivide_box.value),
+                          "max_aspect": (float(self.max_aspect_spin.value)
+                                         if self.subdivide_box.value else None),
                           "max_size": float(self.max_size_spin.value) or None}
         elif self.refine_spin.value or self.max_size_spin.value:
             notify_error("refine and max edge apply to the template method; set them to 0 "
@@ -291,7 +309,7 @@ class MeshWidget(QWidget):
             clipper = MeshClipper(mesh, shown=(surface["faces"], surface["owners"]))
             clipper.kept(0, 0.0)         # the element extents on the first axis, here
             bound_range(mesh.ndim)       # cached here, not computed in the main thread
-            bound_range(mesh.ndim, mesh.spacing, _subdivided(mesh))
+            _mesh_bound(mesh)
             yield 3, 3, "done"
             return mesh, checks, surface, clipper
 
@@ -369,7 +387,7 @@ class MeshWidget(QWidget):
             self._show_legend(None)
         else:
             # limits of the whole mesh, so colours keep their meaning as the clip moves
-            lo, hi = bound_range(mesh.ndim, mesh.spacing, _subdivided(mesh))
+            lo, hi = _mesh_bound(mesh)
             worst = float(np.max(mesh.quality)) if mesh.n_cells else hi
             if layer.vertex_colors is not None:
                 layer.vertex_colors = None
@@ -427,7 +445,7 @@ class MeshWidget(QWidget):
             return
         ax = figure.add_subplot(1, 1, 1)
         q = mesh.quality[np.isfinite(mesh.quality)]
-        lo, hi = bound_range(mesh.ndim, mesh.spacing, _subdivided(mesh))
+        lo, hi = _mesh_bound(mesh)
         band = ax.axvspan(lo, hi, color="#2ca02c", alpha=0.18, lw=0, label=bound_label(mesh))
         band.set_gid("bound")
         # the range always spans the bound, so a mesh of one element shape still bins

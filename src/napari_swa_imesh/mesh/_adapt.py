@@ -76,8 +76,9 @@ def _refine_marked(labels, mesh: Mesh, marked: np.ndarray, tree: RegionTree | No
     if described["refine"] >= MAX_REFINE:
         raise ValueError(f"the mesh is at refine level {MAX_REFINE} already, the finest; "
                          "it cannot be refined further.")
-    coarse = Lattice(spacing, tuple(described["factors"]), described["refine"])
-    fine = Lattice(spacing, coarse.factors, coarse.refine + 1)
+    coarse = Lattice(spacing, tuple(described["factors"]), described["refine"],
+                     described.get("max_aspect"))
+    fine = Lattice(spacing, coarse.factors, coarse.refine + 1, coarse.max_aspect)
     max_size, periodic = info.get("max_size"), bool(info.get("periodic", False))
 
     t0 = time.perf_counter()

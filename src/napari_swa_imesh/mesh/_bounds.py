@@ -28,7 +28,8 @@ from . import _templates_luts as luts
 from ._quality import dihedral_angles, radius_edge_ratio, signed_volumes, triangle_angles
 from ._templates import cut_leaves, template_quality
 
-__all__ = ["format_quality_table", "leaf_configurations", "quality_bounds", "quality_table"]
+__all__ = ["format_lattice_bounds", "format_quality_table", "leaf_configurations",
+           "quality_bounds", "quality_table"]
 
 
 def _check_dim(dim) -> int:
@@ -233,8 +234,8 @@ def _bounds(d: int) -> tuple:
     return tuple(_ranges(d, worst_of).items())
 
 
-def quality_bounds(dim: int, spacing=None, *, subdivide: bool = True
-                   ) -> dict[str, tuple[float, float]]:
+def quality_bounds(dim: int, spacing=None, *, subdivide: bool = True,
+                   max_aspect: float | None = None) -> dict[str, tuple[float, float]]:
     """The range every element of a template mesh lies in, per metric (the IMESH bound).
 
     Derived from :func:`quality_table`: each range runs from the regular simplex's value
@@ -255,6 +256,9 @@ def quality_bounds(dim: int, spacing=None, *, subdivide: bool = True
     subdivide : bool
         Whether the mesh was made with the anisotropy subdivision (``mesh_labels``'s
         default) or of stretched voxels.
+    max_aspect : float, optional
+        The residual-aspect limit the mesh was subdivided with (``mesh_labels``'s
+        `max_aspect`; default its default).
 
     Returns
     -------
@@ -275,15 +279,15 @@ def quality_bounds(dim: int, spacing=None, *, subdivide: bool = True
     [0.5774, 0.7071, 45.0, 60.0]
     >>> round(quality_bounds(2, spacing=(2.0, 1.0), subdivide=False)["quality"][1], 4)
     1.118
-    >>> round(quality_bounds(3, spacing=(2.5, 1.0, 1.0))["quality"][1], 4)  # 3x1x1 cells
-    1.3
+    >>> round(quality_bounds(3, spacing=(2.5, 1.0, 1.0))["quality"][1], 4)  # 2x1x1 cells
+    1.3754
     """
     d = _check_dim(dim)
     spacing = normalize_spacing(spacing, d)
     if subdivide:
         from ._lattice import choose_lattice
 
-        spacing = choose_lattice(spacing).step
+        spacing = choose_lattice(spacing, max_aspect=max_aspect).step
     if all(abs(s / spacing[0] - 1) <= 1e-12 for s in spacing):
         return dict(_bounds(d))
     table = template_quality(d, spacing)
@@ -332,4 +336,52 @@ def format_quality_table(rows: list[dict]) -> str:
     claim = "sqrt(5)/2 = 1.1180" if d == 2 else "sqrt(29)/4 = 1.3463"
     lines.append(f"bound: radius-to-edge ratio <= {worst:.4f} (reference's claim {claim}); "
                  f"{what} in [{lo:.3f}, {hi:.3f}] deg")
+    return "\n".join(lines)
+
+
+def format_lattice_bounds(dim: int, aspects: list[dict], lattice=None, choices=None) -> str:
+    """The bound per residual aspect as text, and for one spacing what each `max_aspect`
+    gives (the chosen row marked).
+
+    Parameters
+    ----------
+    dim : {2, 3}
+    aspects : list of dict
+        :func:`~._lattice.aspect_table` rows.
+    lattice : Lattice, optional
+        The lattice chosen for a spacing (:func:`~._lattice.choose_lattice`).
+    choices : list of dict, optional
+        :func:`~._lattice.lattice_choices` for that spacing.
+    """
+    from ._lattice import ASPECT_LIMIT
+
+    angle = "dihedral angles" if dim == 3 else "angles"
+    lines = ["\nbounds on lattice cells of residual aspect A (max/min cell size): anisotropic "
+             f"voxels are cut into the fewest cells with A <= --max-aspect (default "
+             f"{ASPECT_LIMIT}) unless --no-subdivide",
+             f"{'A':>6s} {'ratio <=':>9s} {angle + ' (deg)':>22s}"]
+    lines += [f"{r['aspect']:6.2f} {r['worst_ratio']:9.4f} {r['min_angle']:10.2f} .. "
+              f"{r['max_angle']:7.2f}" for r in aspects]
+    if lattice is None:
+        return "\n".join(lines)
+    lines += [(f"\nspacing {' x '.join(f'{s:g}' for s in lattice.spacing)}: the lattice for "
+               "each --max-aspect (elements: about the interface cells per voxel face, "
+               "against cubic voxels of the same image)"),
+              (f"{'--max-aspect':>16s} {'cells per voxel':>18s} {'residual A':>10s} "
+               f"{'ratio <=':>9s} {angle + ' (deg)':>24s} {'elements':>9s}")]
+    for r in choices:
+        upper = r["max_aspect_below"]
+        span = (f">= {r['max_aspect_from']:.4g}" if upper is None
+                else f"{r['max_aspect_from']:.4g} .. <{upper:.4g}")
+        cells = " x ".join(map(str, r["factors"])) + f" = {r['cells_per_voxel']}"
+        b = r["bounds"]
+        mark = "  <- chosen" if tuple(r["factors"]) == tuple(lattice.factors) else ""
+        lines.append(f"{span:>16s} {cells:>18s} {r['residual_aspect']:10.4f} "
+                     f"{b['worst_ratio']:9.4f} {b['min_angle']:11.2f} .. {b['max_angle']:7.2f}"
+                     f" {'x' + format(r['interface_cells_per_voxel_face'], '.3g'):>9s}{mark}")
+    d = lattice.describe()
+    lines.append(f"chosen (--max-aspect {lattice.max_aspect:g}): "
+                 f"{' x '.join(map(str, lattice.factors))} cells per voxel, residual aspect "
+                 f"{d['residual_aspect']:.4f}: ratio <= {d['bounds']['worst_ratio']:.4f}, "
+                 f"{angle} {d['bounds']['min_angle']:.2f} to {d['bounds']['max_angle']:.2f}")
     return "\n".join(lines)

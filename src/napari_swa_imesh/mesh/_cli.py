@@ -19,6 +19,7 @@ from .._cli_util import StepTimer, print_json
 from .._validation import normalize_spacing
 from ._checks import _check_mesh
 from ._export import MESH_SUFFIXES
+from ._subdivision import check_max_aspect
 from ._memory import (available_memory, count_boundary_voxels, current_rss,
                       estimate_mesh_memory, format_bytes, parse_memory_size)
 
@@ -69,8 +70,8 @@ def add_commands(subparsers) -> None:
     p.add_argument("--msh-ascii", action="store_true",
                    help="write .msh as Gmsh 4.1 ASCII instead of binary")
     p.add_argument("--refine", type=int, default=0, metavar="K",
-                   help="elements sharing a facet with a material interface are 2^-K voxels "
-                        "(0..4; default 0); the interior coarsens as before, bounds unchanged")
+                   help="elements at material interfaces are at most 2^-K voxels per axis "
+                        "(0..4, default 0; anisotropy cells count); bounds unchanged")
     p.add_argument("--max-size", type=float, default=None, metavar="H",
                    help="longest element edge allowed, in physical units (larger leaves "
                         "are split); at least the diagonal of one lattice cell")
@@ -84,6 +85,10 @@ def add_commands(subparsers) -> None:
     p.add_argument("--no-subdivide", action="store_true",
                    help="mesh anisotropic voxels as stretched templates (no physical "
                         "quality bound) instead of subdividing them into nearly cubic cells")
+    p.add_argument("--max-aspect", type=float, default=None, metavar="A",
+                   help="cut voxels into the fewest cells of aspect <= A (default 1.25: "
+                        "ratio <= 1.3754, dihedral >= 29.5 deg); larger A, fewer elements, "
+                        "looser bound (see: swa-imesh bounds --dim 3 --spacing ...)")
     p.add_argument("--force", action="store_true", help="replace an existing output file")
     p.add_argument("--no-check", action="store_true",
                    help="skip the conformity/volume/label checks (less than the meshing)")
@@ -105,8 +110,10 @@ def add_commands(subparsers) -> None:
                     "radius-to-edge ratio and angles: the quality the mesher guarantees.")
     p.add_argument("--dim", type=int, required=True, metavar="D", help="dimension (2 or 3)")
     p.add_argument("--spacing", type=float, nargs="+", default=None, metavar="S",
-                   help="voxel spacing: also print the lattice the mesher uses for it and "
-                        "the bound that holds there")
+                   help="voxel spacing: also print what each --max-aspect gives for it "
+                        "(cells per voxel, bound, elements) and the lattice used")
+    p.add_argument("--max-aspect", type=float, default=None, metavar="A",
+                   help="with --spacing: the limit to mark (default 1.25, the mesher's)")
     p.add_argument("--json", action="store_true", help="print one JSON object on stdout")
     p.set_defaults(func=_run_bounds)
 
@@ -184,7 +191,7 @@ def _run_mesh(args: argparse.Namespace) -> int:
 
     lattice, max_size, coarsen = resolution_arguments(
         spacing, method=args.method, refine=args.refine, max_size=args.max_size,
-        subdivide=not args.no_subdivide, coarsen=args.coarsen)
+        subdivide=not args.no_subdivide, coarsen=args.coarsen, max_aspect=args.max_aspect)
     # the dimension is known now: the box sides it has, and .poly or .face
     write_options = _write_options(args, labels.ndim)
     mesh_output_paths(args.output, force=args.force,
@@ -252,6 +259,8 @@ def _check_resolution_args(args) -> None:
     from ._lattice import check_refine
 
     check_refine(args.refine)
+    if args.max_aspect is not None:
+        check_max_aspect(args.max_aspect, "--max-aspect", subdivide=not args.no_subdivide)
     check_coarsen(args.coarsen)
     check_periodic(args.method, args.periodic)
     if args.max_size is not None and not (np.isfinite(args.max_size) and args.max_size > 0):
@@ -466,35 +475,29 @@ def _mesh_text(r: dict) -> str:
 
 
 def _run_bounds(args: argparse.Namespace) -> int:
-    from ._bounds import format_quality_table, quality_table
-    from ._lattice import aspect_table, choose_lattice
+    from ._bounds import format_lattice_bounds, format_quality_table, quality_table
+    from ._lattice import aspect_table, choose_lattice, lattice_choices
 
     if args.dim not in (2, 3):
         raise ValueError(f"--dim must be 2 or 3; got {args.dim}.")
-    lattice = None
+    if args.max_aspect is not None:
+        check_max_aspect(args.max_aspect, "--max-aspect")
+        if not args.spacing:
+            raise ValueError("--max-aspect picks the lattice for a spacing; give --spacing.")
+    lattice = choices = None
     if args.spacing:
-        lattice = choose_lattice(normalize_spacing(args.spacing, args.dim))
-    rows = quality_table(args.dim)
-    aspects = aspect_table(args.dim)
+        spacing = normalize_spacing(args.spacing, args.dim)
+        choices = lattice_choices(spacing)
+        lattice = choose_lattice(spacing, max_aspect=args.max_aspect)
+    rows, aspects = quality_table(args.dim), aspect_table(args.dim)
     if args.json:
         out = {"command": "bounds", "dim": args.dim, "simplices": rows,
                "by_residual_aspect": aspects}
         if lattice is not None:
             out["lattice"] = lattice.describe()
+            out["choices"] = [{**r, "factors": list(r["factors"])} for r in choices]
         print_json(out)
         return 0
     print(format_quality_table(rows))
-    angle = "dihedral angles" if args.dim == 3 else "angles"
-    print("\nbounds on lattice cells of residual aspect A (max/min cell size): anisotropic "
-          "voxels are cut into cells with A <= 1.2 unless --no-subdivide")
-    print(f"{'A':>6s} {'ratio <=':>9s} {angle + ' (deg)':>22s}")
-    for row in aspects:
-        print(f"{row['aspect']:6.2f} {row['worst_ratio']:9.4f} "
-              f"{row['min_angle']:10.2f} .. {row['max_angle']:7.2f}")
-    if lattice is not None:
-        d = lattice.describe()
-        print(f"\nspacing {' x '.join(f'{s:g}' for s in lattice.spacing)}: "
-              f"{' x '.join(map(str, lattice.factors))} cells per voxel, residual aspect "
-              f"{d['residual_aspect']:.3f}: ratio <= {d['bounds']['worst_ratio']:.4f}, "
-              f"{angle} {d['bounds']['min_angle']:.2f} to {d['bounds']['max_angle']:.2f}")
+    print(format_lattice_bounds(args.dim, aspects, lattice, choices))
     return 0

@@ -43,7 +43,8 @@ METHODS = ("template", "delaunay")
 def mesh_labels(labels, *, method: str = "template", exclude=(), spacing=None,
                 material_names: dict[int, str] | None = None, affine=None, refine: int = 0,
                 max_size: float | None = None, subdivide: bool = True,
-                coarsen: int = 0, periodic: bool = False) -> Mesh:
+                coarsen: int = 0, periodic: bool = False,
+                max_aspect: float | None = None) -> Mesh:
     """Mesh a 2-D or 3-D label image into triangles or tetrahedra, one material each.
 
     Parameters
@@ -71,14 +72,15 @@ def mesh_labels(labels, *, method: str = "template", exclude=(), spacing=None,
         rotations, flips and an origin included). Give it instead of `spacing`.
     refine : int
         Interface refinement ``0 .. 4``: elements sharing a facet with a material
-        interface are ``2**-refine`` voxels; the interior coarsens as before.
+        interface are at most ``2**-refine`` voxels along every axis (cells of the
+        anisotropy subdivision count toward it); the interior coarsens as before.
     max_size : float, optional
         Longest element edge allowed (physical units); larger leaves are split.
     subdivide : bool
         Cut anisotropic voxels into nearly cubic lattice cells (integer factors per axis,
-        residual aspect at most ``ASPECT_LIMIT`` = 1.2) so the quality bounds hold in
-        physical space (3-D: radius-to-edge <= 1.3185, dihedral angles 30.5-130.3 deg).
-        Off: the stretched voxels are meshed as they are, without a bound.
+        the fewest cells with residual aspect at most `max_aspect`) so the quality bounds
+        hold in physical space. Off: the stretched voxels are meshed as they are, without
+        a bound.
     coarsen : int
         ``0 .. 5``: mesh the labels in blocks of ``2**coarsen`` voxels (each block takes
         its majority label), for large smooth volumes. Boundaries move to that grid; the
@@ -87,6 +89,10 @@ def mesh_labels(labels, *, method: str = "template", exclude=(), spacing=None,
     periodic : bool
         Give opposite faces of the image box the same vertices and facets (translated),
         for periodic boundary conditions: elements touching the box are one lattice cell.
+    max_aspect : float, optional
+        Largest residual aspect of the lattice cells (default ``ASPECT_LIMIT`` = 1.25; 3-D
+        bound there: radius-to-edge <= 1.3754, dihedral angles 29.5-131.5 deg). Larger:
+        fewer cells per voxel, looser bound (``swa-imesh bounds --spacing`` lists them).
 
     Returns
     -------
@@ -144,7 +150,7 @@ def mesh_labels(labels, *, method: str = "template", exclude=(), spacing=None,
         spacing_t, world = world_from_affine(affine, lab.ndim)
     lattice, max_size, coarsen = resolution_arguments(
         spacing_t, method=method, refine=refine, max_size=max_size, subdivide=subdivide,
-        coarsen=coarsen)
+        coarsen=coarsen, max_aspect=max_aspect)
     check_periodic(method, periodic)
     lab, coarse_report = coarsen_labels(lab, coarsen, exclude_arr)
     mesh, tree = _mesh_labels(lab, method=method, exclude=exclude_arr, spacing=spacing_t,
@@ -164,14 +170,15 @@ def mesh_labels(labels, *, method: str = "template", exclude=(), spacing=None,
 
 
 def resolution_arguments(spacing: tuple, *, method: str, refine, max_size, subdivide,
-                         coarsen) -> tuple[Lattice, float | None, int]:
+                         coarsen, max_aspect=None) -> tuple[Lattice, float | None, int]:
     """Check the resolution options at the door: (lattice, max_size, coarsen level).
 
     Raises ValueError with what to pass for a refine level outside 0..4, a size cap below
     one lattice cell, a coarsening level outside 0..5, or a non-template method with any
     of them.
     """
-    lattice = choose_lattice(spacing, refine=refine, subdivide=bool(subdivide))
+    lattice = choose_lattice(spacing, refine=refine, subdivide=bool(subdivide),
+                             max_aspect=max_aspect)
     max_size = check_max_size(max_size, lattice)
     coarsen = check_coarsen(coarsen)
     if method != "template" and (not lattice.is_voxel_lattice or max_size is not None):

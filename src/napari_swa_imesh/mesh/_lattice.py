@@ -5,12 +5,19 @@ Why a lattice
 -------------
 The templates' quality bounds hold for cubic lattice cells. A voxel of spacing
 (2.5, 1, 1) stretches every template by 2.5 along one axis (worst radius-to-edge 3.66).
-Subdividing each voxel into ``n_a`` cells along axis ``a`` (integers, chosen so the cells
-are nearly cubic) brings the *residual aspect* ``max(h) / min(h)`` of the cell size
-``h = spacing / n`` under :data:`ASPECT_LIMIT`, where the bounds of
-:func:`aspect_bounds` hold; the tree merges the cells again wherever the labels are
-uniform, so the interior stays coarse. Material boundaries stay on voxel faces, which are
-lattice planes, so every material keeps its exact volume.
+Subdividing each voxel into ``n_a`` cells along axis ``a`` (integers) brings the
+*residual aspect* ``max(h) / min(h)`` of the cell size ``h = spacing / n`` under a limit
+``max_aspect`` (default :data:`ASPECT_LIMIT`), where the bounds of :func:`aspect_bounds`
+hold; of the factors that do, the fewest cells per voxel are taken (elements grow with
+them). The tree merges the cells again wherever the labels are uniform, so the interior
+stays coarse. Material boundaries stay on voxel faces, which are lattice planes, so every
+material keeps its exact volume.
+
+Spacings are read as the rational numbers they mean: the ratios of the voxel sizes are
+taken as the simplest fractions within :data:`RATIO_TOLERANCE` (a float32 header's
+0.800000011920929 is 4/5) and every aspect is compared exactly, so float32 rounding and
+noise of 1e-6 never change the lattice, and equal cell counts are told apart by a rule
+that permutes with the axes.
 
 Refinement ``K`` divides every cell by ``2**K`` more and splits every leaf that shares a
 facet with a material interface down to one lattice cell: elements at interfaces are
@@ -24,22 +31,26 @@ diagonal) is longer than ``H``.
 from __future__ import annotations
 
 import itertools
-import math
 from dataclasses import dataclass
 
 import numpy as np
 
 from .._tree import PAD_LABEL, RegionTree, _build_tree
+from ._subdivision import (
+    ASPECT_LIMIT,
+    MAX_FACTOR,
+    RATIO_TOLERANCE,
+    aspect_bounds,
+    aspect_table,
+    check_max_aspect,
+    lattice_choices,
+    subdivision_factors,
+)
 
-__all__ = ["ASPECT_LIMIT", "MAX_REFINE", "Lattice", "aspect_bounds", "aspect_table",
-           "choose_lattice", "labels_on_lattice", "lattice_tree", "subdivision_factors"]
+__all__ = ["ASPECT_LIMIT", "MAX_FACTOR", "MAX_REFINE", "RATIO_TOLERANCE", "Lattice", "aspect_bounds", "aspect_table",
+           "check_max_aspect", "choose_lattice", "labels_on_lattice", "lattice_choices",
+           "lattice_tree", "subdivision_factors"]
 
-#: Residual aspect up to which the 3-D bounds stay within radius-to-edge sqrt(29)/4 and
-#: dihedral angles [30, 135] degrees (1.3185 and 30.5-130.3 at 1.2; 1.3754 and 29.5 at
-#: 1.25, see :func:`aspect_bounds`).
-ASPECT_LIMIT = 1.2
-#: Largest subdivision of a voxel along one axis (spacing aspect up to about 19).
-MAX_FACTOR = 16
 #: Largest interface refinement level: 2**-4 voxels (4096 cells per voxel in 3-D).
 MAX_REFINE = 4
 
@@ -57,11 +68,14 @@ class Lattice:
         voxels or when subdivision is off).
     refine : int
         Interface refinement level K: cells are a further ``2**K`` times smaller.
+    max_aspect : float or None
+        The residual-aspect limit `factors` were chosen for (None: not subdivided).
     """
 
     spacing: tuple[float, ...]
     factors: tuple[int, ...]
     refine: int = 0
+    max_aspect: float | None = ASPECT_LIMIT
 
     @property
     def ndim(self) -> int:
@@ -90,124 +104,15 @@ class Lattice:
     def describe(self) -> dict:
         """Plain-data summary for reports and ``--json``."""
         return {"factors": list(self.factors), "refine": self.refine,
+                "max_aspect": self.max_aspect,
                 "cells_per_voxel": list(self.cells_per_voxel),
                 "step": [float(s) for s in self.step],
                 "residual_aspect": float(self.residual_aspect),
                 "bounds": aspect_bounds(self.ndim, self.residual_aspect)}
 
 
-def aspect_bounds(dim: int, aspect: float) -> dict:
-    """Quality bounds of the template mesh on lattice cells of residual aspect `aspect`.
-
-    The worst radius-to-edge ratio and the angle range (dihedral in 3-D) over every
-    template simplex, for every cell shape whose axes lie within a factor `aspect` of each
-    other. The extremes lie where every axis is 1 or `aspect` (a grid of shapes in
-    between gives nothing worse; tests check it), so those shapes are all evaluated.
-
-    Parameters
-    ----------
-    dim : {2, 3}
-    aspect : float
-        ``max(cell size) / min(cell size)``, at least 1.
-
-    Returns
-    -------
-    dict
-        ``worst_ratio``, ``min_angle`` and ``max_angle`` (degrees; dihedral in 3-D).
-
-    Examples
-    --------
-    >>> b = aspect_bounds(3, 1.0)
-    >>> round(b["worst_ratio"], 4), round(b["min_angle"], 2), round(b["max_angle"], 2)
-    (1.118, 35.26, 125.26)
-    """
-    from ._templates import template_quality
-
-    if dim not in (2, 3):
-        raise ValueError(f"bounds exist for 2-D and 3-D lattices; got dim={dim!r}.")
-    aspect = float(aspect)
-    if not (np.isfinite(aspect) and aspect >= 1.0):
-        raise ValueError(f"aspect must be a finite number >= 1; got {aspect!r}.")
-    lo_key, hi_key = ("min_dihedral", "max_dihedral") if dim == 3 else ("min_angle", "max_angle")
-    worst, lo, hi = 0.0, 180.0, 0.0
-    for shape in itertools.product((1.0, aspect), repeat=dim):
-        q = template_quality(dim, shape)
-        worst = max(worst, float(q["quality"].max()))
-        lo = min(lo, float(np.nanmin(q[lo_key])))
-        hi = max(hi, float(np.nanmax(q[hi_key])))
-    return {"worst_ratio": worst, "min_angle": lo, "max_angle": hi}
-
-
-def aspect_table(dim: int, aspects=(1.0, 1.05, 1.1, 1.15, 1.2, 1.25, 1.5, 2.0, 3.0)) -> list[dict]:
-    """:func:`aspect_bounds` for a list of residual aspects: rows of plain data.
-
-    Examples
-    --------
-    >>> [round(r["worst_ratio"], 4) for r in aspect_table(3, (1.0, 1.2))]
-    [1.118, 1.3185]
-    """
-    return [{"aspect": float(a), **aspect_bounds(dim, a)} for a in aspects]
-
-
-def _aspect(values) -> float:
-    return float(max(values) / min(values))
-
-
-def subdivision_factors(spacing, *, max_aspect: float = ASPECT_LIMIT) -> tuple[int, ...]:
-    """Fewest cells per voxel (product of integer factors) with residual aspect <= `max_aspect`.
-
-    Parameters
-    ----------
-    spacing : sequence of float
-        Voxel size per axis.
-    max_aspect : float
-        Largest ``max(h) / min(h)`` allowed for the cell size ``h = spacing / factors``.
-
-    Returns
-    -------
-    tuple of int
-        One factor per axis, each in ``1 .. MAX_FACTOR``; all 1 when the voxels already
-        meet `max_aspect`.
-
-    Raises
-    ------
-    ValueError
-        When no factors up to :data:`MAX_FACTOR` reach `max_aspect` (spacing aspect above
-        about 19).
-
-    Examples
-    --------
-    >>> subdivision_factors((2.5, 1.0, 1.0))
-    (3, 1, 1)
-    >>> subdivision_factors((1.0, 1.0))
-    (1, 1)
-    """
-    s = np.asarray(spacing, dtype=float)
-    if _aspect(s) <= max_aspect:
-        return (1,) * len(s)
-    best: tuple[int, tuple[int, ...]] | None = None
-    # the cell size h is one axis's spacing over some factor; every other axis then takes
-    # the factor on either side of s_b / h
-    for a, n in itertools.product(range(len(s)), range(1, MAX_FACTOR + 1)):
-        h = s[a] / n
-        options = [sorted({max(1, math.floor(v / h)), max(1, math.ceil(v / h))}) for v in s]
-        for combo in itertools.product(*options):
-            if max(combo) > MAX_FACTOR or _aspect(s / np.asarray(combo)) > max_aspect:
-                continue
-            key = (math.prod(combo), tuple(combo))
-            if best is None or key < best:
-                best = key
-    if best is None:
-        raise ValueError(
-            f"voxel spacing {tuple(float(v) for v in s)} has aspect {_aspect(s):.3g}: no "
-            f"subdivision of up to {MAX_FACTOR} cells per axis makes cells within aspect "
-            f"{max_aspect}; resample the image closer to cubic voxels, or pass "
-            "subdivide=False (--no-subdivide) to mesh the stretched voxels without a bound."
-        )
-    return best[1]
-
-
-def choose_lattice(spacing, *, refine: int = 0, subdivide: bool = True) -> Lattice:
+def choose_lattice(spacing, *, refine: int = 0, subdivide: bool = True,
+                   max_aspect: float | None = None) -> Lattice:
     """The lattice for voxels of `spacing`: anisotropy subdivision and interface refinement.
 
     Parameters
@@ -215,20 +120,38 @@ def choose_lattice(spacing, *, refine: int = 0, subdivide: bool = True) -> Latti
     spacing : tuple of float
         Voxel size per axis (already checked).
     refine : int
-        Interface refinement level, ``0 .. MAX_REFINE``.
+        Interface refinement level, ``0 .. MAX_REFINE``: cells at interfaces at most
+        ``2**-refine`` voxels along every axis. The subdivision counts toward it: voxels
+        cut into at least ``2**j`` cells along every axis take ``j`` levels fewer
+        (``Lattice.refine``), instead of multiplying the cells again.
     subdivide : bool
         Subdivide anisotropic voxels so the bounds of :func:`aspect_bounds` at
-        :data:`ASPECT_LIMIT` hold in physical space. Off: voxels are stretched templates
-        and no bound is claimed beyond the stretched one.
+        `max_aspect` hold in physical space. Off: voxels are stretched templates and no
+        bound is claimed beyond the stretched one.
+    max_aspect : float, optional
+        Largest residual aspect of the cells (default :data:`ASPECT_LIMIT`): larger gives
+        fewer cells per voxel and a looser bound (``swa-imesh bounds --spacing`` prints
+        the choices). Not with ``subdivide=False``.
 
     Examples
     --------
     >>> choose_lattice((3.0, 1.0, 1.0), refine=1).cells_per_voxel
     (6, 2, 2)
+    >>> choose_lattice((1.0, 0.8, 1.2), refine=2).cells_per_voxel    # 2 x 2 x 3, one level
+    (4, 4, 6)
     """
     refine = check_refine(refine)
-    factors = subdivision_factors(spacing) if subdivide else (1,) * len(spacing)
-    return Lattice(tuple(float(s) for s in spacing), factors, refine)
+    if max_aspect is not None and not subdivide:
+        raise ValueError("max_aspect bounds the subdivided cells; with subdivide=False "
+                         "(--no-subdivide) the voxels are meshed as they are, so give one "
+                         "or the other.")
+    max_aspect = ASPECT_LIMIT if max_aspect is None else check_max_aspect(max_aspect)
+    factors = (subdivision_factors(spacing, max_aspect=max_aspect) if subdivide
+               else (1,) * len(spacing))
+    # every axis has at least 2**j cells already: j levels of the refinement are there
+    refine = max(0, refine - (min(factors).bit_length() - 1))
+    return Lattice(tuple(float(s) for s in spacing), factors, refine,
+                   max_aspect if subdivide else None)
 
 
 def check_level(value, name: str, top: int, meaning: str) -> int:

@@ -25,6 +25,12 @@ from ._quality import quality_data
 
 __all__ = ["cut_leaves", "lattice", "mark_corners", "template_mesh", "template_quality"]
 
+#: Lattice size (points) above which vertices are numbered by searching the sorted keys
+#: present instead of an intp prefix sum over the whole lattice, when the points are fewer
+#: than 1/8 of it: the prefix sum costs 8 bytes per lattice point (8.6 GB at 1025^3 for
+#: a mesh of a few hundred thousand points). Both give the same numbers.
+DENSE_RANK_LIMIT = 1 << 25
+
 
 def lattice(tree: RegionTree):
     """Shape and strides of the lattice of pixel corners of the padded grid.
@@ -127,8 +133,9 @@ def cut_leaves(okey: np.ndarray, size: np.ndarray, hanging: np.ndarray, strides:
     used : (n_lattice,) ndarray of bool, optional
         Flat lattice marking the corners and sites present. When given, the templates' new
         points are marked in it, and elements come back as vertex numbers (the rank of the
-        key among the marked points, i.e. ``cumsum(used) - 1``) instead of keys, so the
-        big key array is never built.
+        key among the marked points, i.e. ``cumsum(used) - 1``, or found by searching the
+        sorted marked keys when the lattice is large and mostly empty) instead of keys, so
+        the big key array is never built.
     variant : (L,) ndarray of int8, optional
         Diagonal rule per leaf (``VARIANTS[d]``, see ``_templates_luts``); default 0, the
         lowest-corner rule, for every leaf.
@@ -201,11 +208,14 @@ def cut_leaves(okey: np.ndarray, size: np.ndarray, hanging: np.ndarray, strides:
         new_keys = table.new_point[row].astype(kd) @ strides
         new_points.append(okey[leaf_of_new] + half[leaf_of_new] * new_keys)
     new_points = np.concatenate(new_points) if new_points else np.zeros(0, kd)
-    vertex_id = None
+    vertex_id = present = None
     if used is not None:
         used[new_points] = True
-        vertex_id = np.cumsum(used, dtype=np.intp)
-        vertex_id -= 1
+        if used.size > DENSE_RANK_LIMIT and used.size > 8 * np.count_nonzero(used):
+            present = np.flatnonzero(used)          # (n_points,) sorted keys
+        else:
+            vertex_id = np.cumsum(used, dtype=np.intp)
+            vertex_id -= 1
     # write every block straight into its slice of the outputs (no concatenation copies)
     keys = np.empty((total, d + 1), dtype=kd)
     which = np.empty(total, dtype=wd)
@@ -217,9 +227,13 @@ def cut_leaves(okey: np.ndarray, size: np.ndarray, hanging: np.ndarray, strides:
         `template_ids` (t,) or (n, t)."""
         n, t = len(sel), local_keys.shape[-2]
         block = keys[start:start + n * t].reshape(n, t, d + 1)
-        if vertex_id is None:
+        if vertex_id is None and present is None:
             np.multiply(scale[sel, None, None], local_keys, out=block)
             block += okey[sel, None, None]
+        elif present is not None:              # the rank of each key among the present
+            np.multiply(scale[sel, None, None], local_keys, out=block)
+            block += okey[sel, None, None]
+            block[...] = np.searchsorted(present, block)
         else:
             lattice_keys = np.multiply(scale[sel, None, None], local_keys,
                                        out=local_keys if local_keys.ndim == 3 else None)

@@ -50,6 +50,11 @@ def add_commands(subparsers) -> None:
     p.add_argument("--refine", type=int, default=0, metavar="K",
                    help="labels only: elements at material interfaces are 2^-K voxels "
                         "(0..4, default 0), where the field is least smooth")
+    p.add_argument("--max-aspect", type=float, default=None, metavar="A",
+                   help="labels only: anisotropic voxels are cut into the fewest cells of "
+                        "residual aspect <= A (default 1.25: radius-to-edge <= 1.3754, "
+                        "dihedral angles >= 29.5 deg); larger, fewer elements and a looser "
+                        "bound (swa-imesh bounds --spacing lists the choices)")
     p.add_argument("--protocol", choices=("mixed", "periodic"), default="mixed",
                    help="mixed (potential 0/1 on two faces, others insulated; default) or "
                         "periodic (unit mean gradient, periodic fluctuation: the full "
@@ -158,20 +163,29 @@ def _run_simulate(args: argparse.Namespace) -> int:
     elif args.output:
         check_series_path(args.output, force=args.force)
     is_image = image_suffix(args.input) in IMAGE_SUFFIXES
-    if not is_image and (args.spacing or args.exclude or args.refine):
-        raise ValueError("--spacing, --exclude and --refine apply to a label image; a mesh "
-                         "file already has its coordinates, materials and elements.")
+    if not is_image and (args.spacing or args.exclude or args.refine
+                         or args.max_aspect is not None):
+        raise ValueError("--spacing, --exclude, --refine and --max-aspect apply to a label "
+                         "image; a mesh file already has its coordinates, materials and "
+                         "elements.")
     if not is_image and adapt not in ("auto", 0):
         raise ValueError("--adapt meshes the labels again: it needs a label image, not a mesh "
                          "file (simulate the labels, or leave --adapt out).")
     from ..mesh._lattice import check_refine
 
     check_refine(args.refine)
+    if args.max_aspect is not None:
+        from ..mesh._lattice import check_max_aspect
+
+        check_max_aspect(args.max_aspect, "--max-aspect")
     if transient is not None and args.protocol != "mixed":
         raise ValueError("--protocol is for the steady k_eff run, not --transient.")
     if transient is not None and args.refine:
         raise ValueError("--refine is for the steady k_eff run; for --transient, mesh with "
                          "swa-imesh mesh --refine K and simulate the mesh file.")
+    if transient is not None and args.max_aspect is not None:
+        raise ValueError("--max-aspect is for the steady k_eff run; for --transient, mesh "
+                         "with swa-imesh mesh --max-aspect A and simulate the mesh file.")
     if args.spacing:
         normalize_spacing(args.spacing, len(args.spacing))
 
@@ -193,7 +207,7 @@ def _run_simulate(args: argparse.Namespace) -> int:
 
         mesh = prepare_mesh(source, spacing=spacing if is_image else None,
                             exclude=tuple(args.exclude), material_names=names,
-                            refine=args.refine)
+                            refine=args.refine, max_aspect=args.max_aspect)
         result = solve_boundary_value(mesh, conductivity, order=fixed_order, tol=args.tol,
                                       **boundary)
     elif transient is not None:
@@ -207,7 +221,7 @@ def _run_simulate(args: argparse.Namespace) -> int:
         result = simulate(source, conductivity, spacing=spacing, order=order,
                           axes=args.axes, tol=args.tol, exclude=tuple(args.exclude),
                           material_names=names, refine=args.refine, protocol=args.protocol,
-                          adapt=adapt if is_image else 0)
+                          adapt=adapt if is_image else 0, max_aspect=args.max_aspect)
     table = None
     if signatures is not None or args.report:
         table = simulation_report(result, conductivity, signatures)

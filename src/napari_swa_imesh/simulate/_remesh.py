@@ -86,11 +86,14 @@ def remesh(mesh: Mesh, labels, *, refine: int, periodic: bool) -> Mesh:
     if tuple(labels.shape) != tuple(mesh.shape):
         raise ValueError(f"the labels are {labels.shape} but the mesh was made from "
                          f"{tuple(mesh.shape)} labels; give the label image of this mesh.")
-    factors = info.get("lattice", {}).get("factors", ())
+    described = info.get("lattice", {})
+    factors = described.get("factors", ())
+    subdivided = any(int(f) > 1 for f in factors)
     new = mesh_labels(labels, method=info.get("method", "template"),
                       exclude=tuple(info.get("exclude", ())), spacing=mesh.spacing or None,
                       material_names=dict(mesh.material_names), refine=refine,
-                      max_size=info.get("max_size"), subdivide=any(int(f) > 1 for f in factors),
+                      max_size=info.get("max_size"), subdivide=subdivided,
+                      max_aspect=described.get("max_aspect") if subdivided else None,
                       periodic=periodic)
     old_volumes, new_volumes = _material_volumes(mesh), _material_volumes(new)
     same = old_volumes.keys() == new_volumes.keys() and all(

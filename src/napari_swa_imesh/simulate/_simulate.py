@@ -154,20 +154,21 @@ def _check_axes(axes, ndim: int) -> tuple[str, ...]:
 
 def prepare_mesh(mesh_or_labels, *, spacing=None, exclude=(),
                  material_names: Mapping[int, str] | None = None, refine: int = 0,
-                 periodic: bool = False) -> Mesh:
+                 periodic: bool = False, max_aspect: float | None = None) -> Mesh:
     """The mesh to simulate on: a given mesh (with extra names, not modified) or the
-    IMESH mesh of a label image (refined at interfaces by `refine` levels)."""
+    IMESH mesh of a label image (refined at interfaces by `refine` levels, anisotropic
+    voxels cut into cells of residual aspect at most `max_aspect`)."""
     if isinstance(mesh_or_labels, Mesh):
-        if spacing is not None or tuple(exclude) or refine:
-            raise ValueError("spacing, exclude and refine apply to a label image; a mesh "
-                             "already has them.")
+        if spacing is not None or tuple(exclude) or refine or max_aspect is not None:
+            raise ValueError("spacing, exclude, max_aspect and refine apply to a label "
+                             "image; a mesh already has them.")
         if not material_names:
             return mesh_or_labels
         names = {**mesh_or_labels.material_names, **dict(material_names)}
         return dataclasses.replace(mesh_or_labels, material_names=names)
     return mesh_labels(mesh_or_labels, spacing=spacing, exclude=exclude,
                        material_names=dict(material_names or {}), refine=refine,
-                       periodic=periodic)
+                       periodic=periodic, max_aspect=max_aspect)
 
 
 def _check_box_faces(mesh: Mesh, names, lo: np.ndarray, hi: np.ndarray) -> None:
@@ -225,13 +226,14 @@ def simulate_steps(mesh_or_labels, conductivity: Mapping, *, spacing=None,
                    order: int | str = AUTO, axes=None, tol: float = DEFAULT_TOLERANCE,
                    exclude=(), material_names: Mapping[int, str] | None = None,
                    refine: int = 0, protocol: str = "mixed", adapt: int | str = AUTO,
-                   labels=None) -> Generator[tuple[int, int, str], None, SimulationResult]:
+                   labels=None, max_aspect: float | None = None
+                   ) -> Generator[tuple[int, int, str], None, SimulationResult]:
     """Run :func:`simulate` step by step, for a progress bar.
 
     Parameters
     ----------
     mesh_or_labels, conductivity, spacing, order, axes, tol, exclude, material_names, refine,
-    protocol, adapt, labels
+    protocol, adapt, labels, max_aspect
         As for :func:`simulate`.
 
     Yields
@@ -254,7 +256,7 @@ def simulate_steps(mesh_or_labels, conductivity: Mapping, *, spacing=None,
     t0 = time.perf_counter()
     mesh = prepare_mesh(mesh_or_labels, spacing=spacing, exclude=exclude,
                         material_names=material_names, refine=refine,
-                        periodic=protocol == "periodic")
+                        periodic=protocol == "periodic", max_aspect=max_aspect)
     names = _check_axes(axes, mesh.ndim)
     materials, cell_material = np.unique(mesh.material, return_inverse=True)
     tensors = conductivity_tensors(conductivity, materials, mesh.ndim, mesh.material_names)
@@ -273,6 +275,7 @@ def simulate_steps(mesh_or_labels, conductivity: Mapping, *, spacing=None,
         # mark whole leaves (the unit the mesher splits) by their summed indicator
         leaf = np.asarray(mesh.cell_data["leaf"])
         indicator = np.bincount(leaf, flux_jump_indicator(mesh, [first.flux[a] for a in names]))
+        del first          # its fields would stay alive through the next mesh and solve
         if growth is None:
             mesh, tree = _refine_marked(source, mesh, doerfler(indicator)[leaf], tree)
         else:              # P1's default: each step its share of the vertex budget
@@ -361,7 +364,7 @@ def simulate(mesh_or_labels, conductivity: Mapping, *, spacing=None,
              order: int | str = AUTO, axes=None, tol: float = DEFAULT_TOLERANCE, exclude=(),
              material_names: Mapping[int, str] | None = None,
              refine: int = 0, protocol: str = "mixed", adapt: int | str = AUTO,
-             labels=None) -> SimulationResult:
+             labels=None, max_aspect: float | None = None) -> SimulationResult:
     """Steady diffusion on an IMESH mesh: effective conductivity of the image box.
 
     For each axis asked, the mixed-boundary protocol: potential 0 and 1 on the two faces
@@ -407,6 +410,9 @@ def simulate(mesh_or_labels, conductivity: Mapping, *, spacing=None,
         of largest indicator split first; :func:`._adapt.refine_within`).
     labels : (M, N[, P]) array_like of int, optional
         With a mesh: the label image it was made from, so that it can be adapted.
+    max_aspect : float, optional
+        Labels only: largest residual aspect of the lattice cells anisotropic voxels are
+        cut into (``mesh_labels(max_aspect=...)``; default 1.25).
 
     Returns
     -------
@@ -424,7 +430,8 @@ def simulate(mesh_or_labels, conductivity: Mapping, *, spacing=None,
     """
     steps = simulate_steps(mesh_or_labels, conductivity, spacing=spacing, order=order,
                            axes=axes, tol=tol, exclude=exclude, material_names=material_names,
-                           refine=refine, protocol=protocol, adapt=adapt, labels=labels)
+                           refine=refine, protocol=protocol, adapt=adapt, labels=labels,
+                           max_aspect=max_aspect)
     while True:
         try:
             next(steps)
