@@ -487,10 +487,13 @@ def run_summary(result: "SegmentationResult", dice: dict[int, float] | None,
     """One line about a classification: method and scales, scores, Dice, time.
 
     The library's ``SegmentationResult.describe()`` (what the command line and the demo
-    print), with the Dice against a truth layer and the time.
+    print), with the Dice against a truth layer and the time. The per-material signature
+    lines are left out: the signatures table right below shows them, and the line must fit
+    above the fold of a laptop screen.
     """
     # the task panel shows the run's warnings, so the description leaves them out
-    parts = [result.describe(notes=False).replace("\n", "; ")]
+    lines = result.describe(notes=False).splitlines()
+    parts = ["; ".join(line for line in lines if not line.startswith("  "))]
     if dice:
         parts.append("Dice: " + ", ".join(
             f"{names.get(k, k)} {v:.3f}" for k, v in dice.items() if not math.isnan(v)))
