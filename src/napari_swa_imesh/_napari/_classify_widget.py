@@ -487,11 +487,9 @@ def run_summary(result: "SegmentationResult", dice: dict[int, float] | None,
     """One line about a classification: method and scales, scores, Dice, time.
 
     The library's ``SegmentationResult.describe()`` (what the command line and the demo
-    print), with the Dice against a truth layer and the time. The per-material signature
-    lines are left out: the signatures table right below shows them, and the line must fit
-    above the fold of a laptop screen.
+    print), with the Dice against a truth layer and the time.
     """
-    # the task panel shows the run's warnings, so the description leaves them out
+    # warnings are in the task panel, signatures in the table below (a laptop's fold)
     lines = result.describe(notes=False).splitlines()
     parts = ["; ".join(line for line in lines if not line.startswith("  "))]
     if dice:

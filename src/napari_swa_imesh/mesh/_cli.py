@@ -90,17 +90,14 @@ def add_commands(subparsers) -> None:
                         "ratio <= 1.3754, dihedral >= 29.5 deg); larger A, fewer elements, "
                         "looser bound (see: swa-imesh bounds --dim 3 --spacing ...)")
     p.add_argument("--force", action="store_true", help="replace an existing output file")
-    p.add_argument("--no-check", action="store_true",
-                   help="skip the conformity/volume/label checks (less than the meshing)")
+    p.add_argument("--no-check", action="store_true", help="skip the conformity checks")
     p.add_argument("--full-check", action="store_true",
                    help="check by sorting every element facet, as for a mesh made elsewhere "
                         "(same verdict as the default one-pass check; slower)")
     p.add_argument("--memory-limit", default="auto", metavar="BYTES|auto|off",
-                   help="refuse to start when the estimated peak memory of the run "
-                        "(labels, tree, balance, elements, checks, writing) exceeds this: "
-                        "auto (default) = the memory available now (MemAvailable, a cgroup "
-                        "limit, ulimit -v), a size such as 8G or 500M, or off to skip the "
-                        "estimate; the estimate is reported as memory_estimate_bytes in --json")
+                   help="refuse to start when the run's estimated peak memory exceeds "
+                        "this: auto (default: available now, cgroup, ulimit -v), a size "
+                        "such as 8G, or off; --json reports it as memory_estimate_bytes")
     p.add_argument("--json", action="store_true", help="print one JSON object on stdout")
     p.set_defaults(func=_run_mesh)
 
