@@ -110,9 +110,10 @@ def text_overlay(viewer):
 def quality_legend(mesh: "Mesh", lo: float, hi: float, worst: float) -> str:
     """The canvas text that goes with the quality colour bar: scale, bound and worst."""
     holds = "within" if worst <= hi + 1e-9 else "ABOVE"
-    return (f"colour: radius-to-edge ratio of each face's worse element, {lo:.3f} (best) "
-            f"to {max(hi, worst):.3f}; {bound_label(mesh)}: <= {hi:.3f}; worst element "
-            f"{worst:.3f} ({holds} the bound)")
+    # short lines: the canvas of a laptop screen is about 550 px wide
+    return (f"colour: radius-to-edge ratio of each face's worse element\n"
+            f"from {lo:.3f} (best) to {max(hi, worst):.3f}\n{bound_label(mesh)}: <= {hi:.3f}\n"
+            f"worst element {worst:.3f} ({holds} the bound)")
 
 
 def _labels_present(data: np.ndarray) -> list[int]:
