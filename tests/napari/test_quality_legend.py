@@ -41,6 +41,14 @@ def test_quality_colouring_shows_its_colour_bar_and_bound(make_napari_viewer, qt
     assert not layer.colorbar.visible and not text_overlay(viewer).visible
     widget.color_combo.value = COLOR_BY_QUALITY
     assert layer.colorbar.visible and text_overlay(viewer).text == text
+    # the text belongs to the mesh layer: hidden (a potential field shown instead) or
+    # removed, the canvas shows no quality legend over something else
+    layer.visible = False
+    assert not text_overlay(viewer).visible
+    layer.visible = True
+    assert text_overlay(viewer).visible
+    viewer.layers.remove(layer)
+    assert not text_overlay(viewer).visible
 
 
 def test_the_legend_leaves_other_text_alone(make_napari_viewer, qtbot):

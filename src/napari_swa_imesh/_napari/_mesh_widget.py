@@ -409,9 +409,20 @@ class MeshWidget(QWidget):
         if text is not None:
             overlay.text, overlay.visible = text, True
             overlay.position, overlay.font_size = "bottom_left", 10
-            self._legend_text = text
+            self._legend_text, self._legend_layer = text, layer
+            # the text speaks for this layer only: hidden or removed, it goes too
+            layer.events.visible.connect(self._sync_legend)
+            self.viewer.layers.events.removed.connect(self._sync_legend)
         elif overlay.text == getattr(self, "_legend_text", None):   # ours: take it away
             overlay.text, overlay.visible = "", False
+            self._legend_layer = None
+
+    def _sync_legend(self, event=None) -> None:
+        """Show the quality text while its mesh layer is in the viewer and visible."""
+        layer, overlay = getattr(self, "_legend_layer", None), text_overlay(self.viewer)
+        if layer is None or overlay.text != getattr(self, "_legend_text", None):
+            return
+        overlay.visible = layer in self.viewer.layers and bool(layer.visible)
 
     def _show_summary(self, mesh: "Mesh", checks, n_faces: int) -> None:
         info = mesh.info
