@@ -35,6 +35,7 @@ _SLAB = 1 << 20         # float64 values per slab of an upsampling (8 MB)
 FIT_CELLS = 12          # cells along the shortest side of the polynomial fit
 MAX_DEGREE = 3          # log-field: polynomial of total degree <= 3 (20 terms in 3-D)
 CV_BLOCKS = 4           # checkerboard blocks per side of the degree's cross-validation
+EVIDENCE = 3.0          # z of the held-out gain a field needs (one-sided p ~ 0.1 %)
 _HUBER = 1.345          # Huber threshold in robust sigmas (95 % efficiency)
 _IRLS = 8               # reweighting rounds
 
@@ -99,13 +100,29 @@ def field_terms(image: np.ndarray, corrected: np.ndarray, labels: np.ndarray,
     """Per-pixel ``I mu`` and ``mu^2`` (float32), zero outside the inliers (module
     docstring); `image` is the uncorrected I, `corrected` the image the labels came from."""
     mu = class_mean_image(labels, class_means)
+    mu = np.where(_inliers(corrected, mu, class_means), mu, np.float32(0))
+    return image * mu, mu * mu
+
+
+def _inliers(corrected: np.ndarray, mu: np.ndarray, class_means: dict[int, float]
+             ) -> np.ndarray:
+    """Pixels whose local mean is within :data:`INLIER_GAP` of the smallest class gap of
+    their class mean `mu`."""
     means = np.sort(np.fromiter(class_means.values(), float))
     gap = float(np.diff(means).min()) if means.size > 1 else float(abs(means[0]))
     local = ndi.uniform_filter(np.asarray(corrected, np.float32), LOCAL_WINDOW,
                                mode="reflect")
-    keep = np.abs(local - mu) <= INLIER_GAP * gap
-    mu = np.where(keep, mu, np.float32(0))
-    return image * mu, mu * mu
+    return np.abs(local - mu) <= INLIER_GAP * gap
+
+
+def inlier_sums(image: np.ndarray, labels: np.ndarray, class_means: dict[int, float]
+                ) -> dict[int, tuple[float, int]]:
+    """Sum and count of the inlier pixels of every label (the pixels
+    :func:`field_terms` counts), for class means that match those pixels."""
+    keep = _inliers(image, class_mean_image(labels, class_means), class_means)
+    image = np.asarray(image, np.float64)
+    return {k: (float(image[keep & (labels == k)].sum()),
+                int(np.count_nonzero(keep & (labels == k)))) for k in class_means}
 
 
 def grid_factor(shape: tuple[int, ...]) -> int:
@@ -208,24 +225,36 @@ def _robust_fit(A: np.ndarray, y: np.ndarray, w: np.ndarray
 
 
 def _cv_degree(basis, y, w, fold, ndim: int, max_degree: int) -> int:
-    """Degree whose fit on one fold best predicts the other (Huber loss, both ways)."""
-    best, best_loss = 0, np.inf
+    """Degree whose fit on one fold best predicts the other (weighted Huber loss, both
+    ways), among those that beat the flat field by :data:`EVIDENCE` standard errors of
+    the paired per-cell loss differences (a one-sided z-test; 0 when none does)."""
+    losses = []
     for degree in range(max_degree + 1):
         cols = _n_terms(ndim, degree)
-        loss = 0.0
+        loss = np.empty_like(y)
         for f in (0, 1):
             train, test = fold == f, fold != f
             if train.sum() <= cols or not test.any():
-                return best
+                return _best(losses)
             coef, _ = _robust_fit(basis[train, :cols], y[train], w[train])
             r = y[test] - basis[test, :cols] @ coef
             # residuals of the flat model set the Huber scale, the same for every degree
             r0 = y[test] - np.average(y[test], weights=w[test])
             scale = 1.4826 * np.median(np.abs(r0 - np.median(r0))) + 1e-12
             a = np.abs(r) / (_HUBER * scale)
-            loss += float(np.sum(w[test] * np.where(a <= 1, a * a, 2 * a - 1)))
-        if loss < best_loss:
-            best, best_loss = degree, loss
+            loss[test] = w[test] * np.where(a <= 1, a * a, 2 * a - 1)
+        losses.append(loss)
+    return _best(losses)
+
+
+def _best(losses: list[np.ndarray]) -> int:
+    """:func:`_cv_degree`'s choice from the per-cell held-out losses of degrees 0, 1..."""
+    best, best_total = 0, float(losses[0].sum()) if losses else 0.0
+    for degree, loss in enumerate(losses[1:], 1):
+        gain = losses[0] - loss
+        se = np.sqrt(gain.size) * gain.std()
+        if gain.sum() > EVIDENCE * se and loss.sum() < best_total:
+            best, best_total = degree, float(loss.sum())
     return best
 
 
