@@ -22,12 +22,11 @@ anatomy seeds of their own; the truth is the most probable tissue of the output 
 
 from __future__ import annotations
 
+import anatomy
 import numpy as np
 from scipy import ndimage as ndi
 
-import anatomy
-
-__all__ = ["MEANS", "VARIANTS", "CASES", "CROP_MM", "cases", "make_case"]
+__all__ = ["CASES", "CROP_MM", "MEANS", "VARIANTS", "cases", "make_case"]
 
 MEANS = np.array([0.0, 0.20, 0.62, 0.86], np.float32)       # background, CSF, GM, WM
 # (noise, bias, spacing): 1 mm and 1.5 x 0.94 x 0.94 mm voxels
@@ -47,7 +46,7 @@ def _fine_labels(crop: str, anatomy_seed: int) -> tuple[np.ndarray, np.ndarray]:
     gm, wm, brain = anatomy.template()
     origin = np.array(anatomy._QUADRANTS[crop], float) + 4.0
     rng = np.random.default_rng(5000 + anatomy_seed)
-    n = [int(round(e / FINE)) for e in CROP_MM]
+    n = [round(e / FINE) for e in CROP_MM]
     axes = [o + (np.arange(k) + 0.5) * FINE - 0.5 for o, k in zip(origin, n)]
     grid = np.meshgrid(*[a.astype(np.float32) for a in axes], indexing="ij")
     disp = anatomy._displacement(tuple(max(2, k // 2) for k in n), rng)
@@ -95,7 +94,7 @@ def make_case(crop: str, anatomy_seed: int, noise: float, bias: float, spacing, 
     # truth: the most frequent label within the output voxel (box average of one-hot)
     frac = np.stack([ndi.map_coordinates(
         ndi.uniform_filter((lab == t).astype(np.float32),
-                           [max(1, int(round(s / FINE))) for s in spacing]), grid, order=1,
+                           [max(1, round(s / FINE)) for s in spacing]), grid, order=1,
         mode="nearest") for t in range(4)])
     brain = frac[0] < 0.5
     truth = np.where(brain, np.argmax(frac[1:], axis=0) + 1, 0).astype(np.int32)

@@ -8,8 +8,8 @@ import numpy as np
 import pytest
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[2] / "benchmarks"))
-import anatomy  # noqa: E402
-import anatomy_heldout  # noqa: E402
+import anatomy
+import anatomy_heldout
 
 
 def test_heldout_shares_no_crop_seed_or_contrast_with_tuning():

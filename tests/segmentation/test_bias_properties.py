@@ -11,8 +11,12 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from napari_swa_imesh.data import tissue_phantom
-from napari_swa_imesh.segmentation import (RecommendedModel, dice_scores, estimate_bias_field,
-                                           samples_from_truth)
+from napari_swa_imesh.segmentation import (
+    RecommendedModel,
+    dice_scores,
+    estimate_bias_field,
+    samples_from_truth,
+)
 from napari_swa_imesh.segmentation._bias import coarse_bias_field
 
 SHAPE = (32, 48, 48)
