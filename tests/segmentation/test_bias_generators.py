@@ -1,0 +1,36 @@
+"""The held-out phantom generator (benchmarks/anatomy_heldout.py) is independent of the
+tuning one (benchmarks/anatomy.py) and makes what it says."""
+
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[2] / "benchmarks"))
+import anatomy
+import anatomy_heldout
+
+
+def test_heldout_shares_no_crop_seed_or_contrast_with_tuning():
+    dev = {c for c, _, _ in anatomy.SPLITS["dev"]}
+    seeds = {a for split in anatomy.SPLITS.values() for _, a, _ in split}
+    for crop, anat, _ in anatomy_heldout.CASES:
+        assert crop not in dev and anat not in seeds
+    assert not np.allclose(anatomy_heldout.MEANS, anatomy.MEANS)
+    # the extent fits inside a quadrant at every spacing
+    assert all(e <= n for e, n in zip(anatomy_heldout.CROP_MM, anatomy.CROP))
+
+
+@pytest.mark.parametrize("spacing", [(1.0, 1.0, 1.0), (1.5, 0.94, 0.94)])
+def test_heldout_case_is_a_labelled_gaussian_phantom(spacing):
+    pytest.importorskip("nilearn")
+    image, truth, brain = anatomy_heldout.make_case("inf-ant", 7, 0.09, 0.4, spacing, 0)
+    shape = tuple(int(e // s) for e, s in zip(anatomy_heldout.CROP_MM, spacing))
+    assert image.shape == truth.shape == brain.shape == shape
+    assert set(np.unique(truth)) == {0, 1, 2, 3}
+    assert np.all(truth[~brain] == 0) and np.all(truth[brain] > 0)
+    means = [image[truth == k].mean() for k in (1, 2, 3)]
+    assert means[0] < means[1] < means[2]
+    # Gaussian, not Rician: the dark background goes below zero
+    assert image[~brain].min() < 0
