@@ -9,8 +9,9 @@ noise: fields of 0.57..1.09 on images without bias, costing WM Dice up to .16.
 
 Only *inliers* enter the sums: pixels whose local mean (5-px window of the currently
 corrected image) is within half the smallest gap between class means of their own class
-mean (so it is nearer that mean than any other). Background that no material describes (dark air around an MR head, labelled
-as the darkest material) and partial-volume boundaries would otherwise pull the field
+mean (so it is nearer that mean than any other). Background that no material describes
+(dark air around an MR head, labelled as the darkest material) and partial-volume
+boundaries would otherwise pull the field
 (measured on the real-anatomy phantoms: a field of 0.1..1.08 on an image with no bias).
 """
 
@@ -299,3 +300,21 @@ def upsample_linear_at(small: np.ndarray, shape: tuple[int, ...], region) -> np.
         sl = slice(i, i + step)
         result[sl] = out[lo[sl]] * (1 - w[sl]) + out[hi[sl]] * w[sl]
     return result
+
+
+def inlier_class_means(crops, label_crop, class_means: dict[int, float]) -> dict[int, float]:
+    """The class means the field divides by: of the box pixels that :func:`field_terms`
+    counts as inliers of each label, `label_crop(crop)` labelling each crop as the image
+    will be labelled.
+
+    The boxes' plain means are not what the labelled inliers average: the labels and the
+    inlier gate truncate each class's noise differently, and the field then follows where
+    each class lies (measured: class ratios 1.02..1.07 after correction, a field error
+    near the field itself). A class with no inlier keeps its mean.
+    """
+    sums = {k: [0.0, 0] for k in class_means}
+    for crop in crops:
+        for k, (total, count) in inlier_sums(crop, label_crop(crop), class_means).items():
+            sums[k][0] += total
+            sums[k][1] += count
+    return {k: (t / n if n else class_means[k]) for k, (t, n) in sums.items()}

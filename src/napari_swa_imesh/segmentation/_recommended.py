@@ -34,11 +34,12 @@ level, the scales used (windows in px), and the features with the largest Fisher
 from __future__ import annotations
 
 import warnings
+from functools import partial
 
 import numpy as np
 from scipy import ndimage as ndi
 
-from ._bias import estimate_bias_field, upsample_linear
+from ._bias import estimate_bias_field, inlier_class_means, upsample_linear
 from ._blocked_cv import BLOCKED_CV_METHOD, blocked_cv_errors
 from ._classifiers import GaussianClassifier
 from ._model_base import SegmentationModel
@@ -227,7 +228,9 @@ class RecommendedModel(SegmentationModel):
             else:
                 self.levels[self.finest_scale] = GaussianClassifier(priors="equal").fit(X, y)
             if r + 1 < rounds:
-                self.class_means = self._field_means(source.crops(self), samples)
+                self.class_means = inlier_class_means(
+                    source.crops(self), partial(self._predict_level, level=self.finest_scale),
+                    self.class_means)
                 bias_range = source.correct(self)
         reduction = None
         if rounds > 1:
@@ -347,23 +350,6 @@ class RecommendedModel(SegmentationModel):
         labels = self._predict_level(work[sub], level)
         field = estimate_bias_field(base[sub], labels, self.class_means, corrected=work[sub])
         return field if step == 1 else upsample_linear(field, base.shape)
-
-    def _field_means(self, crops: list[np.ndarray], samples: Samples) -> dict[int, float]:
-        """The class means the field divides by: of the box pixels that
-        :func:`~._bias.field_terms` would count as inliers of each label (labelled by the
-        field's level, as the image will be). The boxes' plain means are not what the
-        labelled inliers average: the labels and the inlier gate truncate each class's
-        noise differently, and the field then follows where each class lies (measured:
-        class ratios 1.02..1.07 after correction, a field error near the field itself)."""
-        from ._bias import inlier_sums
-
-        sums = {k: [0.0, 0] for k in self.class_means}
-        for crop in crops:
-            labels = self._predict_level(crop, self.finest_scale)
-            for k, (total, count) in inlier_sums(crop, labels, self.class_means).items():
-                sums[k][0] += total
-                sums[k][1] += count
-        return {k: (t / n if n else self.class_means[k]) for k, (t, n) in sums.items()}
 
     def _standardised(self, img: np.ndarray, field: np.ndarray | None = None,
                       out: np.ndarray | None = None) -> np.ndarray:
