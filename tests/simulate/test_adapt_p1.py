@@ -93,3 +93,25 @@ def test_p1_over_its_budget_is_not_adapted_and_says_why(monkeypatch, tmp_path, c
     # a mesh without its labels, or adapt 0, stays as it is
     assert simulate(mesh_labels(labels), K, axes="x", order=1).adapt == 0
     assert simulate(labels, K, axes="x", order=1, adapt=0).dofs == vertices
+
+
+def test_p1_budget_counts_from_the_labels_on_voxel_cells_not_the_subdivided_mesh():
+    # 1 / 0.8 / 1.2 (float32) cuts each voxel into 2 x 2 x 3 cells; the budget is still
+    # P1_GROWTH times the labels' voxel-lattice mesh, so the subdivision does not
+    # multiply the unknowns the default buys
+    labels = blobs((10, 12, 8), sigma=2.0, seed=4)
+    spacing = tuple(float(np.float32(s)) for s in (1.0, 0.8, 1.2))
+    first = mesh_labels(labels, spacing=spacing)
+    assert first.info["lattice"]["factors"] == [2, 2, 3]
+    voxel = len(mesh_labels(labels, spacing=spacing, subdivide=False).points)
+    assert _adapt.voxel_lattice_vertices(labels, first) == voxel
+    iso = simulate(labels, K, order=1, axes="x")
+    aniso = simulate(labels, K, order=1, axes="x", spacing=spacing)
+    assert iso.dofs <= _adapt.P1_GROWTH * voxel           # the isotropic rule, unchanged
+    assert aniso.dofs <= max(len(first.points), _adapt.P1_GROWTH * voxel)
+    assert aniso.dofs < 0.5 * _adapt.P1_GROWTH * len(first.points)
+    if aniso.adapt == 0:
+        assert "labels on voxel cells" in aniso.choice
+    # on cubic voxels the reference is the first mesh itself
+    plain = mesh_labels(labels)
+    assert _adapt.voxel_lattice_vertices(labels, plain) == len(plain.points)

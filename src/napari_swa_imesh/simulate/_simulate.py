@@ -14,7 +14,7 @@ import numpy as np
 from ..mesh import Mesh, mesh_labels
 from ..mesh._adapt import _refine_marked
 from ._adapt import (AUTO, auto_settings, check_adapt, doerfler, flux_jump_indicator,
-                     refine_within)
+                     refine_within, voxel_lattice_vertices)
 from ._assembly import cell_fluxes, fe_space, p1_embedding, stiffness_matrix
 from ._conductivity import axis_names, conductivity_tensors
 from ._fe import vertex_values
@@ -261,7 +261,14 @@ def simulate_steps(mesh_or_labels, conductivity: Mapping, *, spacing=None,
     materials, cell_material = np.unique(mesh.material, return_inverse=True)
     tensors = conductivity_tensors(conductivity, materials, mesh.ndim, mesh.material_names)
     source = labels if isinstance(mesh_or_labels, Mesh) else mesh_or_labels
-    order, adapt, growth, choice = auto_settings(mesh, order, adapt, source is not None)
+    # the P1 default's budget counts from the labels on voxel cells, not from a mesh the
+    # spacing's subdivision made finer (only computed where it decides something)
+    reference = (voxel_lattice_vertices(source, mesh)
+                 if order == 1 and adapt == AUTO and source is not None
+                 and mesh.info.get("method") == "template" and "lattice" in mesh.info
+                 and not mesh.info.get("coarsen") else None)
+    order, adapt, growth, choice = auto_settings(mesh, order, adapt, source is not None,
+                                                 reference)
     start = len(mesh.points)
     seconds["mesh"] = time.perf_counter() - t0
     total = 2 + len(names) + adapt
@@ -406,8 +413,10 @@ def simulate(mesh_or_labels, conductivity: Mapping, *, spacing=None,
         Adaptive steps before the final solve: a P1 solve, its flux-jump indicator, and
         the labels meshed again one level finer where it is largest (:mod:`._adapt`).
         ``"auto"``: one step with P2 when the labels are at hand and the budget allows;
-        with ``order=1``, two steps that together at most triple the vertices (the leaves
-        of largest indicator split first; :func:`._adapt.refine_within`).
+        with ``order=1``, two steps that together reach at most 2.9 times the vertices of
+        the labels meshed on voxel cells (the leaves of largest indicator split first;
+        :func:`._adapt.refine_within`); a lattice subdivided for the spacing counts
+        toward that budget.
     labels : (M, N[, P]) array_like of int, optional
         With a mesh: the label image it was made from, so that it can be adapted.
     max_aspect : float, optional
