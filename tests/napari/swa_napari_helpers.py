@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import numpy as np
+
 # small enough that the whole napari suite runs in a few minutes on two shared cores, large
 # enough that the grey-matter shell of the phantom still holds sample blocks
 PHANTOM_SHAPE = (48, 64, 64)
@@ -37,3 +39,20 @@ class Notifications:
 def wait_idle(qtbot, *widgets, timeout=60_000):
     """Wait until every widget's TaskPanel has finished its computation."""
     qtbot.waitUntil(lambda: all(not w.tasks.busy for w in widgets), timeout=timeout)
+
+
+def rect(r0, c0, r1, c1):
+    """Rectangle covering pixels [r0, r1) x [c0, c1) (pixel edges at half integers)."""
+    return np.array([[r0, c0], [r0, c1], [r1, c1], [r1, c0]], float) - 0.5
+
+
+def draw_boxes(samples, boxes: dict[str, list]):
+    """A new samples layer of `samples` (a SamplesWidget) holding, per material name in
+    order, its rectangles (:func:`rect`); the materials replace the table's. The layer."""
+    layer = samples.new_samples_layer()
+    samples.set_materials([])
+    materials = [samples.add_material(name) for name in boxes]
+    for material, rects in zip(materials, boxes.values()):
+        samples.select_material(material.label)
+        layer.add_rectangles(rects)
+    return layer

@@ -3,7 +3,7 @@
 import csv
 
 import numpy as np
-from swa_napari_helpers import wait_idle
+from swa_napari_helpers import draw_boxes, rect, wait_idle
 from scipy import ndimage as ndi
 
 from napari_swa_imesh._napari._classify_widget import METHOD_RECOMMENDED, METHOD_REFERENCE
@@ -109,17 +109,9 @@ def test_recommended_is_the_default_and_beats_the_reference(mosaic_viewer, qtbot
 def _unbalanced(viewer):
     """Brick boxes of 64 px and one grass box of 16 px: scale 4 windows (17 px) do not fit
     in any grass box."""
-    from test_samples_widget import rect
-
     flow = WorkflowWidget(viewer)
-    samples = flow.samples
-    layer = samples.new_samples_layer()
-    samples.set_materials([])
-    brick, grass = samples.add_material("brick"), samples.add_material("grass")
-    samples.select_material(brick.label)
-    layer.add_rectangles([rect(0, 0, 64, 64), rect(0, 80, 64, 144)])
-    samples.select_material(grass.label)
-    layer.add_rectangles([rect(150, 150, 166, 230)])
+    draw_boxes(flow.samples, {"brick": [rect(0, 0, 64, 64), rect(0, 80, 64, 144)],
+                              "grass": [rect(150, 150, 166, 230)]})
     return flow
 
 

@@ -2,9 +2,8 @@
 
 import threading
 
-import numpy as np
 import pytest
-from swa_napari_helpers import wait_idle
+from swa_napari_helpers import draw_boxes, rect, wait_idle
 
 from napari_swa_imesh._napari import _classify_widget, _mesh_widget
 from napari_swa_imesh._napari._classify_widget import METHOD_REFERENCE, ClassifyWidget
@@ -13,10 +12,6 @@ from napari_swa_imesh._napari._res_widget import ResWidget
 from napari_swa_imesh._napari._samples_widget import SamplesWidget
 from napari_swa_imesh._napari._tasks import error_sentence
 from napari_swa_imesh._napari._workflow import WorkflowWidget
-
-
-def rect(r0, c0, r1, c1):
-    return np.array([[r0, c0], [r0, c1], [r1, c1], [r1, c0]], float) - 0.5
 
 
 def test_no_image_layer(make_napari_viewer, notifications):
@@ -37,13 +32,8 @@ def test_no_image_layer(make_napari_viewer, notifications):
 
 def _brick_and_tiny_grass(viewer, image):
     samples = SamplesWidget(viewer)
-    layer = samples.new_samples_layer()
-    samples.set_materials([])
-    brick, grass = samples.add_material("brick"), samples.add_material("grass")
-    samples.select_material(brick.label)
-    layer.add_rectangles([rect(0, 0, 128, 128)])
-    samples.select_material(grass.label)
-    layer.add_rectangles([rect(100, 100, 108, 108)])   # 8 px: too small for 16-px tiles
+    layer = draw_boxes(samples, {"brick": [rect(0, 0, 128, 128)],
+                                 "grass": [rect(100, 100, 108, 108)]})  # 8 px: < 16-px tiles
     return samples, layer
 
 

@@ -4,16 +4,11 @@ import json
 
 import numpy as np
 import pytest
-from swa_napari_helpers import wait_idle
+from swa_napari_helpers import draw_boxes, rect, wait_idle
 
 from napari_swa_imesh._napari._boxes import box_to_rectangle, rectangles_to_boxes
 from napari_swa_imesh._napari._samples_widget import SamplesWidget
 from napari_swa_imesh.segmentation import SampleBox, load_samples
-
-
-def rect(r0, c0, r1, c1):
-    """Rectangle covering pixels [r0, r1) x [c0, c1) (pixel edges at half integers)."""
-    return np.array([[r0, c0], [r0, c1], [r1, c1], [r1, c0]], float) - 0.5
 
 
 def test_rectangles_get_the_current_material_and_its_colour(mosaic_viewer):
@@ -185,14 +180,9 @@ def _brick_and_thin_grass(viewer):
     from napari_swa_imesh._napari._workflow import WorkflowWidget
 
     flow = WorkflowWidget(viewer)
-    widget = flow.samples
-    layer = widget.new_samples_layer()
-    widget.set_materials([])
-    brick, grass = widget.add_material("brick"), widget.add_material("grass")
-    widget.select_material(brick.label)
-    layer.add_rectangles([rect(0, 0, 64, 64), rect(0, 80, 64, 144)])
-    widget.select_material(grass.label)
-    layer.add_rectangles([rect(100, 100, 116, 156), rect(200, 200, 210, 210)])
+    layer = draw_boxes(flow.samples, {
+        "brick": [rect(0, 0, 64, 64), rect(0, 80, 64, 144)],
+        "grass": [rect(100, 100, 116, 156), rect(200, 200, 210, 210)]})
     return flow, layer
 
 

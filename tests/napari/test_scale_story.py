@@ -2,7 +2,7 @@
 trains at, names the box that limits it once, and the classify panel says plainly which
 scales ran and why, each warning once."""
 
-from swa_napari_helpers import wait_idle
+from swa_napari_helpers import draw_boxes, rect, wait_idle
 
 from napari_swa_imesh._napari._classify_widget import METHOD_RECOMMENDED
 from napari_swa_imesh._napari._workflow import WorkflowWidget
@@ -10,17 +10,9 @@ from napari_swa_imesh._napari._workflow import WorkflowWidget
 
 def _narrow_grass(viewer):
     """Brick boxes of 64 px and one grass box 4 px wide: no 5-px window fits in it."""
-    from test_samples_widget import rect
-
     flow = WorkflowWidget(viewer)
-    samples = flow.samples
-    layer = samples.new_samples_layer()
-    samples.set_materials([])
-    brick, grass = samples.add_material("brick"), samples.add_material("grass")
-    samples.select_material(brick.label)
-    layer.add_rectangles([rect(0, 0, 64, 64), rect(0, 80, 64, 144)])
-    samples.select_material(grass.label)
-    layer.add_rectangles([rect(150, 150, 230, 154)])
+    draw_boxes(flow.samples, {"brick": [rect(0, 0, 64, 64), rect(0, 80, 64, 144)],
+                              "grass": [rect(150, 150, 230, 154)]})
     return flow
 
 
