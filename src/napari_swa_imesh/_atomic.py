@@ -60,6 +60,11 @@ def _host() -> str:
 _TEMP_NAME = re.compile(re.escape(TEMP_PREFIX) + r"(\d+)@([A-Za-z0-9._]+)-[a-z0-9_]+")
 
 
+def _temp_prefix() -> str:
+    """This process's temporary-folder prefix: the name :data:`_TEMP_NAME` parses."""
+    return f"{TEMP_PREFIX}{os.getpid()}@{_host()}-"
+
+
 def check_writable(path, *, force: bool = False) -> Path:
     """Check that `path` may be written (before any work); return it as a Path.
 
@@ -324,7 +329,7 @@ def atomic_write(paths: Sequence, *, force: bool = False) -> Iterator[list[Path]
                          "give each output its own name.")
     folders: dict[Path, Path] = {}
     temps: list[Path] = []
-    prefix = f"{TEMP_PREFIX}{os.getpid()}@{_host()}-"
+    prefix = _temp_prefix()
     parent = Path(".")
     try:
         for t in targets:
@@ -357,7 +362,7 @@ def atomic_write(paths: Sequence, *, force: bool = False) -> Iterator[list[Path]
 def scratch_folder(parent) -> Iterator[Path]:
     """A hidden folder in `parent`, named and cleaned up like :func:`atomic_write`'s (a
     stale one of a dead owner is removed by a later run), removed when the block ends."""
-    folder = Path(tempfile.mkdtemp(prefix=f"{TEMP_PREFIX}{os.getpid()}@{_host()}-",
+    folder = Path(tempfile.mkdtemp(prefix=_temp_prefix(),
                                    dir=parent))
     try:
         yield folder
