@@ -10,7 +10,7 @@ from pathlib import Path
 
 import numpy as np
 
-__all__ = ["StepTimer", "print_json", "to_jsonable"]
+__all__ = ["StepTimer", "print_json", "to_jsonable", "parse_material_names"]
 
 
 def to_jsonable(obj):
@@ -48,3 +48,34 @@ class StepTimer:
             yield
         finally:
             self.seconds[name] = self.seconds.get(name, 0.0) + time.perf_counter() - t0
+
+
+def parse_material_names(items) -> dict[int, str]:
+    """Parse ``["1=bone", "2=soft tissue"]`` into ``{1: "bone", 2: "soft tissue"}``.
+
+    Examples
+    --------
+    >>> parse_material_names(["1=bone", " 2 = soft "])
+    {1: 'bone', 2: 'soft'}
+    """
+    names: dict[int, str] = {}
+    for item in items or ():
+        key, sep, name = str(item).partition("=")
+        try:
+            material = int(key)
+        except ValueError:
+            material = -1
+        if not sep or material < 0 or not name.strip() or '"' in name:
+            raise ValueError(
+                f"--material-names expects ID=NAME pairs with a non-negative integer ID "
+                f"and a name without quotes, such as 1=bone; got {item!r}."
+            )
+        name = name.strip()
+        twin = next((m for m, n in names.items() if n == name and m != material), None)
+        if twin is not None:
+            raise ValueError(
+                f"materials {twin} and {material} share the name {name!r}; give each "
+                "material its own name."
+            )
+        names[material] = name
+    return names

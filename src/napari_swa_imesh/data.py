@@ -12,7 +12,7 @@ from __future__ import annotations
 import numpy as np
 from scipy import ndimage as ndi
 
-from .segmentation._samples import Material, SampleBox, Samples
+from .segmentation import Material, SampleBox, Samples
 
 __all__ = ["TEXTURES", "texture_photo", "texture_mosaic", "texture_training",
            "tissue_phantom", "TISSUE_NAMES"]

@@ -26,8 +26,7 @@ from qtpy.QtWidgets import QFileDialog, QLabel, QTableWidget, QWidget
 
 from ..mesh import MeshClipper, shown_faces
 from ..simulate import simulate_steps, write_field
-from ..simulate._adapt import P1_GROWTH
-from ..simulate._remesh import mesh_refine, needs_remesh, remesh
+from ..simulate import P1_GROWTH, mesh_refine, needs_remesh, remesh
 from ._clip_panel import ClipPanel
 from ._conductivity_table import Conductivity, ConductivityTable, parse_conductivity
 from ._dock import fit_dock, scroll_body, side_by_side, wrapped_label

@@ -19,16 +19,30 @@
 * display: :func:`shown_faces` (boundary and material-interface faces),
   :func:`mesh_surface` (per-triangle vertices and values for a surface view),
   :func:`clip_cells` and :class:`MeshClipper` (the whole elements on one side of a plane,
-  and the surface of that set); :meth:`Mesh.to_pyvista` for VTK's own filters.
+  and the surface of that set); :meth:`Mesh.to_pyvista` for VTK's own filters;
+* for the steps above mesh: :data:`MESH_SUFFIXES`, the lattice (:class:`Lattice`,
+  :data:`ASPECT_LIMIT`, :data:`MAX_REFINE`, :func:`check_refine`, :func:`check_max_aspect`),
+  :func:`voxel_sizes`, :func:`paired_facets`, :func:`export_vectors`, adaptive refinement
+  (:func:`refine_marked`, and ``refine_marked_tree`` which also takes and returns the
+  region tree), and the mesher's door and worker apart (``mesh_arguments`` checks
+  what :func:`mesh_labels` takes, ``mesh_checked_labels`` meshes them and returns the
+  mesh and its tree).
 """
 
 from .checks._checks import MeshChecks, check_mesh, rasterize_materials
 from .checks._clip import MeshClipper, clip_cells
 from .checks._facets import FacetGroup, facet_groups
 from .checks._surface import mesh_surface, shown_faces
-from .formats._export import read_mesh, to_meshio, write_mesh, write_mesh_vtu
+from .checks._facets import paired_facets
+from .formats._common import export_vectors
+from .formats._export import MESH_SUFFIXES, read_mesh, to_meshio, write_mesh, write_mesh_vtu
 from .mesher._balance import balance_tree
+from .mesher._adapt import _refine_marked as refine_marked_tree
+from .mesher._adapt import refine_marked
+from .mesher._imesh import _mesh_arguments as mesh_arguments
+from .mesher._imesh import _mesh_labels as mesh_checked_labels
 from .mesher._imesh import mesh_labels, mesh_tree
+from .mesher._lattice import ASPECT_LIMIT, MAX_REFINE, Lattice, check_max_aspect, check_refine
 from .mesher._tree import RegionTree, build_tree
 from .model._bounds import format_quality_table, quality_bounds, quality_table
 from .model._memory import count_boundary_voxels, estimate_mesh_memory
@@ -41,7 +55,7 @@ from .model._quality import (
     signed_volumes,
 )
 from .model._types import Mesh
-from .model._world import world_from_affine
+from .model._world import voxel_sizes, world_from_affine
 
 __all__ = [
     "FacetGroup", "facet_groups", "write_mesh_vtu", "Mesh", "balance_tree", "mesh_labels", "mesh_tree", "check_mesh", "MeshChecks",
@@ -50,4 +64,8 @@ __all__ = [
     "format_quality_table", "read_mesh", "to_meshio", "write_mesh", "estimate_mesh_memory",
     "count_boundary_voxels", "mesh_surface", "shown_faces", "world_from_affine",
     "MeshClipper", "clip_cells", "RegionTree", "build_tree",
+    # for the packages above mesh (simulate, pipeline, the widgets), issue 24
+    "MESH_SUFFIXES", "ASPECT_LIMIT", "MAX_REFINE", "Lattice", "check_refine",
+    "check_max_aspect", "voxel_sizes", "paired_facets", "export_vectors", "refine_marked",
+    "refine_marked_tree", "mesh_arguments", "mesh_checked_labels",
 ]

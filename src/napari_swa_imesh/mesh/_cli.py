@@ -15,7 +15,7 @@ from pathlib import Path
 
 import numpy as np
 
-from .._cli_util import StepTimer, print_json
+from .._cli_util import StepTimer, parse_material_names, print_json
 from .._validation import normalize_spacing
 from .checks._checks import _check_mesh
 from .formats._export import MESH_SUFFIXES
@@ -113,37 +113,6 @@ def add_commands(subparsers) -> None:
                    help="with --spacing: the limit to mark (default 1.25, the mesher's)")
     p.add_argument("--json", action="store_true", help="print one JSON object on stdout")
     p.set_defaults(func=_run_bounds)
-
-
-def parse_material_names(items) -> dict[int, str]:
-    """Parse ``["1=bone", "2=soft tissue"]`` into ``{1: "bone", 2: "soft tissue"}``.
-
-    Examples
-    --------
-    >>> parse_material_names(["1=bone", " 2 = soft "])
-    {1: 'bone', 2: 'soft'}
-    """
-    names: dict[int, str] = {}
-    for item in items or ():
-        key, sep, name = str(item).partition("=")
-        try:
-            material = int(key)
-        except ValueError:
-            material = -1
-        if not sep or material < 0 or not name.strip() or '"' in name:
-            raise ValueError(
-                f"--material-names expects ID=NAME pairs with a non-negative integer ID "
-                f"and a name without quotes, such as 1=bone; got {item!r}."
-            )
-        name = name.strip()
-        twin = next((m for m, n in names.items() if n == name and m != material), None)
-        if twin is not None:
-            raise ValueError(
-                f"materials {twin} and {material} share the name {name!r}; give each "
-                "material its own name."
-            )
-        names[material] = name
-    return names
 
 
 def _run_mesh(args: argparse.Namespace) -> int:

@@ -54,8 +54,7 @@ def _run_batch(args: argparse.Namespace) -> int:
     import sys
 
     from ..io import check_writable
-    from ..segmentation._chunked import default_memory, parse_memory
-    from ..segmentation._model_io import load_model
+    from ..segmentation import default_memory, load_model, parse_memory
     from ._batch import (connect, expand_inputs, mesh_for, missing_folders, output_for,
                          quiet_dask, run_batch)
 
@@ -64,7 +63,7 @@ def _run_batch(args: argparse.Namespace) -> int:
     model = load_model(args.model)                           # a bad model fails here
     new_folders = missing_folders(args.output)               # made once the checks pass
     if args.mesh:
-        from ..mesh.formats._export import MESH_SUFFIXES
+        from ..mesh import MESH_SUFFIXES
 
         if args.mesh not in MESH_SUFFIXES:
             raise ValueError(f"--mesh takes a mesh suffix ({', '.join(MESH_SUFFIXES)}); got "
@@ -138,11 +137,7 @@ def _batch_conductivity(args: argparse.Namespace, model) -> dict | None:
                          "--conductivity goes with --simulate); give both or neither.")
     if not args.simulate:
         return None
-    from ..simulate._conductivity import (
-        conductivity_tensors,
-        material_label,
-        parse_conductivity_args,
-    )
+    from ..simulate import conductivity_tensors, material_label, parse_conductivity_args
 
     parsed = parse_conductivity_args(args.conductivity)
     names = {m.label: m.name for m in model.materials}

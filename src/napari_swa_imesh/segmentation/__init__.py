@@ -16,9 +16,9 @@ The pipeline of the reference's chapter 2, as functions on arrays:
   :func:`evaluate`.
 """
 
-from ._apply import apply_model
+from ._apply import apply_model, wants_chunks
 from ._bias import estimate_bias_field
-from ._chunked import plan_chunks, predict_chunked
+from ._chunked import default_memory, parse_memory, plan_chunks, predict_chunked
 from ._classifiers import (
     CLASSIFIERS,
     GaussianClassifier,
@@ -57,7 +57,7 @@ __all__ = [
     "ResStatistics", "res_statistics", "plot_res", "plot_res_scales",
     "SWAModel", "load_model", "SegmentationResult", "segment", "segment_steps", "METHODS",
     "RecommendedModel", "estimate_bias_field", "predict_chunked", "plan_chunks",
-    "apply_model", "multiscale_feature_names",
+    "apply_model", "wants_chunks", "default_memory", "parse_memory", "multiscale_feature_names",
     "multiscale_features", "potts_mean_field",
     "sieve_labels", "tile_placement", "upsample_tiles", "majority_tiles",
     "material_signatures", "write_signatures_csv",

@@ -15,9 +15,11 @@
   per-material signatures of the segmentation and k_eff in one table.
 """
 
+from ._adapt import P1_GROWTH
 from ._boundary import BoundaryResult, solve_boundary_value
-from ._conductivity import conductivity_tensors, parse_conductivity_args
+from ._conductivity import conductivity_tensors, material_label, parse_conductivity_args
 from ._output import write_field, write_series
+from ._remesh import mesh_refine, needs_remesh, remesh
 from ._report import SimulationReport, read_signatures, simulation_report, write_report
 from ._simulate import SimulationResult, simulate, simulate_steps
 from ._solve import SolverInfo
@@ -27,4 +29,6 @@ __all__ = ["BoundaryResult", "SimulationReport", "SimulationResult", "SolverInfo
            "TransientResult", "conductivity_tensors", "parse_conductivity_args",
            "read_signatures", "simulate", "simulate_steps", "simulate_transient",
            "simulation_report", "solve_boundary_value", "transient_steps", "write_field",
-           "write_report", "write_series"]
+           "write_report", "write_series",
+           # for the widgets and the pipeline (issue 24)
+           "P1_GROWTH", "material_label", "mesh_refine", "needs_remesh", "remesh"]

@@ -39,11 +39,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..mesh.mesher._adapt import _refine_marked
-from ..mesh.checks._facets import paired_facets
-from ..mesh.mesher._lattice import MAX_REFINE
-from ..mesh.model._quality import signed_volumes
-from ..mesh.model._types import Mesh
+from ..mesh import MAX_REFINE, Mesh, paired_facets, signed_volumes
+from ..mesh import refine_marked_tree as _refine_marked
 
 __all__ = ["AUTO", "P1_GROWTH", "P1_STEPS", "P2_BUDGET", "THETA", "auto_settings", "doerfler",
            "flux_jump_indicator", "refine_within", "voxel_lattice_vertices"]
@@ -163,8 +160,9 @@ def voxel_lattice_vertices(labels, mesh: Mesh) -> int:
     (every axis cut into at least ``2**j``) count toward it, so a lattice at refine
     ``r > 0`` was asked ``r + j``, and one at 0 is taken as asked 0.
     """
-    from ..mesh.mesher._imesh import _mesh_arguments, _mesh_labels
-    from ..mesh.mesher._lattice import Lattice
+    from ..mesh import Lattice
+    from ..mesh import mesh_arguments as _mesh_arguments
+    from ..mesh import mesh_checked_labels as _mesh_labels
 
     described = mesh.info["lattice"]
     factors = tuple(int(f) for f in described["factors"])

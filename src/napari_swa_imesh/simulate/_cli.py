@@ -116,7 +116,7 @@ def _run_simulate(args: argparse.Namespace) -> int:
     from .._validation import normalize_spacing
     from ..io import read_image
     from ..mesh import read_mesh
-    from ..mesh._cli import parse_material_names
+    from .._cli_util import parse_material_names
     from ._conductivity import parse_conductivity_args
     from ._output import check_field_path, check_series_path, write_field, write_series
     from ._report import (
@@ -171,11 +171,11 @@ def _run_simulate(args: argparse.Namespace) -> int:
     if not is_image and adapt not in ("auto", 0):
         raise ValueError("--adapt meshes the labels again: it needs a label image, not a mesh "
                          "file (simulate the labels, or leave --adapt out).")
-    from ..mesh.mesher._lattice import check_refine
+    from ..mesh import check_refine
 
     check_refine(args.refine)
     if args.max_aspect is not None:
-        from ..mesh.mesher._lattice import check_max_aspect
+        from ..mesh import check_max_aspect
 
         check_max_aspect(args.max_aspect, "--max-aspect")
     if transient is not None and args.protocol != "mixed":
