@@ -73,13 +73,17 @@ def _mesh_bound(mesh: "Mesh") -> tuple[float, float]:
     """:func:`bound_range` for the lattice `mesh` was cut on (its recorded max aspect)."""
     subdivided = _subdivided(mesh)
     return bound_range(mesh.ndim, mesh.spacing, subdivided,
-                       mesh.info.get("lattice", {}).get("max_aspect") if subdivided else None)
+                       mesh.recipe.lattice.max_aspect if subdivided else None)
 
 
 def _subdivided(mesh: "Mesh") -> bool:
     """Whether the mesh was cut on a lattice finer than its voxels for anisotropy."""
-    factors = mesh.info.get("lattice", {}).get("factors")
-    return bool(factors) and any(int(f) > 1 for f in factors)
+    return mesh.recipe is not None and mesh.recipe.subdivided
+
+
+def _method(mesh: "Mesh") -> str:
+    """The method that made `mesh` (the template mesher's when it does not say)."""
+    return "template" if mesh.recipe is None else mesh.recipe.method
 
 
 def _aspect(spacing: tuple[float, ...]) -> str:
@@ -93,9 +97,9 @@ def bound_label(mesh: "Mesh") -> str:
     cubic = len(set(mesh.spacing)) <= 1
     voxels = "square/cubic voxels" if cubic else f"{_aspect(mesh.spacing)} voxels"
     if _subdivided(mesh):
-        voxels += " in " + " x ".join(str(f) for f in mesh.info["lattice"]["factors"]) + " cells"
-    if mesh.info.get("method", "template") != "template":
-        return f"template bound, {voxels} ({mesh.info['method']} proves none)"
+        voxels += " in " + " x ".join(str(f) for f in mesh.recipe.lattice.factors) + " cells"
+    if _method(mesh) != "template":
+        return f"template bound, {voxels} ({_method(mesh)} proves none)"
     return f"IMESH bound, {voxels}"
 
 
@@ -132,13 +136,13 @@ def _bound_line(mesh: "Mesh") -> str:
     """The summary's sentence on the quality bound that holds for `mesh`'s voxels."""
     subdivided = _subdivided(mesh)
     hi = _mesh_bound(mesh)[1]
-    if mesh.info.get("method", "template") != "template":
-        return (f"no quality bound is proven for the {mesh.info['method']} method "
+    if _method(mesh) != "template":
+        return (f"no quality bound is proven for the {_method(mesh)} method "
                 f"(shaded: the template mesher's, {hi:.3f})")
     if len(set(mesh.spacing)) <= 1:
         return f"IMESH bound (square/cubic voxels): ratio <= {hi:.3f}"
     if subdivided:
-        cells = " x ".join(str(f) for f in mesh.info["lattice"]["factors"])
+        cells = " x ".join(str(f) for f in mesh.recipe.lattice.factors)
         return (f"IMESH bound for {_aspect(mesh.spacing)} voxels cut into {cells} cells: "
                 f"ratio <= {hi:.3f}")
     cubic = bound_range(mesh.ndim)[1]

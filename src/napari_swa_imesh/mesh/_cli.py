@@ -202,7 +202,7 @@ def _run_mesh(args: argparse.Namespace) -> int:
         _check_memory(args, estimate, limit, labels.shape, labels.dtype)
 
     from ._coarsen import coarsen_labels
-    from ._imesh import _mesh_labels, warn_lost_materials
+    from ._imesh import _mesh_labels, record_coarsening
 
     with timer("mesh"):
         labels, coarse_report = coarsen_labels(labels, coarsen, exclude)
@@ -211,8 +211,7 @@ def _run_mesh(args: argparse.Namespace) -> int:
                                   max_size=max_size, periodic=args.periodic)
     mesh.world = placement[1] if placement else None
     if coarsen:
-        mesh.info["coarsen"] = coarse_report
-        warn_lost_materials(coarse_report, names)
+        record_coarsening(mesh, coarse_report)
     with ThreadPoolExecutor(1) as pool:
         # both only read the mesh; numpy's gathers and sorts release the GIL
         if not args.no_check:
@@ -371,7 +370,7 @@ def _peek_shape_dtype(path):
 
 def _mesh_report(args, mesh, checks, written, seconds) -> dict:
     """The ``--json`` object: counts, quality, checks and seconds per step."""
-    info = mesh.info
+    info, recipe = mesh.info, mesh.recipe
     materials, counts = _material_counts(mesh.material)
     report = {
         "command": "mesh",
@@ -382,7 +381,7 @@ def _mesh_report(args, mesh, checks, written, seconds) -> dict:
         "dim": mesh.ndim,
         "shape": list(mesh.shape),
         "spacing": list(mesh.spacing),
-        "exclude": list(mesh.info["exclude"]),
+        "exclude": list(recipe.exclude),
         "leaves_before_balance": info.get("n_leaves_tree"),
         "leaves_after_balance": info.get("n_leaves_balanced"),
         "leaves_meshed": info.get("n_leaves_meshed"),
@@ -403,11 +402,11 @@ def _mesh_report(args, mesh, checks, written, seconds) -> dict:
     if mesh.ndim == 3 and "min_dihedral" in cd:
         report["min_dihedral"] = float(np.nanmin(cd["min_dihedral"]))
         report["max_dihedral"] = float(np.nanmax(cd["max_dihedral"]))
-    report["lattice"] = info.get("lattice")
+    report["lattice"] = None if recipe.lattice is None else recipe.lattice.describe()
     if "coarsen" in info:
         report["coarsen"] = info["coarsen"]
-    if "max_size" in info:
-        report["max_size"] = info["max_size"]
+    if recipe.max_size is not None:
+        report["max_size"] = recipe.max_size
     report["checks"] = checks
     report["seconds"] = {
         "read": seconds.get("read", 0.0),

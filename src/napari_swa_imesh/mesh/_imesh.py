@@ -18,6 +18,7 @@ in physical units, per-element data, counts and seconds in ``info``.
 
 from __future__ import annotations
 
+import dataclasses
 import time
 import warnings
 
@@ -30,7 +31,7 @@ from ._checks import _check_mesh, count_excluded
 from ._delaunay import delaunay_mesh
 from ._coarsen import check_coarsen, coarsen_labels
 from ._lattice import Lattice, choose_lattice, lattice_tree
-from ._leaf_facets import MadeLattice
+from ._recipe import MadeLattice, Recipe
 from ._templates import template_mesh, template_quality
 from ._types import Mesh
 from ._world import world_from_affine
@@ -100,16 +101,18 @@ def mesh_labels(labels, *, method: str = "template", exclude=(), spacing=None,
         ``points (N, d) float64`` in physical units, ``cells (M, d+1) intp`` positively
         oriented, ``material (M,) int64``, ``cell_data`` with ``quality`` (radius-to-edge),
         ``level`` and ``leaf`` (index of the balanced leaf), and ``min_angle``/``max_angle`` (2-D) or
-        ``min_dihedral``/``max_dihedral`` (3-D) in degrees; ``info`` holds counts, the worst
-        ratio, the angle range and seconds per step.
+        ``min_dihedral``/``max_dihedral`` (3-D) in degrees; ``recipe`` says how it was
+        made (:class:`~._recipe.Recipe`: method, exclusions, lattice, size cap, periodic
+        faces, coarsening); ``info`` holds counts, the worst ratio, the angle range and
+        seconds per step.
 
     Notes
     -----
-    The mesher works on the lattice of :func:`choose_lattice` (``info["lattice"]``): the
+    The mesher works on the lattice of :func:`choose_lattice` (``recipe.lattice``): the
     voxels themselves for cubic spacing without refinement. The per-element metrics are
     those of the physical elements; ``level`` counts lattice cells. Template elements per
     leaf, when no edge midpoint or face centre of the leaf is a vertex: 2 in 2-D, 5 in 3-D
-    (6, Kuhn's, in a periodic mesh with an odd extent: ``info["diagonal_rule"]``); else
+    (6, Kuhn's, in a periodic mesh with an odd extent: ``recipe.diagonal_rule``); else
     one cone simplex per boundary segment or face triangle (2-D: 5-8; 3-D: 12-48), or in
     3-D the fewer tetrahedra of the leaf table where it has the configuration (17-40;
     ``_templates_luts.LeafTable``).
@@ -158,8 +161,7 @@ def mesh_labels(labels, *, method: str = "template", exclude=(), spacing=None,
                               max_size=max_size, periodic=bool(periodic))
     mesh.world = world
     if coarsen:
-        mesh.info["coarsen"] = coarse_report
-        warn_lost_materials(coarse_report, mesh.material_names)
+        record_coarsening(mesh, coarse_report)
     if method == "delaunay":  # report the reference's step as it is
         t = time.perf_counter()
         checks = _check_mesh(mesh, lab, exclude_arr, tree)
@@ -196,14 +198,23 @@ def check_periodic(method: str, periodic: bool) -> None:
                          "cannot match opposite faces).")
 
 
-def warn_lost_materials(report: dict, names: dict | None = None) -> None:
+def record_coarsening(mesh: Mesh, report: dict) -> None:
+    """Say on `mesh` that its labels were coarsened first (``recipe.coarsen``, the volume
+    changes in ``info["coarsen"]``) and warn about materials the coarsening removed."""
+    mesh.info["coarsen"] = report
+    mesh.recipe = dataclasses.replace(mesh.recipe, coarsen=int(report["level"]))
+    warn_lost_materials(report, mesh.material_names, stacklevel=4)
+
+
+def warn_lost_materials(report: dict, names: dict | None = None, *,
+                        stacklevel: int = 3) -> None:
     """Warn (naming them) about materials the coarsening removed entirely."""
     if report.get("lost"):
         lost = ", ".join(f"{m}" + (f" ({names[m]})" if names and m in names else "")
                          for m in report["lost"])
         warnings.warn(f"coarsening by 2^{report['level']} voxels removed material(s) {lost} "
                       "entirely: they are thinner than a block. Use a smaller --coarsen to "
-                      "keep them.", UserWarning, stacklevel=3)
+                      "keep them.", UserWarning, stacklevel=stacklevel)
 
 
 def _exclude_array(exclude) -> np.ndarray:
@@ -251,17 +262,12 @@ def _mesh_labels(lab: np.ndarray, *, method: str, exclude: np.ndarray, spacing: 
         tree = lattice_tree(lab, lattice, exclude=exclude, max_size=max_size,
                             periodic=periodic)
     seconds = {"tree": time.perf_counter() - t0}
+    # the mesh describes the image it came from; the lattice is in its recipe
     mesh = _mesh_tree(tree, method=method, exclude=exclude, spacing=lattice.step,
                       material_names=_names(material_names), connectivity=None,
-                      report_face_balance=False, seconds=seconds, periodic=periodic)
-    # the mesh describes the image it came from; the lattice is in info
-    mesh.shape, mesh.spacing = tuple(lab.shape), tuple(spacing)
-    mesh.info["spacing"] = list(spacing)
-    mesh.info["shape"] = list(lab.shape)
-    mesh.info["lattice"] = lattice.describe()
-    if max_size is not None:
-        mesh.info["max_size"] = max_size
-    mesh.info["periodic"] = bool(periodic)
+                      report_face_balance=False, seconds=seconds, periodic=periodic,
+                      image=(tuple(lab.shape), tuple(spacing)), lattice=lattice,
+                      max_size=max_size)
     return mesh, tree
 
 
@@ -340,10 +346,15 @@ def mesh_tree(tree: RegionTree, *, method: str = "template", exclude=(), spacing
 
 def _mesh_tree(tree: RegionTree, *, method: str, exclude: np.ndarray, spacing: tuple,
                material_names: dict[int, str], connectivity: int | None,
-               report_face_balance: bool, seconds: dict, periodic: bool = False) -> Mesh:
+               report_face_balance: bool, seconds: dict, periodic: bool = False,
+               image: tuple[tuple, tuple] | None = None, lattice: Lattice | None = None,
+               max_size: float | None = None, adapted=None) -> Mesh:
     """The worker behind :func:`mesh_tree` and :func:`mesh_labels`: trusted arguments;
     `seconds` holds the steps already timed (the tree) and receives the others.
-    `periodic`: the tree's box faces are to be cut alike (the diagonal rule follows)."""
+    `periodic`: the tree's box faces are to be cut alike (the diagonal rule follows).
+    `image`: the (shape, voxel spacing) of the label image the tree is the lattice of
+    (default: the tree's own shape and `spacing`); `lattice`, `max_size` and `adapted`
+    go into the recipe as they are."""
     d = tree.ndim
     if connectivity is None:
         connectivity = 1 if method == "delaunay" else max(1, d - 1)
@@ -353,13 +364,6 @@ def _mesh_tree(tree: RegionTree, *, method: str, exclude: np.ndarray, spacing: t
     seconds["balance"] = time.perf_counter() - t
     meshed = bal.inside & ~np.isin(bal.label, exclude)
     info = {
-        "method": method,
-        "dim": d,
-        "shape": list(tree.shape),
-        "spacing": list(spacing),
-        "exclude": exclude.tolist(),
-        "balance": {1: "faces", 2: "faces+edges", 3: "faces+edges+corners"}.get(
-            connectivity, f"connectivity {connectivity}"),
         "n_leaves_tree": int(np.count_nonzero(tree.inside)),
         "n_leaves_balanced": int(np.count_nonzero(bal.inside)),
         "n_leaves_meshed": int(np.count_nonzero(meshed)),
@@ -377,8 +381,8 @@ def _mesh_tree(tree: RegionTree, *, method: str, exclude: np.ndarray, spacing: t
     if method == "template":
         # a periodic mesh needs the rule to survive the translation by the box size
         rule = "lowest" if periodic and any(n % 2 for n in tree.shape) else "parity"
-        points, cells, leaf, template_id, vseconds, packed = template_mesh(bal, meshed,
-                                                                          rule=rule)
+        points, cells, leaf, template_id, vseconds, packed, n_plain = template_mesh(
+            bal, meshed, rule=rule)
         seconds.update(vseconds)
         t = time.perf_counter()
         table = template_quality(d, spacing)
@@ -386,9 +390,7 @@ def _mesh_tree(tree: RegionTree, *, method: str, exclude: np.ndarray, spacing: t
         cell_data = {name: values[template_id] for name, values in table.items()}
         del template_id
         seconds["quality"] = time.perf_counter() - t
-        info["n_plain_leaves"] = int(vseconds.pop("_n_plain"))
-        seconds.pop("_n_plain", None)
-        info["diagonal_rule"] = rule if d == 3 else "lowest"
+        info["n_plain_leaves"] = n_plain
     else:
         points, cells, leaf, cell_data, dinfo, vseconds = delaunay_mesh(bal, meshed)
         seconds.update(vseconds)
@@ -400,13 +402,21 @@ def _mesh_tree(tree: RegionTree, *, method: str, exclude: np.ndarray, spacing: t
     material = bal.label[leaf]
     cell_data = {"quality": cell_data.pop("quality"), "level": bal.level[leaf],
                  "leaf": leaf, **cell_data}
-    mesh = Mesh._trusted(points, cells, material, cell_data, spacing=spacing,
-                         shape=tuple(tree.shape), material_names=dict(material_names or {}),
+    shape, voxel = image if image is not None else (tuple(tree.shape), spacing)
+    mesh = Mesh._trusted(points, cells, material, cell_data, spacing=tuple(voxel),
+                         shape=tuple(shape), material_names=dict(material_names or {}),
                          info=info)
+    mesh.recipe = Recipe(
+        method=method, exclude=tuple(exclude.tolist()),
+        balance={1: "faces", 2: "faces+edges", 3: "faces+edges+corners"}.get(
+            connectivity, f"connectivity {connectivity}"),
+        lattice=lattice, max_size=max_size, periodic=bool(periodic),
+        diagonal_rule=(rule if d == 3 else "lowest") if method == "template" else None,
+        adapted=adapted)
     if method == "template":
         # what the facet groups' pass would otherwise recompute from the points, valid
-        # while the mesh's arrays are the ones made here
-        mesh._made = MadeLattice.record(mesh, packed, bal.origin)
+        # while the mesh holds the (now read-only) arrays made here
+        mesh.made = MadeLattice.record(mesh, packed, bal.origin)
     seconds["assemble"] = time.perf_counter() - t
 
     t = time.perf_counter()
