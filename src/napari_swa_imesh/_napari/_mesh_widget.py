@@ -15,9 +15,8 @@ from magicgui.widgets import CheckBox, ComboBox, Container, FloatSpinBox, PushBu
 from qtpy.QtCore import Qt, Signal
 from qtpy.QtWidgets import QFileDialog, QLabel, QListWidget, QListWidgetItem, QWidget
 
-from ..mesh import (MeshClipper, check_mesh, mesh_labels, mesh_surface, quality_bounds,
-                    write_mesh)
-from ..mesh._export import MESH_SUFFIXES
+from ..mesh import (MeshClipper, check_mesh, mesh_formats, mesh_labels, mesh_surface,
+                    quality_bounds, write_mesh)
 from ..mesh._lattice import ASPECT_LIMIT
 from ._clip_panel import ClipPanel
 from ._dock import fit_dock, scroll_body, wrapped_label
@@ -199,7 +198,7 @@ class MeshWidget(QWidget):
         self.edges_box = CheckBox(text="show element edges", value=True)
         self.mesh_button = PushButton(text="Mesh")
         self.export_button = PushButton(text="Export mesh...", enabled=False, tooltip=(
-            "Write the mesh (" + ", ".join(s for s in MESH_SUFFIXES if s != ".ele") + ")."))
+            "Write the mesh (" + ", ".join(f.suffix for f in mesh_formats()) + ")."))
         self.summary = wrapped_label()
         self.summary.native.setTextInteractionFlags(Qt.TextSelectableByMouse)
         self.plot = ThemedFigure(self.viewer, self._draw_histogram, min_height=180)
@@ -491,8 +490,7 @@ class MeshWidget(QWidget):
                               notify_info("mesh written to " + ", ".join(map(str, written))))
 
     def _on_export_clicked(self) -> None:
-        filters = ";;".join(f"{text} (*{suffix})" for suffix, text in MESH_SUFFIXES.items()
-                            if suffix != ".ele")
+        filters = ";;".join(f"{f.description} (*{f.suffix})" for f in mesh_formats())
         path, _ = QFileDialog.getSaveFileName(self, "Export mesh", "mesh.vtu", filters)
         if path:
             self.export_mesh(path)

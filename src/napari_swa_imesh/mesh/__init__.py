@@ -9,7 +9,8 @@
   :func:`quality_table` and the ranges they prove per metric, :func:`quality_bounds`;
 * export: :func:`write_mesh` (every format, order 1 or 2, with the facet groups asked
   for), :func:`read_mesh`, :func:`to_meshio`, and :func:`write_mesh_vtu` (the ``.vtu``
-  writer, with extra fields);
+  writer, with extra fields); the formats, one :class:`MeshFormat` record each, by
+  :func:`mesh_format` (of a path) and :func:`mesh_formats` (all, as users see them);
 * placement: ``mesh_labels(..., affine=...)`` puts the files in an image's world frame
   (NIfTI); :func:`world_from_affine` gives the spacing and ``Mesh.world`` it uses;
 * facet groups for boundary conditions: :func:`facet_groups` (box sides, material
@@ -29,6 +30,7 @@ from ._export import read_mesh, to_meshio, write_mesh, write_mesh_vtu
 from ._facets import FacetGroup, facet_groups
 from ._imesh import mesh_labels, mesh_tree
 from ._memory import count_boundary_voxels, estimate_mesh_memory
+from ._registry import MESH_SUFFIXES, MeshFormat, mesh_format, mesh_formats
 from ._quality import (
     QUALITY_METRICS,
     dihedral_angles,
@@ -47,5 +49,5 @@ __all__ = [
     "radius_edge_ratio", "signed_volumes", "quality_bounds", "quality_table",
     "format_quality_table", "read_mesh", "to_meshio", "write_mesh", "estimate_mesh_memory",
     "count_boundary_voxels", "mesh_surface", "shown_faces", "world_from_affine",
-    "MeshClipper", "clip_cells",
+    "MeshClipper", "clip_cells", "MESH_SUFFIXES", "MeshFormat", "mesh_format", "mesh_formats",
 ]

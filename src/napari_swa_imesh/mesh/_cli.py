@@ -16,9 +16,10 @@ from pathlib import Path
 import numpy as np
 
 from .._cli_util import StepTimer, print_json
-from .._validation import normalize_spacing
+from .._validation import OptionError, normalize_spacing
 from ._checks import _check_mesh
 from ._export import MESH_SUFFIXES
+from ._registry import mesh_format, mesh_formats
 from ._subdivision import check_max_aspect
 from ._memory import (available_memory, count_boundary_voxels, current_rss,
                       estimate_mesh_memory, format_bytes, parse_memory_size)
@@ -181,9 +182,9 @@ def _run_mesh(args: argparse.Namespace) -> int:
         spacing=placement[0] if placement else args.spacing if args.spacing else file_spacing,
         name=f"labels in {Path(args.labels).name}")
     del image
-    if Path(args.output).suffix.lower() == ".msh":
-        from ._gmsh import check_gmsh_labels
-        check_gmsh_labels(labels, exclude)
+    fmt = mesh_format(args.output)
+    if fmt.check_labels is not None:        # a limit of the format on the label values
+        fmt.check_labels(labels, exclude)
     from ._imesh import resolution_arguments
 
     lattice, max_size, coarsen = resolution_arguments(
@@ -295,9 +296,10 @@ def _write_options(args, ndim: int | None) -> dict:
 
     if args.order not in ("1", "2"):
         raise ValueError(f"--order must be 1 or 2, not {args.order!r}.")
-    if args.msh_ascii and Path(args.output).suffix.lower() != ".msh":
-        raise ValueError(f"--msh-ascii applies to .msh output only, not "
-                         f"{Path(args.output).name}; leave it out or write .msh.")
+    if args.msh_ascii and "binary" not in mesh_format(args.output).options:
+        ascii_ = " or ".join(f.suffix for f in mesh_formats() if "binary" in f.options)
+        raise ValueError(f"--msh-ascii applies to {ascii_} output only, not "
+                         f"{Path(args.output).name}; leave it out or write {ascii_}.")
     text = args.facet_groups.strip()
     groups = text if text in ("all", "none") else [n.strip() for n in text.split(",")]
     if isinstance(groups, list) and not all(groups):
@@ -307,11 +309,9 @@ def _write_options(args, ndim: int | None) -> dict:
                "facet_groups": groups, "abaqus_elements": args.abaqus_elements}
     try:
         options["facet_groups"] = check_write_options(args.output, ndim=ndim, **options)
-    except ValueError as exc:
-        if "legacy .vtk" in str(exc):
-            raise ValueError("legacy .vtk holds no facet groups; write .vtu (its groups go "
-                             "to <stem>_facets.vtu) or .msh, or drop --facet-groups.") from None
-        raise ValueError(str(exc).replace("facet_groups", "--facet-groups")) from None
+    except OptionError as exc:            # the library's keyword, named as the flag
+        flag = "--" + exc.option.replace("_", "-")
+        raise exc.as_option(flag, drop=f"drop {flag}") from None
     return options
 
 
