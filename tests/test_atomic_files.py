@@ -179,7 +179,8 @@ def test_the_cli_refuses_a_dangling_symlink_output(tmp_path, capsys):
 
 STOPPED_WRITER = textwrap.dedent("""
     import dataclasses, sys, time
-    from napari_swa_imesh.mesh import _registry, mesh_format
+    from napari_swa_imesh.mesh import mesh_format
+    from napari_swa_imesh.mesh.formats import _registry
     from napari_swa_imesh.cli import main
 
     def slow_write(ex, temps, **options):

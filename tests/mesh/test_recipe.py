@@ -10,10 +10,10 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from napari_swa_imesh.mesh import Mesh, clip_cells, facet_groups, mesh_labels, mesh_tree
-from napari_swa_imesh.mesh._adapt import refine_marked
-from napari_swa_imesh.mesh._facets import _sorted_groups
-from napari_swa_imesh.mesh._lattice import Lattice
-from napari_swa_imesh.mesh._recipe import Adapted, Recipe
+from napari_swa_imesh.mesh.mesher._adapt import refine_marked
+from napari_swa_imesh.mesh.checks._facets import _sorted_groups
+from napari_swa_imesh.mesh.mesher._lattice import Lattice
+from napari_swa_imesh.mesh.model._recipe import Adapted, Recipe
 
 #: keys of the recipe that ``info`` once carried
 RECIPE_KEYS = {"method", "exclude", "lattice", "max_size", "periodic", "adapted",

@@ -17,7 +17,7 @@ from qtpy.QtWidgets import QFileDialog, QLabel, QListWidget, QListWidgetItem, QW
 
 from ..mesh import (MeshClipper, check_mesh, mesh_formats, mesh_labels, mesh_surface,
                     quality_bounds, write_mesh)
-from ..mesh._lattice import ASPECT_LIMIT
+from ..mesh.mesher._lattice import ASPECT_LIMIT
 from ._clip_panel import ClipPanel
 from ._dock import fit_dock, scroll_body, wrapped_label
 from ._help import explain_terms
@@ -300,6 +300,7 @@ class MeshWidget(QWidget):
 
         def steps():
             yield 0, 3, f"{method} mesh of the balanced 2^d-tree"
+            # mesh_labels runs the library's plan (plan_mesh), as the command line does
             mesh = mesh_labels(data, method=method, exclude=exclude, material_names=names,
                                **resolution,
                                **({"affine": place} if place is not None else

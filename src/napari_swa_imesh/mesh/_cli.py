@@ -17,11 +17,11 @@ import numpy as np
 
 from .._cli_util import StepTimer, print_json
 from .._validation import OptionError, normalize_spacing
-from ._checks import _check_mesh
-from ._export import MESH_SUFFIXES
-from ._registry import mesh_format, mesh_formats
-from ._subdivision import check_max_aspect
-from ._memory import (available_memory, count_boundary_voxels, current_rss,
+from .checks._checks import _check_mesh
+from .formats._export import MESH_SUFFIXES
+from .formats._registry import mesh_format, mesh_formats
+from .mesher._subdivision import check_max_aspect
+from .model._memory import (available_memory, count_boundary_voxels, current_rss,
                       estimate_mesh_memory, format_bytes, parse_memory_size)
 
 __all__ = ["add_commands", "parse_material_names"]
@@ -149,8 +149,8 @@ def parse_material_names(items) -> dict[int, str]:
 
 def _run_mesh(args: argparse.Namespace) -> int:
     from ..io import image_suffix, read_image
-    from ._export import mesh_output_paths, write_mesh
-    from ._imesh import _mesh_arguments
+    from .formats._export import mesh_output_paths, write_mesh
+    from .mesher._imesh import plan_mesh
 
     timer = StepTimer()
     # fail before the (possibly long) meshing on a bad option, suffix or existing file
@@ -176,20 +176,19 @@ def _run_mesh(args: argparse.Namespace) -> int:
             f"{Path(args.labels).name} is a colour picture (shape {image.shape}); a label "
             "image has one value per pixel. Save the labels as a grey PNG, .tif or .npy."
         )
-    # the door: labels keep their dtype (no copy), spacing and exclusions checked once
-    labels, spacing, exclude = _mesh_arguments(
+    # the library's door: labels keep their dtype (no copy), every option checked once;
+    # the plan is what the library's mesh_labels and the Mesh tab run too
+    plan = plan_mesh(
         image, method=args.method, exclude=tuple(args.exclude),
         spacing=placement[0] if placement else args.spacing if args.spacing else file_spacing,
-        name=f"labels in {Path(args.labels).name}")
+        material_names=names, refine=args.refine, max_size=args.max_size,
+        subdivide=not args.no_subdivide, coarsen=args.coarsen, periodic=args.periodic,
+        max_aspect=args.max_aspect, name=f"labels in {Path(args.labels).name}")
     del image
+    labels, exclude = plan.labels, plan.exclude
     fmt = mesh_format(args.output)
     if fmt.check_labels is not None:        # a limit of the format on the label values
         fmt.check_labels(labels, exclude)
-    from ._imesh import resolution_arguments
-
-    lattice, max_size, coarsen = resolution_arguments(
-        spacing, method=args.method, refine=args.refine, max_size=args.max_size,
-        subdivide=not args.no_subdivide, coarsen=args.coarsen, max_aspect=args.max_aspect)
     # the dimension is known now: the box sides it has, and .poly or .face
     write_options = _write_options(args, labels.ndim)
     mesh_output_paths(args.output, force=args.force,
@@ -198,21 +197,16 @@ def _run_mesh(args: argparse.Namespace) -> int:
         estimate = estimate_mesh_memory(labels.shape, labels.dtype,
                                         n_boundary=count_boundary_voxels(labels),
                                         max_label=int(labels.max()), check=not args.no_check,
-                                        cells_per_voxel=lattice.cells_per_voxel)
+                                        cells_per_voxel=plan.lattice.cells_per_voxel)
     if limit != 0:
         _check_memory(args, estimate, limit, labels.shape, labels.dtype)
 
-    from ._coarsen import coarsen_labels
-    from ._imesh import _mesh_labels, record_coarsening
-
+    del labels
     with timer("mesh"):
-        labels, coarse_report = coarsen_labels(labels, coarsen, exclude)
-        mesh, tree = _mesh_labels(labels, method=args.method, exclude=exclude,
-                                  spacing=spacing, material_names=names, lattice=lattice,
-                                  max_size=max_size, periodic=args.periodic)
+        # the checks below run beside the writer, not in the plan (report_checks)
+        mesh, tree, labels = plan.run(report_checks=False)
+    del plan
     mesh.world = placement[1] if placement else None
-    if coarsen:
-        record_coarsening(mesh, coarse_report)
     with ThreadPoolExecutor(1) as pool:
         # both only read the mesh; numpy's gathers and sorts release the GIL
         if not args.no_check:
@@ -251,9 +245,9 @@ def _timed_check(timer, mesh, labels, exclude, tree, full) -> dict:
 def _check_resolution_args(args) -> None:
     """Refine and coarsen levels in range before any reading (the size cap needs the
     spacing, so it is checked with it)."""
-    from ._coarsen import check_coarsen
-    from ._imesh import check_periodic
-    from ._lattice import check_refine
+    from .mesher._coarsen import check_coarsen
+    from .mesher._imesh import check_periodic
+    from .mesher._lattice import check_refine
 
     check_refine(args.refine)
     if args.max_aspect is not None:
@@ -268,7 +262,7 @@ def _placement(args, peek) -> tuple | None:
     """(spacing, world) from a NIfTI file's affine (its header only, before any work), or
     None: the image's own frame (other formats, ``--index-space``)."""
     from ..io import is_nifti, read_affine
-    from ._world import world_from_affine
+    from .model._world import world_from_affine
 
     name = Path(args.labels).name
     if not is_nifti(args.labels):
@@ -292,7 +286,7 @@ def _placement(args, peek) -> tuple | None:
 def _write_options(args, ndim: int | None) -> dict:
     """The keyword arguments of ``write_mesh`` from the flags, checked (ValueError in the
     flags' words) before any meshing."""
-    from ._export import check_write_options
+    from .formats._export import check_write_options
 
     if args.order not in ("1", "2"):
         raise ValueError(f"--order must be 1 or 2, not {args.order!r}.")
@@ -471,8 +465,8 @@ def _mesh_text(r: dict) -> str:
 
 
 def _run_bounds(args: argparse.Namespace) -> int:
-    from ._bounds import format_lattice_bounds, format_quality_table, quality_table
-    from ._lattice import aspect_table, choose_lattice, lattice_choices
+    from .model._bounds import format_lattice_bounds, format_quality_table, quality_table
+    from .mesher._lattice import aspect_table, choose_lattice, lattice_choices
 
     if args.dim not in (2, 3):
         raise ValueError(f"--dim must be 2 or 3; got {args.dim}.")
