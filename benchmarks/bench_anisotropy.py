@@ -56,7 +56,7 @@ mesh = mesh_labels(lab, spacing=spacing, max_aspect=max_aspect)
 seconds = time.perf_counter() - t
 ratio = radius_edge_ratio(mesh.points, mesh.cells)
 lo, hi = dihedral_angles(mesh.points, mesh.cells)
-lattice = mesh.info["lattice"]
+lattice = mesh.recipe.lattice.describe()
 print(json.dumps({"elements": int(mesh.n_cells), "factors": lattice["factors"],
                   "residual_aspect": lattice["residual_aspect"], "bound": lattice["bounds"],
                   "worst_ratio": float(ratio.max()), "min_dihedral": float(lo.min()),

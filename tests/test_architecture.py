@@ -11,6 +11,7 @@
 from __future__ import annotations
 
 import ast
+import re
 from pathlib import Path
 
 import pytest
@@ -191,8 +192,6 @@ LAYER_EXCEPTIONS = {(f"{PACKAGE}.segmentation._samples", f"{PACKAGE}.mesh", "bui
 #: mesh plan/steps object (issue 24, "the CLI re-implements the mesher") replaces them
 CLI_PRIVATE_EXCEPTIONS = {
     (f"{PACKAGE}.mesh._cli", "_check_mesh"),
-    (f"{PACKAGE}.mesh._cli", "_mesh_arguments"),
-    (f"{PACKAGE}.mesh._cli", "_mesh_labels"),
 }
 
 
@@ -310,3 +309,44 @@ def test_the_cli_exceptions_are_still_needed():
     used = {(name, n) for name in MODULES if _is_cli_module(name)
             for _, names in _from_imports(name) for n in names}
     assert CLI_PRIVATE_EXCEPTIONS <= used
+
+
+#: a string that is a mesh file's suffix, or the ending of a facet companion's name (a
+#: whole file name, such as the demo's "mesh.vtu", is a name, not a format's knowledge)
+_MESH_SUFFIX = re.compile(r"^(\.(vtu|vtk|msh|xdmf|h5|inp|node|ele|poly|face)|_\w*facets\.vtu)$",
+                          re.IGNORECASE)
+#: the format registry: the only module that may spell them
+_REGISTRY = {f"{PACKAGE}.mesh._registry", f"{PACKAGE}.mesh.formats._registry"}
+#: field (solution) files, written by simulate beside the mesh formats: not yet routed
+#: through the registry (issue 24; see the report of the records branch)
+_NOT_YET = {f"{PACKAGE}.simulate._output"}
+
+
+def _suffix_literals(name: str) -> list[str]:
+    """The string constants of module `name` that spell a mesh suffix (docstrings aside)."""
+    tree = ast.parse(MODULES[name].read_text(encoding="utf-8"))
+    docstrings = {id(node.body[0].value) for node in ast.walk(tree)
+                  if isinstance(node, (ast.Module, ast.FunctionDef, ast.AsyncFunctionDef,
+                                       ast.ClassDef))
+                  and node.body and isinstance(node.body[0], ast.Expr)
+                  and isinstance(node.body[0].value, ast.Constant)}
+    return [node.value for node in ast.walk(tree)
+            if isinstance(node, ast.Constant) and isinstance(node.value, str)
+            and id(node) not in docstrings and _MESH_SUFFIX.match(node.value)]
+
+
+def test_only_the_format_registry_spells_mesh_suffixes():
+    """One record per format (issue 24): a suffix literal anywhere else is knowledge of a
+    format kept outside its record, which the next format would have to find."""
+    spelled = {name: _suffix_literals(name) for name in MODULES
+               if name not in _REGISTRY | _NOT_YET}
+    assert {name: found for name, found in spelled.items() if found} == {}
+    assert any(_suffix_literals(name) for name in _REGISTRY if name in MODULES)
+
+
+def test_the_suffix_rule_finds_a_planted_literal(monkeypatch, tmp_path):
+    planted = tmp_path / "planted.py"
+    planted.write_text('"""Mentions .vtu in prose."""\nSUFFIX = ".VTU"\nEND = "_facets.vtu"\n'
+                       'NAME = "mesh.vtu"\n')
+    monkeypatch.setitem(MODULES, "planted", planted)
+    assert _suffix_literals("planted") == [".VTU", "_facets.vtu"]

@@ -178,8 +178,9 @@ def test_the_cli_refuses_a_dangling_symlink_output(tmp_path, capsys):
 # ------------------------------------------------------------------------------ signals
 
 STOPPED_WRITER = textwrap.dedent("""
-    import sys, time
-    import napari_swa_imesh.mesh.formats._export as export
+    import dataclasses, sys, time
+    from napari_swa_imesh.mesh import mesh_format
+    from napari_swa_imesh.mesh.formats import _registry
     from napari_swa_imesh.cli import main
 
     def slow_write(ex, temps, **options):
@@ -189,7 +190,8 @@ STOPPED_WRITER = textwrap.dedent("""
             fh.flush()
             time.sleep(600)
 
-    export._write = slow_write
+    vtu = mesh_format("m.vtu")          # the format's record, with a slow writer
+    _registry._FORMATS[vtu.suffix] = dataclasses.replace(vtu, write=slow_write)
     sys.exit(main(sys.argv[1:]))
 """)
 

@@ -11,7 +11,7 @@ from collections.abc import Sequence
 import numpy as np
 
 __all__ = ["SPACING_RANGE", "IMAGE_NDIM", "as_image", "as_labels", "check_ndim",
-           "normalize_spacing", "label_dtype"]
+           "normalize_spacing", "label_dtype", "OptionError"]
 
 #: Dimensionalities every command and pipeline function takes: a plane or a volume (a
 #: 4-D array is a time series or a stack of channels, which no step models).
@@ -283,3 +283,34 @@ def _plain_text(value) -> str:
     if isinstance(value, (tuple, list)):
         return ", ".join(str(v) for v in value) if value else "nothing"
     return str(value)
+
+
+class OptionError(ValueError):
+    """A bad value of one named option, worded so each caller can name it its own way.
+
+    The message is `template` filled with ``option`` (the option's name) and `words`; the
+    library raises it with its keyword's name, the command line re-words it with its
+    flag (:meth:`as_option`) instead of editing the text.
+
+    Examples
+    --------
+    >>> err = OptionError("facet_groups", "{option} lists no group; {drop}.",
+    ...                   drop="pass 'none'")
+    >>> str(err)
+    "facet_groups lists no group; pass 'none'."
+    >>> str(err.as_option("--facet-groups", drop="use --facet-groups none"))
+    '--facet-groups lists no group; use --facet-groups none.'
+    """
+
+    def __init__(self, option: str, template: str, **words: str):
+        self.option, self.template, self.words = option, template, words
+        super().__init__(template.format(option=option, **words))
+
+    @staticmethod
+    def quote(value) -> str:
+        """``repr(value)`` with its braces doubled, to put a given value in a template."""
+        return repr(value).replace("{", "{{").replace("}", "}}")
+
+    def as_option(self, option: str, **words: str) -> "OptionError":
+        """The same error naming the option `option` (and any of its words replaced)."""
+        return OptionError(option, self.template, **{**self.words, **words})

@@ -150,7 +150,7 @@ def test_node_ele_follows_the_documented_layout(tmp_path, ndim):
     assert header.split() == [str(mesh.n_cells), str(ndim + 1), str(n_attr)]
     node_header = [ln for ln in node.read_text().splitlines() if not ln.startswith("#")][0]
     assert node_header.split() == [str(len(mesh.points)), str(ndim), "0", "0"]
-    points, cells, attributes = read_node_ele(node)
+    points, cells, attributes = read_node_ele((node, ele))
     assert cells.min() == 0  # 1-based in the file, 0-based back
     # Triangle wants counterclockwise corners in (x, y), TetGen positive volume
     assert (signed_volumes(points, cells) > 0).all()

@@ -74,7 +74,7 @@ def test_info_counts():
     mesh = mesh_labels(lab, material_names={1: "bone"})
     info = mesh.info
     assert info["n_elements"] == mesh.n_cells and info["n_vertices"] == len(mesh.points)
-    assert info["balance"] == "faces+edges"
+    assert mesh.recipe.balance == "faces+edges"
     # the face-balance count needs a second balance pass: only on request
     assert info["n_leaves_face_balanced"] is None and info["balance_element_cost"] is None
     assert "face_balance_count" not in info["seconds"]

@@ -76,7 +76,7 @@ def test_random_labels_and_spacings_mesh_conforming_exact_and_within_the_physica
     mesh = mesh_labels(lab, spacing=spacing, refine=refine, exclude=exclude)
     assert check_mesh(mesh, lab, exclude=exclude).all_passed
     exact_volumes(mesh, lab, exclude)
-    lattice = mesh.info["lattice"]
+    lattice = mesh.recipe.lattice.describe()
     assert lattice["residual_aspect"] <= ASPECT_LIMIT + 1e-12
     # quality recomputed from the elements themselves, not the template table
     ratio = radius_edge_ratio(mesh.points, mesh.cells)
@@ -100,7 +100,7 @@ def test_extreme_aspect_1_to_8_meets_the_bound_that_stretching_breaks():
     stretched = mesh_labels(lab, spacing=spacing, subdivide=False)
     assert stretched.info["worst_ratio"] > 3            # what the issue measured as wrong
     mesh = mesh_labels(lab, spacing=spacing)
-    assert mesh.info["lattice"]["factors"] == [7, 1, 1]
+    assert mesh.recipe.lattice.factors == (7, 1, 1)
     assert mesh.info["worst_ratio"] <= RATIO_3D
     assert ANGLES_3D[0] <= mesh.info["min_dihedral"] and mesh.info["max_dihedral"] <= ANGLES_3D[1]
     exact_volumes(mesh, lab)

@@ -202,7 +202,7 @@ def test_meshes_pass_the_checks_within_the_bound_and_cells_cap_the_elements(
         return
     mesh = mesh_labels(lab, spacing=s, max_aspect=limit)
     assert check_mesh(mesh, lab).all_passed
-    info = mesh.info["lattice"]
+    info = mesh.recipe.lattice.describe()
     assert tuple(info["factors"]) == lattice.factors and info["max_aspect"] == limit
     assert info["residual_aspect"] <= limit * (1 + 1e-5)
     bound = aspect_bounds(d, limit * (1 + 1e-5))

@@ -47,9 +47,9 @@ def test_leaf_path_gives_the_groups_of_the_sorting_path(case):
         return
     assert template_group_rows(mesh) is not None             # the fast path was taken
     expected = _sorted_groups(mesh)
-    assert mesh._made is not None and _as_made(mesh) is mesh._made   # the mesher's record
+    assert mesh.made is not None and _as_made(mesh) is mesh.made     # the mesher's record
     _assert_same(facet_groups(mesh), expected)
-    mesh._made = None                                        # and from the points alone
+    mesh.made = None                                         # and from the points alone
     _assert_same(facet_groups(mesh), expected)
 
 
@@ -161,31 +161,32 @@ def test_an_unchanged_template_mesh_skips_the_sign_pass(monkeypatch):
     assert np.array_equal(_flips_as_computed(mesh), expected)
 
 
-@pytest.mark.parametrize("change", ["swap corners", "swap point axes", "new cells array",
-                                    "mirror an axis"])
+@pytest.mark.parametrize("change", ["swap corners", "swap point axes", "mirror an axis"])
 def test_a_template_mesh_changed_after_meshing_gets_its_signs_computed(change):
-    from napari_swa_imesh.mesh.checks._leaf_facets import template_group_rows
-
+    """The mesher's arrays are read-only; a mesh given changed arrays has no record, so
+    its facets are paired by the sort and its signs computed."""
     labels = np.random.default_rng(9).integers(0, 3, (7, 8, 8))   # axes 1 and 2 alike
     mesh = mesh_labels(labels)
     before = _flips_as_computed(mesh).copy()
     some = np.arange(0, mesh.n_cells, 7)
-    if change == "swap corners":      # same counts, same leaves: only the signs differ
-        mesh.cells[some, 0], mesh.cells[some, 1] = mesh.cells[some, 1], mesh.cells[some, 0].copy()
-    elif change == "swap point axes":  # a cube's lattice still: every element turned
-        mesh.points[:, [1, 2]] = mesh.points[:, [2, 1]]
-    elif change == "mirror an axis":   # only sign bits change, an even number of them
-        assert len(mesh.points) % 2 == 0
+    with pytest.raises(ValueError, match="read-only"):
+        mesh.cells[some, 0] = 0
+    with pytest.raises(ValueError, match="read-only"):
         mesh.points[:, 0] *= -1
-    else:
+    if change == "swap corners":      # same counts, same leaves: only the signs differ
         cells = mesh.cells.copy()
         cells[some, 0], cells[some, 1] = cells[some, 1], cells[some, 0].copy()
         mesh.cells = cells
-    if change != "mirror an axis":                     # off the lattice's box: sorted
-        assert template_group_rows(mesh) is not None  # the leaf path still takes it
+    elif change == "swap point axes":  # a cube's lattice still: every element turned
+        mesh.points = mesh.points[:, [0, 2, 1]]
+    else:                              # only sign bits change, an even number of them
+        assert len(mesh.points) % 2 == 0
+        mesh.points = mesh.points * [-1, 1, 1]
+    assert mesh.recipe is None and mesh.made is None
+    assert template_group_rows(mesh) is None
     after = _flips_as_computed(mesh)
     turned = np.zeros(mesh.n_cells, bool)
-    turned[some if change in ("swap corners", "new cells array") else slice(None)] = True
+    turned[some if change == "swap corners" else slice(None)] = True
     np.testing.assert_array_equal(after, before ^ turned)
 
 

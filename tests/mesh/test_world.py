@@ -125,7 +125,7 @@ def test_triangle_tetgen_files_hold_world_points(tmp_path):
     affine = oblique_affine(3, flip=True)
     mesh = mesh_labels(labels_3d(), affine=affine)
     write_mesh(mesh, tmp_path / "m.node")
-    points, cells, _ = read_node_ele(tmp_path / "m.node")
+    points, cells, _ = read_node_ele((tmp_path / "m.node", tmp_path / "m.ele"))
     assert (signed_volumes(points, cells) > 0).all()
     np.testing.assert_allclose(points, apply_affine(affine, corner_index(mesh) - 0.5),
                                atol=1e-9)

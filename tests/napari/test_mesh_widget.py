@@ -82,11 +82,11 @@ def test_max_aspect_reaches_the_mesher_and_its_bound_is_shaded(make_napari_viewe
     # 2.5:1:1 voxels: 2 x 1 x 1 cells at the default 1.25, 3 x 1 x 1 at 1.2 (2.5/3 = 0.83)
     widget = _meshed(viewer, qtbot, data, scale=(2.5, 1.0, 1.0))
     assert widget.max_aspect_spin.value == 1.25
-    assert widget.mesh.info["lattice"]["factors"] == [2, 1, 1]
+    assert widget.mesh.recipe.lattice.factors == (2, 1, 1)
     widget.max_aspect_spin.value = 1.2
     widget.run_mesh()
     wait_idle(qtbot, widget, timeout=120_000)
-    info = widget.mesh.info["lattice"]
+    info = widget.mesh.recipe.lattice.describe()
     assert info["factors"] == [3, 1, 1] and info["max_aspect"] == 1.2
     lo, hi, label = _band(widget)
     assert label == "IMESH bound, 2.5:1:1 voxels in 3 x 1 x 1 cells"
@@ -106,7 +106,7 @@ def test_refine_and_max_edge_reach_the_mesher(make_napari_viewer, qtbot):
     widget.run_mesh()
     wait_idle(qtbot, widget, timeout=120_000)
     mesh = widget.mesh
-    assert mesh.info["lattice"]["refine"] == 1 and mesh.info["max_size"] == 4.0
+    assert mesh.recipe.lattice.refine == 1 and mesh.recipe.max_size == 4.0
     assert mesh.n_cells > plain
     corners = mesh.points[mesh.cells]
     assert np.linalg.norm(corners[:, :, None] - corners[:, None], axis=-1).max() <= 4.0

@@ -83,7 +83,7 @@ def test_periodic_refined_run_meshes_the_labels_again_and_shows_the_tensor(
     sim.run()
     wait_idle(qtbot, sim, timeout=120_000)
     # the default adapts it once (the labels are at hand); P1 runs on it as it is
-    assert sim.result.mesh.info["adapted"]["from_refine"] == 0
+    assert sim.result.mesh.recipe.adapted.from_refine == 0
     assert "where the flux jumps" in sim.mesh_note.value
     sim.order_combo.value = "P1 (linear)"
     assert "where the flux jumps" not in sim.mesh_note.value

@@ -47,7 +47,7 @@ def test_marked_refinement_is_a_conforming_exact_mesh_within_its_bound(d, seed, 
     np.testing.assert_allclose(volumes[1:], np.bincount(labels.ravel())[1:] * voxel, rtol=1e-9)
     bound = quality_bounds(d, spacing[:d])["quality"][1]
     assert fine.quality.max() <= bound * (1 + 1e-9)
-    assert fine.n_cells > mesh.n_cells and fine.info["adapted"]["marked_elements"] == marked.sum()
+    assert fine.n_cells > mesh.n_cells and fine.recipe.adapted.marked_elements == marked.sum()
 
 
 def _assert_matching_faces(mesh):
@@ -147,7 +147,7 @@ def test_adapting_moves_k_eff_towards_a_much_finer_solution():
     assert fine < default.k_eff["x"] < p2.k_eff["x"]
     # a second step refines the adapted mesh, not the labels' own tree
     two = simulate(labels, k, order=2, adapt=2, axes="x")
-    assert two.mesh.info["adapted"]["steps"] == 2 and check_mesh(two.mesh, labels).all_passed
+    assert two.mesh.recipe.adapted.steps == 2 and check_mesh(two.mesh, labels).all_passed
     assert fine < two.k_eff["x"] < default.k_eff["x"]
     with pytest.raises(ValueError, match="adapted before"):
         refine_marked(labels, default.mesh, np.ones(default.mesh.n_cells, bool))

@@ -40,9 +40,9 @@ def test_the_largest_leaves_are_split_within_the_target_and_the_mesh_stays_exact
     assert check_mesh(fine, labels, exclude=options.get("exclude", ())).all_passed
     assert fine.quality.max() <= quality_bounds(d, spacing[:d])["quality"][1] * (1 + 1e-9)
     # the split leaves are the top of the ranking: their elements are the marked ones
-    split = fine.info["adapted"]["split_leaves"]
+    split = fine.recipe.adapted.split_leaves
     top = np.argsort(indicator)[::-1][:split]
-    assert fine.info["adapted"]["marked_elements"] == np.isin(leaf, top).sum()
+    assert fine.recipe.adapted.marked_elements == np.isin(leaf, top).sum()
     if target - len(mesh.points) >= 4 * _adapt.VERTICES_PER_SPLIT * 2 ** d:
         assert split > 0 and fine.n_cells > mesh.n_cells
 
@@ -53,7 +53,7 @@ def test_no_room_or_an_exact_field_splits_nothing():
     leaf = np.asarray(mesh.cell_data["leaf"])
     ones = np.ones(leaf.max() + 1)
     same, _ = refine_within(labels, mesh, ones, len(mesh.points) + 1)
-    assert same.n_cells == mesh.n_cells and same.info["adapted"]["split_leaves"] == 0
+    assert same.n_cells == mesh.n_cells and same.recipe.adapted.split_leaves == 0
     same, _ = refine_within(labels, mesh, np.zeros_like(ones), 3 * len(mesh.points))
     assert same.n_cells == mesh.n_cells
     # layers across the flux: the field is exact, nothing is refined, k_eff is harmonic
@@ -102,7 +102,7 @@ def test_p1_budget_counts_from_the_labels_on_voxel_cells_not_the_subdivided_mesh
     labels = blobs((10, 12, 8), sigma=2.0, seed=4)
     spacing = tuple(float(np.float32(s)) for s in (1.0, 0.8, 1.2))
     first = mesh_labels(labels, spacing=spacing)
-    assert first.info["lattice"]["factors"] == [2, 2, 3]
+    assert first.recipe.lattice.factors == (2, 2, 3)
     voxel = len(mesh_labels(labels, spacing=spacing, subdivide=False).points)
     assert _adapt.voxel_lattice_vertices(labels, first) == voxel
     iso = simulate(labels, K, order=1, axes="x")

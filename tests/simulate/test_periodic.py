@@ -93,7 +93,7 @@ def test_periodic_meshes_have_matching_opposite_faces(d, shape, spacing, rule):
     lab = rng.integers(1, 4, size=shape).astype(np.uint8)
     lab[(slice(2, 5),) * d] = 1
     mesh = mesh_labels(lab, periodic=True, spacing=spacing)
-    assert mesh.info["diagonal_rule"] == rule
+    assert mesh.recipe.diagonal_rule == rule
     groups = facet_groups(mesh)
     lo, hi = mesh.image_box()
     for name, axis in zip("xyz"[:d], range(d - 1, -1, -1)):
@@ -136,7 +136,7 @@ def test_opposite_faces_cut_differently_are_refused_though_their_nodes_match(ord
         simulate(mesh, {1: 1.0, 2: 10.0}, protocol="periodic", order=order)
     monkeypatch.undo()
     honest = mesh_labels(lab, periodic=True)
-    assert honest.info["diagonal_rule"] == "lowest"
+    assert honest.recipe.diagonal_rule == "lowest"
     assert simulate(honest, {1: 1.0, 2: 10.0}, protocol="periodic", order=order,
                     adapt=0).tensor is not None
 

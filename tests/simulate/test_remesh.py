@@ -31,7 +31,7 @@ def test_remesh_keeps_every_setting_but_refine_and_periodic(labels):
     assert mesh_refine(mesh) == 0
     new = remesh(mesh, labels, refine=1, periodic=True)
     _same_mesh(new, mesh_labels(labels, **kwargs, refine=1, periodic=True))
-    assert mesh_refine(new) == 1 and new.info["periodic"] and new.material_names == {1: "a",
+    assert mesh_refine(new) == 1 and new.recipe.periodic and new.material_names == {1: "a",
                                                                                     2: "b"}
     assert 3 not in new.material
     # without anisotropy subdivision, the new mesh is cut on the voxels too

@@ -15,8 +15,8 @@ from magicgui.widgets import CheckBox, ComboBox, Container, FloatSpinBox, PushBu
 from qtpy.QtCore import Qt, Signal
 from qtpy.QtWidgets import QFileDialog, QLabel, QListWidget, QListWidgetItem, QWidget
 
-from ..mesh import (MeshClipper, check_mesh, mesh_labels, mesh_surface, quality_bounds,
-                    write_mesh)
+from ..mesh import (MeshClipper, check_mesh, mesh_formats, mesh_labels, mesh_surface,
+                    quality_bounds, write_mesh)
 from ..mesh import ASPECT_LIMIT, MESH_SUFFIXES
 from ._clip_panel import ClipPanel
 from ._dock import fit_dock, scroll_body, wrapped_label
@@ -72,13 +72,17 @@ def _mesh_bound(mesh: "Mesh") -> tuple[float, float]:
     """:func:`bound_range` for the lattice `mesh` was cut on (its recorded max aspect)."""
     subdivided = _subdivided(mesh)
     return bound_range(mesh.ndim, mesh.spacing, subdivided,
-                       mesh.info.get("lattice", {}).get("max_aspect") if subdivided else None)
+                       mesh.recipe.lattice.max_aspect if subdivided else None)
 
 
 def _subdivided(mesh: "Mesh") -> bool:
     """Whether the mesh was cut on a lattice finer than its voxels for anisotropy."""
-    factors = mesh.info.get("lattice", {}).get("factors")
-    return bool(factors) and any(int(f) > 1 for f in factors)
+    return mesh.recipe is not None and mesh.recipe.subdivided
+
+
+def _method(mesh: "Mesh") -> str:
+    """The method that made `mesh` (the template mesher's when it does not say)."""
+    return "template" if mesh.recipe is None else mesh.recipe.method
 
 
 def _aspect(spacing: tuple[float, ...]) -> str:
@@ -92,9 +96,9 @@ def bound_label(mesh: "Mesh") -> str:
     cubic = len(set(mesh.spacing)) <= 1
     voxels = "square/cubic voxels" if cubic else f"{_aspect(mesh.spacing)} voxels"
     if _subdivided(mesh):
-        voxels += " in " + " x ".join(str(f) for f in mesh.info["lattice"]["factors"]) + " cells"
-    if mesh.info.get("method", "template") != "template":
-        return f"template bound, {voxels} ({mesh.info['method']} proves none)"
+        voxels += " in " + " x ".join(str(f) for f in mesh.recipe.lattice.factors) + " cells"
+    if _method(mesh) != "template":
+        return f"template bound, {voxels} ({_method(mesh)} proves none)"
     return f"IMESH bound, {voxels}"
 
 
@@ -131,13 +135,13 @@ def _bound_line(mesh: "Mesh") -> str:
     """The summary's sentence on the quality bound that holds for `mesh`'s voxels."""
     subdivided = _subdivided(mesh)
     hi = _mesh_bound(mesh)[1]
-    if mesh.info.get("method", "template") != "template":
-        return (f"no quality bound is proven for the {mesh.info['method']} method "
+    if _method(mesh) != "template":
+        return (f"no quality bound is proven for the {_method(mesh)} method "
                 f"(shaded: the template mesher's, {hi:.3f})")
     if len(set(mesh.spacing)) <= 1:
         return f"IMESH bound (square/cubic voxels): ratio <= {hi:.3f}"
     if subdivided:
-        cells = " x ".join(str(f) for f in mesh.info["lattice"]["factors"])
+        cells = " x ".join(str(f) for f in mesh.recipe.lattice.factors)
         return (f"IMESH bound for {_aspect(mesh.spacing)} voxels cut into {cells} cells: "
                 f"ratio <= {hi:.3f}")
     cubic = bound_range(mesh.ndim)[1]
@@ -194,7 +198,7 @@ class MeshWidget(QWidget):
         self.edges_box = CheckBox(text="show element edges", value=True)
         self.mesh_button = PushButton(text="Mesh")
         self.export_button = PushButton(text="Export mesh...", enabled=False, tooltip=(
-            "Write the mesh (" + ", ".join(s for s in MESH_SUFFIXES if s != ".ele") + ")."))
+            "Write the mesh (" + ", ".join(f.suffix for f in mesh_formats()) + ")."))
         self.summary = wrapped_label()
         self.summary.native.setTextInteractionFlags(Qt.TextSelectableByMouse)
         self.plot = ThemedFigure(self.viewer, self._draw_histogram, min_height=180)
@@ -296,6 +300,7 @@ class MeshWidget(QWidget):
 
         def steps():
             yield 0, 3, f"{method} mesh of the balanced 2^d-tree"
+            # mesh_labels runs the library's plan (plan_mesh), as the command line does
             mesh = mesh_labels(data, method=method, exclude=exclude, material_names=names,
                                **resolution,
                                **({"affine": place} if place is not None else
@@ -486,8 +491,7 @@ class MeshWidget(QWidget):
                               notify_info("mesh written to " + ", ".join(map(str, written))))
 
     def _on_export_clicked(self) -> None:
-        filters = ";;".join(f"{text} (*{suffix})" for suffix, text in MESH_SUFFIXES.items()
-                            if suffix != ".ele")
+        filters = ";;".join(f"{f.description} (*{f.suffix})" for f in mesh_formats())
         path, _ = QFileDialog.getSaveFileName(self, "Export mesh", "mesh.vtu", filters)
         if path:
             self.export_mesh(path)

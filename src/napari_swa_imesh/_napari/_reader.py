@@ -42,8 +42,16 @@ __all__ = ["get_nifti_reader", "read_nifti", "napari_placement", "looks_like_lab
            "LABEL_WORDS", "MAX_LABELS", "get_tiff_reader", "read_tiff", "get_mesh_reader",
            "read_mesh_layer", "MESH_READ_SUFFIXES"]
 
-#: Mesh files the mesh reader opens (what the writer writes; .node/.ele as TetGen pairs).
-MESH_READ_SUFFIXES = (".vtu", ".vtk", ".msh", ".xdmf", ".inp", ".node", ".ele")
+
+def __getattr__(name: str):
+    # MESH_READ_SUFFIXES: the mesh files the reader opens, every suffix of the format
+    # registry (.node/.ele as TetGen pairs); looked up there when asked, so that this
+    # module, which napari imports to ask about any file, does not load the mesher
+    if name == "MESH_READ_SUFFIXES":
+        from ..mesh import MESH_SUFFIXES
+
+        return tuple(MESH_SUFFIXES)
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
 
 #: Words of a file name that mark a label volume (BIDS ``dseg``, FreeSurfer ``aseg``...).
 LABEL_WORDS = frozenset({"seg", "dseg", "segmentation", "label", "labels", "mask", "masks",
@@ -164,7 +172,11 @@ def read_tiff(path) -> list[tuple]:
 
 def get_mesh_reader(path) -> Callable | None:
     """npe2 reader command: a reader for one mesh file, else None."""
-    if isinstance(path, (list, tuple)) or not str(path).lower().endswith(MESH_READ_SUFFIXES):
+    if isinstance(path, (list, tuple)):
+        return None
+    from ..mesh import MESH_SUFFIXES
+
+    if not str(path).lower().endswith(tuple(MESH_SUFFIXES)):
         return None
     return read_mesh_layer
 

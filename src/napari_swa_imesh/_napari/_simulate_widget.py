@@ -213,7 +213,8 @@ class SimulateWidget(QWidget):
             return
         mesh = layer.metadata[MESH_KEY]
         shown = (f"refine {mesh_refine(mesh)}"
-                 + (", periodic faces" if mesh.info.get("periodic") else ""))
+                 + (", periodic faces" if mesh.recipe is not None and mesh.recipe.periodic
+                    else ""))
         if not self._remeshing():
             self.mesh_note.value = f"the run uses the mesh as shown ({mesh.n_cells} " \
                                    f"elements, {shown})" + self._adapt_note()

@@ -10,7 +10,8 @@
   :func:`quality_table` and the ranges they prove per metric, :func:`quality_bounds`;
 * export: :func:`write_mesh` (every format, order 1 or 2, with the facet groups asked
   for), :func:`read_mesh`, :func:`to_meshio`, and :func:`write_mesh_vtu` (the ``.vtu``
-  writer, with extra fields);
+  writer, with extra fields); the formats, one :class:`MeshFormat` record each, by
+  :func:`mesh_format` (of a path) and :func:`mesh_formats` (all, as users see them);
 * placement: ``mesh_labels(..., affine=...)`` puts the files in an image's world frame
   (NIfTI); :func:`world_from_affine` gives the spacing and ``Mesh.world`` it uses;
 * facet groups for boundary conditions: :func:`facet_groups` (box sides, material
@@ -35,13 +36,14 @@ from .checks._facets import FacetGroup, facet_groups
 from .checks._surface import mesh_surface, shown_faces
 from .checks._facets import paired_facets
 from .formats._common import export_vectors
-from .formats._export import MESH_SUFFIXES, read_mesh, to_meshio, write_mesh, write_mesh_vtu
+from .formats._export import read_mesh, to_meshio, write_mesh, write_mesh_vtu
+from .formats._registry import MESH_SUFFIXES, MeshFormat, mesh_format, mesh_formats
 from .mesher._balance import balance_tree
 from .mesher._adapt import _refine_marked as refine_marked_tree
 from .mesher._adapt import refine_marked
 from .mesher._imesh import _mesh_arguments as mesh_arguments
 from .mesher._imesh import _mesh_labels as mesh_checked_labels
-from .mesher._imesh import mesh_labels, mesh_tree
+from .mesher._imesh import MeshPlan, mesh_labels, mesh_tree, plan_mesh
 from .mesher._lattice import ASPECT_LIMIT, MAX_REFINE, Lattice, check_max_aspect, check_refine
 from .mesher._tree import RegionTree, build_tree
 from .model._bounds import format_quality_table, quality_bounds, quality_table
@@ -64,6 +66,7 @@ __all__ = [
     "format_quality_table", "read_mesh", "to_meshio", "write_mesh", "estimate_mesh_memory",
     "count_boundary_voxels", "mesh_surface", "shown_faces", "world_from_affine",
     "MeshClipper", "clip_cells", "RegionTree", "build_tree",
+    "MeshFormat", "mesh_format", "mesh_formats", "MeshPlan", "plan_mesh",
     # for the packages above mesh (simulate, pipeline, the widgets), issue 24
     "MESH_SUFFIXES", "ASPECT_LIMIT", "MAX_REFINE", "Lattice", "check_refine",
     "check_max_aspect", "voxel_sizes", "paired_facets", "export_vectors", "refine_marked",

@@ -16,9 +16,10 @@ from pathlib import Path
 import numpy as np
 
 from .._cli_util import StepTimer, parse_material_names, print_json
-from .._validation import normalize_spacing
+from .._validation import OptionError, normalize_spacing
 from .checks._checks import _check_mesh
 from .formats._export import MESH_SUFFIXES
+from .formats._registry import mesh_format, mesh_formats
 from .mesher._subdivision import check_max_aspect
 from .model._memory import (available_memory, count_boundary_voxels, current_rss,
                       estimate_mesh_memory, format_bytes, parse_memory_size)
@@ -118,7 +119,7 @@ def add_commands(subparsers) -> None:
 def _run_mesh(args: argparse.Namespace) -> int:
     from ..io import image_suffix, read_image
     from .formats._export import mesh_output_paths, write_mesh
-    from .mesher._imesh import _mesh_arguments
+    from .mesher._imesh import plan_mesh
 
     timer = StepTimer()
     # fail before the (possibly long) meshing on a bad option, suffix or existing file
@@ -144,20 +145,19 @@ def _run_mesh(args: argparse.Namespace) -> int:
             f"{Path(args.labels).name} is a colour picture (shape {image.shape}); a label "
             "image has one value per pixel. Save the labels as a grey PNG, .tif or .npy."
         )
-    # the door: labels keep their dtype (no copy), spacing and exclusions checked once
-    labels, spacing, exclude = _mesh_arguments(
+    # the library's door: labels keep their dtype (no copy), every option checked once;
+    # the plan is what the library's mesh_labels and the Mesh tab run too
+    plan = plan_mesh(
         image, method=args.method, exclude=tuple(args.exclude),
         spacing=placement[0] if placement else args.spacing if args.spacing else file_spacing,
-        name=f"labels in {Path(args.labels).name}")
+        material_names=names, refine=args.refine, max_size=args.max_size,
+        subdivide=not args.no_subdivide, coarsen=args.coarsen, periodic=args.periodic,
+        max_aspect=args.max_aspect, name=f"labels in {Path(args.labels).name}")
     del image
-    if Path(args.output).suffix.lower() == ".msh":
-        from .formats._gmsh import check_gmsh_labels
-        check_gmsh_labels(labels, exclude)
-    from .mesher._imesh import resolution_arguments
-
-    lattice, max_size, coarsen = resolution_arguments(
-        spacing, method=args.method, refine=args.refine, max_size=args.max_size,
-        subdivide=not args.no_subdivide, coarsen=args.coarsen, max_aspect=args.max_aspect)
+    labels, exclude = plan.labels, plan.exclude
+    fmt = mesh_format(args.output)
+    if fmt.check_labels is not None:        # a limit of the format on the label values
+        fmt.check_labels(labels, exclude)
     # the dimension is known now: the box sides it has, and .poly or .face
     write_options = _write_options(args, labels.ndim)
     mesh_output_paths(args.output, force=args.force,
@@ -166,22 +166,16 @@ def _run_mesh(args: argparse.Namespace) -> int:
         estimate = estimate_mesh_memory(labels.shape, labels.dtype,
                                         n_boundary=count_boundary_voxels(labels),
                                         max_label=int(labels.max()), check=not args.no_check,
-                                        cells_per_voxel=lattice.cells_per_voxel)
+                                        cells_per_voxel=plan.lattice.cells_per_voxel)
     if limit != 0:
         _check_memory(args, estimate, limit, labels.shape, labels.dtype)
 
-    from .mesher._coarsen import coarsen_labels
-    from .mesher._imesh import _mesh_labels, warn_lost_materials
-
+    del labels
     with timer("mesh"):
-        labels, coarse_report = coarsen_labels(labels, coarsen, exclude)
-        mesh, tree = _mesh_labels(labels, method=args.method, exclude=exclude,
-                                  spacing=spacing, material_names=names, lattice=lattice,
-                                  max_size=max_size, periodic=args.periodic)
+        # the checks below run beside the writer, not in the plan (report_checks)
+        mesh, tree, labels = plan.run(report_checks=False)
+    del plan
     mesh.world = placement[1] if placement else None
-    if coarsen:
-        mesh.info["coarsen"] = coarse_report
-        warn_lost_materials(coarse_report, names)
     with ThreadPoolExecutor(1) as pool:
         # both only read the mesh; numpy's gathers and sorts release the GIL
         if not args.no_check:
@@ -265,9 +259,10 @@ def _write_options(args, ndim: int | None) -> dict:
 
     if args.order not in ("1", "2"):
         raise ValueError(f"--order must be 1 or 2, not {args.order!r}.")
-    if args.msh_ascii and Path(args.output).suffix.lower() != ".msh":
-        raise ValueError(f"--msh-ascii applies to .msh output only, not "
-                         f"{Path(args.output).name}; leave it out or write .msh.")
+    if args.msh_ascii and "binary" not in mesh_format(args.output).options:
+        ascii_ = " or ".join(f.suffix for f in mesh_formats() if "binary" in f.options)
+        raise ValueError(f"--msh-ascii applies to {ascii_} output only, not "
+                         f"{Path(args.output).name}; leave it out or write {ascii_}.")
     text = args.facet_groups.strip()
     groups = text if text in ("all", "none") else [n.strip() for n in text.split(",")]
     if isinstance(groups, list) and not all(groups):
@@ -277,11 +272,9 @@ def _write_options(args, ndim: int | None) -> dict:
                "facet_groups": groups, "abaqus_elements": args.abaqus_elements}
     try:
         options["facet_groups"] = check_write_options(args.output, ndim=ndim, **options)
-    except ValueError as exc:
-        if "legacy .vtk" in str(exc):
-            raise ValueError("legacy .vtk holds no facet groups; write .vtu (its groups go "
-                             "to <stem>_facets.vtu) or .msh, or drop --facet-groups.") from None
-        raise ValueError(str(exc).replace("facet_groups", "--facet-groups")) from None
+    except OptionError as exc:            # the library's keyword, named as the flag
+        flag = "--" + exc.option.replace("_", "-")
+        raise exc.as_option(flag, drop=f"drop {flag}") from None
     return options
 
 
@@ -340,7 +333,7 @@ def _peek_shape_dtype(path):
 
 def _mesh_report(args, mesh, checks, written, seconds) -> dict:
     """The ``--json`` object: counts, quality, checks and seconds per step."""
-    info = mesh.info
+    info, recipe = mesh.info, mesh.recipe
     materials, counts = _material_counts(mesh.material)
     report = {
         "command": "mesh",
@@ -351,7 +344,7 @@ def _mesh_report(args, mesh, checks, written, seconds) -> dict:
         "dim": mesh.ndim,
         "shape": list(mesh.shape),
         "spacing": list(mesh.spacing),
-        "exclude": list(mesh.info["exclude"]),
+        "exclude": list(recipe.exclude),
         "leaves_before_balance": info.get("n_leaves_tree"),
         "leaves_after_balance": info.get("n_leaves_balanced"),
         "leaves_meshed": info.get("n_leaves_meshed"),
@@ -372,11 +365,11 @@ def _mesh_report(args, mesh, checks, written, seconds) -> dict:
     if mesh.ndim == 3 and "min_dihedral" in cd:
         report["min_dihedral"] = float(np.nanmin(cd["min_dihedral"]))
         report["max_dihedral"] = float(np.nanmax(cd["max_dihedral"]))
-    report["lattice"] = info.get("lattice")
+    report["lattice"] = None if recipe.lattice is None else recipe.lattice.describe()
     if "coarsen" in info:
         report["coarsen"] = info["coarsen"]
-    if "max_size" in info:
-        report["max_size"] = info["max_size"]
+    if recipe.max_size is not None:
+        report["max_size"] = recipe.max_size
     report["checks"] = checks
     report["seconds"] = {
         "read": seconds.get("read", 0.0),

@@ -92,12 +92,14 @@ def auto_settings(mesh: Mesh, order, adapt, from_labels: bool,
     coarsened, or past the finest refine level).
     """
     p2 = P2_PER_VERTEX[mesh.ndim] * len(mesh.points)
-    room = MAX_REFINE - int(mesh.info.get("lattice", {}).get("refine", MAX_REFINE))
-    can_adapt = (from_labels and mesh.info.get("method") == "template"
-                 and not mesh.info.get("coarsen"))
+    recipe = mesh.recipe
+    room = MAX_REFINE - (MAX_REFINE if recipe is None or recipe.lattice is None
+                         else recipe.refine)
+    can_adapt = (from_labels and recipe is not None and recipe.method == "template"
+                 and not recipe.coarsen)
     # periodic faces must match, so a finer lattice refines whole box faces: the default
     # does not adapt there (its cost is not the growth the budget counts)
-    auto_adapts = can_adapt and not mesh.info.get("periodic")
+    auto_adapts = can_adapt and not recipe.periodic
     fits_adapted = auto_adapts and room > 0 and p2 * ADAPT_GROWTH <= P2_BUDGET
     note, growth, asked_p1 = "", None, order == 1
     if order == AUTO:
@@ -164,20 +166,20 @@ def voxel_lattice_vertices(labels, mesh: Mesh) -> int:
     from ..mesh import mesh_arguments as _mesh_arguments
     from ..mesh import mesh_checked_labels as _mesh_labels
 
-    described = mesh.info["lattice"]
-    factors = tuple(int(f) for f in described["factors"])
+    recipe = mesh.recipe
+    factors = tuple(int(f) for f in recipe.lattice.factors)
     if all(f == 1 for f in factors):
         return len(mesh.points)
-    refine = int(described["refine"])
+    refine = recipe.refine
     if refine:
         refine += min(factors).bit_length() - 1
-    spacing = tuple(float(s) for s in mesh.info["spacing"])
-    lab, _, exclude = _mesh_arguments(labels, method="template", exclude=mesh.info["exclude"],
+    spacing = tuple(float(s) for s in mesh.spacing)
+    lab, _, exclude = _mesh_arguments(labels, method="template", exclude=recipe.exclude,
                                       spacing=spacing)
     plain = Lattice(spacing, (1,) * len(spacing), min(refine, MAX_REFINE), None)
     voxel, _ = _mesh_labels(lab, method="template", exclude=exclude, spacing=spacing,
-                            lattice=plain, max_size=mesh.info.get("max_size"),
-                            periodic=bool(mesh.info.get("periodic")))
+                            lattice=plain, max_size=recipe.max_size,
+                            periodic=recipe.periodic)
     return len(voxel.points)
 
 

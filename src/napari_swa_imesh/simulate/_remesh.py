@@ -20,15 +20,15 @@ __all__ = ["mesh_refine", "needs_remesh", "remesh"]
 
 def mesh_refine(mesh: Mesh) -> int:
     """The interface refinement level `mesh` was made with (0 when it does not say)."""
-    return int(mesh.info.get("lattice", {}).get("refine", 0))
+    return 0 if mesh.recipe is None else mesh.recipe.refine
 
 
 def needs_remesh(mesh: Mesh, *, refine: int, periodic: bool) -> bool:
     """Whether a run with `refine` and (for the periodic protocol) periodic faces needs a
     new mesh: the level differs from the mesh's, or periodic faces are wanted and the mesh
     was not made with them (a periodic mesh serves the mixed protocol as well)."""
-    return mesh_refine(mesh) != int(refine) or (bool(periodic) and
-                                                not mesh.info.get("periodic", False))
+    made_periodic = mesh.recipe is not None and mesh.recipe.periodic
+    return mesh_refine(mesh) != int(refine) or (bool(periodic) and not made_periodic)
 
 
 def _material_volumes(mesh: Mesh) -> dict[int, float]:
@@ -44,7 +44,8 @@ def remesh(mesh: Mesh, labels, *, refine: int, periodic: bool) -> Mesh:
     Parameters
     ----------
     mesh : Mesh
-        Made by :func:`~napari_swa_imesh.mesh.mesh_labels` (its ``info`` says how).
+        Made by :func:`~napari_swa_imesh.mesh.mesh_labels` (its ``recipe`` says how;
+        without one, the defaults: the template method, nothing excluded).
     labels : (M, N[, P]) array_like of int
         The label image `mesh` was made from.
     refine : int
@@ -74,26 +75,26 @@ def remesh(mesh: Mesh, labels, *, refine: int, periodic: bool) -> Mesh:
     (1, True)
     """
     labels = np.asarray(labels)
-    info = mesh.info
+    recipe = mesh.recipe
     if not mesh.records_box:
         raise ValueError("this mesh does not record the label image it was made from (a "
                          "mesh read from a file?); mesh the labels with the refine level "
                          "and periodic faces wanted instead.")
-    if "coarsen" in info:
+    if recipe is not None and recipe.coarsen:
         raise ValueError("this mesh was coarsened, so its labels cannot be meshed again "
                          "the same way here; mesh them with the refine level wanted "
                          "instead.")
     if tuple(labels.shape) != tuple(mesh.shape):
         raise ValueError(f"the labels are {labels.shape} but the mesh was made from "
                          f"{tuple(mesh.shape)} labels; give the label image of this mesh.")
-    described = info.get("lattice", {})
-    factors = described.get("factors", ())
-    subdivided = any(int(f) > 1 for f in factors)
-    new = mesh_labels(labels, method=info.get("method", "template"),
-                      exclude=tuple(info.get("exclude", ())), spacing=mesh.spacing or None,
+    subdivided = recipe is not None and recipe.subdivided
+    new = mesh_labels(labels, method="template" if recipe is None else recipe.method,
+                      exclude=() if recipe is None else recipe.exclude,
+                      spacing=mesh.spacing or None,
                       material_names=dict(mesh.material_names), refine=refine,
-                      max_size=info.get("max_size"), subdivide=subdivided,
-                      max_aspect=described.get("max_aspect") if subdivided else None,
+                      max_size=None if recipe is None else recipe.max_size,
+                      subdivide=subdivided,
+                      max_aspect=recipe.lattice.max_aspect if subdivided else None,
                       periodic=periodic)
     old_volumes, new_volumes = _material_volumes(mesh), _material_volumes(new)
     same = old_volumes.keys() == new_volumes.keys() and all(

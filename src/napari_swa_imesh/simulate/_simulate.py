@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import dataclasses
 import time
 import warnings
 from collections.abc import Generator, Mapping
@@ -165,7 +164,7 @@ def prepare_mesh(mesh_or_labels, *, spacing=None, exclude=(),
         if not material_names:
             return mesh_or_labels
         names = {**mesh_or_labels.material_names, **dict(material_names)}
-        return dataclasses.replace(mesh_or_labels, material_names=names)
+        return mesh_or_labels.with_material_names(names)
     return mesh_labels(mesh_or_labels, spacing=spacing, exclude=exclude,
                        material_names=dict(material_names or {}), refine=refine,
                        periodic=periodic, max_aspect=max_aspect)
@@ -265,8 +264,7 @@ def simulate_steps(mesh_or_labels, conductivity: Mapping, *, spacing=None,
     # spacing's subdivision made finer (only computed where it decides something)
     reference = (voxel_lattice_vertices(source, mesh)
                  if order == 1 and adapt == AUTO and source is not None
-                 and mesh.info.get("method") == "template" and "lattice" in mesh.info
-                 and not mesh.info.get("coarsen") else None)
+                 and mesh.recipe is not None and mesh.recipe.remeshable else None)
     order, adapt, growth, choice = auto_settings(mesh, order, adapt, source is not None,
                                                  reference)
     start = len(mesh.points)

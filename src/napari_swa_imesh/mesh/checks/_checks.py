@@ -305,9 +305,9 @@ def _check_mesh(mesh: Mesh, lab: np.ndarray, exclude: np.ndarray,
                 tree: RegionTree | None = None, *, full: bool = False) -> MeshChecks:
     """The worker behind :func:`check_mesh`: `lab` from ``as_labels``, `exclude` int64,
     `tree` the region tree of `lab` (or of its lattice) or None (then built here)."""
-    lattice = mesh.info.get("lattice") if isinstance(mesh.info, dict) else None
-    if lattice:
-        return _check_on_lattice(mesh, lab, exclude, tree, lattice.get("factors"), full)
+    lattice = None if mesh.recipe is None else mesh.recipe.lattice
+    if lattice is not None:
+        return _check_on_lattice(mesh, lab, exclude, tree, lattice.factors, full)
     # a mesh read from a file does not say how its voxels were cut: the subdivision the
     # mesher picks for this spacing when the points fit it, else the voxels themselves
     checks = _check_on_lattice(mesh, lab, exclude, tree, None, full)

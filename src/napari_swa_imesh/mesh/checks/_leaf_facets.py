@@ -12,8 +12,8 @@ of the ``(d+1) * M`` facet occurrences (the general path of ``_facets``), which 
 several times the meshing at volume size.
 
 Only meshes the template mesher made qualify (:func:`template_group_rows` returns None
-for the rest, and the caller takes the general path): method ``"template"``, element and
-vertex counts as the mesher recorded them (a mesh cut down afterwards fails this), points
+for the rest, and the caller takes the general path): a ``recipe`` of method
+``"template"`` (a mesh built from arrays, cut down or given new arrays has none), points
 on the lattice, and the two sides of every interface counted alike. A lattice of more
 than 16 cells per element (deep ``--refine`` on a coarse mesh) is not painted either.
 """
@@ -21,16 +21,15 @@ than 16 cells per element (deep ``--refine`` on a coarse mesh) is not painted ei
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
 
 import numpy as np
 
-from ..mesher._packed import array_fingerprint, corners, pack_points
+from ..mesher._packed import corners, pack_points
 from ..model._quality import _edge_det
+from ..model._recipe import MadeLattice
 from ..model._types import Mesh
 
-__all__ = ["material_codes", "present_materials", "template_group_rows", "made_fingerprint",
-           "MadeLattice"]
+__all__ = ["material_codes", "present_materials", "template_group_rows"]
 
 _CHUNK = 1 << 17                  # elements per pass (their corners stay in cache-ish)
 _PAINT = 1 << 22                  # lattice cells painted at once
@@ -84,47 +83,18 @@ def material_codes(material: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return materials, code.reshape(-1).astype(np.int16 if len(materials) < 2**15 else np.int64)
 
 
-def made_fingerprint(mesh: Mesh) -> list[int]:
-    """Fingerprints of the arrays :class:`MadeLattice` vouches for: points, cells and the
-    ``leaf`` and ``level`` of every element."""
-    cd = mesh.cell_data
-    return [array_fingerprint(a) for a in (mesh.points, mesh.cells, cd.get("leaf", ()),
-                                           cd.get("level", ()))]
-
-
-@dataclass
-class MadeLattice:
-    """What the template mesher knows of a mesh it made, kept on it as ``mesh._made``.
-
-    While the mesh's points, cells, leaves and levels are the ones made (their
-    :func:`made_fingerprint`), the facet groups' pass takes from here what it would
-    otherwise recompute from the points: every element is positive (the templates are
-    cut that way), so no sign pass over all elements; the lattice points packed; and the
-    lattice origin of every leaf.
-    """
-
-    fingerprint: list[int]
-    packed: tuple[np.ndarray, int] | None   # as :func:`~._packed.pack_points` gives
-    leaf_origin: np.ndarray                 # (leaves of the balanced tree, d) lattice cells
-
-    @classmethod
-    def record(cls, mesh: Mesh, packed, leaf_origin: np.ndarray) -> "MadeLattice":
-        small = leaf_origin.size == 0 or int(leaf_origin.max()) < 2**31
-        return cls(made_fingerprint(mesh), packed,
-                   leaf_origin.astype(np.int32) if small else leaf_origin)
-
-
 def _as_made(mesh: Mesh) -> MadeLattice | None:
-    """``mesh._made`` while the arrays it vouches for are unchanged, else None."""
-    made = getattr(mesh, "_made", None)
-    return made if made is not None and made.fingerprint == made_fingerprint(mesh) else None
+    """``mesh.made`` while the mesh holds the arrays it was made for, else None."""
+    made = mesh.made
+    return made if made is not None and made.applies_to(mesh) else None
 
 
 def _lattice_shape(mesh: Mesh) -> tuple[int, ...] | None:
     """The shape of the lattice of cells the mesh records, or None."""
-    lattice = mesh.info.get("lattice") or {}
-    step = np.asarray(lattice.get("step", mesh.spacing), dtype=np.float64)
-    per_voxel = np.asarray(lattice.get("cells_per_voxel", [1] * mesh.ndim), dtype=np.int64)
+    lattice = mesh.recipe.lattice
+    step = np.asarray(mesh.spacing if lattice is None else lattice.step, dtype=np.float64)
+    per_voxel = np.asarray([1] * mesh.ndim if lattice is None else lattice.cells_per_voxel,
+                           dtype=np.int64)
     if step.shape != (mesh.ndim,) or per_voxel.shape != (mesh.ndim,):
         return None
     shape = tuple(int(n) for n in np.asarray(mesh.shape, dtype=np.int64) * per_voxel)
@@ -134,8 +104,9 @@ def _lattice_shape(mesh: Mesh) -> tuple[int, ...] | None:
 def _lattice_coords(mesh: Mesh) -> np.ndarray | None:
     """Vertex coordinates in lattice cells (int32), or None when the points are not on
     the lattice the mesh records."""
-    lattice = mesh.info.get("lattice") or {}
-    u = mesh.points / np.asarray(lattice.get("step", mesh.spacing), dtype=np.float64)
+    lattice = mesh.recipe.lattice
+    u = mesh.points / np.asarray(mesh.spacing if lattice is None else lattice.step,
+                                 dtype=np.float64)
     coords = np.rint(u).astype(np.int32)
     u -= coords
     if not len(u) or np.abs(u, out=u).max() > 1e-6:
@@ -261,11 +232,10 @@ def template_group_rows(mesh: Mesh, *, signs: bool = False):
     None when `mesh` is not one the template mesher made as it made it (see the module
     docstring); the facets then have to be paired by sorting.
     """
-    info, cd = mesh.info, mesh.cell_data
+    recipe, cd = mesh.recipe, mesh.cell_data
     m, d = mesh.n_cells, mesh.ndim
-    if (info.get("method") != "template" or "leaf" not in cd or "level" not in cd
-            or info.get("n_elements") != m or info.get("n_vertices") != len(mesh.points)
-            or not mesh.records_box or m == 0 or d not in (2, 3)):
+    if (recipe is None or recipe.method != "template" or "leaf" not in cd
+            or "level" not in cd or not mesh.records_box or m == 0 or d not in (2, 3)):
         return None
     shape = _lattice_shape(mesh)
     if shape is None or math.prod(shape) > _MAX_CELLS_PER_ELEMENT * m + (1 << 20):

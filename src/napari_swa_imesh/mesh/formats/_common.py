@@ -1,4 +1,4 @@
-"""What every file format shares: suffixes, meshio's cell-type names, the exported frame,
+"""What every file format shares: meshio's cell-type names, the exported frame,
 orientation and the material names.
 
 Conventions written once for the writers (``_export`` and one module per awkward format)
@@ -21,23 +21,12 @@ import numpy as np
 
 from ..model._quality import signed_volumes
 
-__all__ = ["CELL_TYPE", "CELL_TYPE_2", "FACE_CORNERS", "MESH_SUFFIXES", "material_names",
+__all__ = ["CELL_TYPE", "CELL_TYPE_2", "FACE_CORNERS", "material_names",
            "export_points", "export_turns", "export_vectors", "orient_positive"]
 
 #: meshio's name of the simplex of each dimension, linear and of second order.
 CELL_TYPE = {2: "triangle", 3: "tetra"}
 CELL_TYPE_2 = {2: "triangle6", 3: "tetra10"}
-
-#: Suffix -> short description, in the order shown to users.
-MESH_SUFFIXES = {
-    ".vtu": "VTK XML unstructured grid (+ <stem>_facets.vtu)",
-    ".vtk": "legacy VTK",
-    ".msh": "Gmsh 4.1 with physical groups",
-    ".xdmf": "XDMF with its HDF5 .h5 file (+ <stem>_xdmf_facets.vtu)",
-    ".inp": "Abaqus with element sets and facet surfaces",
-    ".node": "Triangle (2-D) / TetGen (3-D) .node + .ele (+ .poly / .face)",
-    ".ele": "Triangle (2-D) / TetGen (3-D) .node + .ele (+ .poly / .face)",
-}
 
 #: Corners of the facet opposite corner k of a positively oriented simplex, ordered so
 #: that the facet's normal (right-hand rule) points out of the simplex.

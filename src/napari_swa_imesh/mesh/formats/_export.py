@@ -2,7 +2,8 @@
 
 This module checks the options once (before any meshing, when the command line asks),
 prepares the mesh once (``_prepare.ExportMesh``: the files' frame, order 1 or 2, the facet
-groups asked for), picks a writer by suffix and sends every write through
+groups asked for), looks the format up by suffix in the registry (``_registry``: one
+record per format, the only place that knows suffixes) and sends every write through
 ``io.atomic_write``; each format keeps its layout in a module of its own (``_gmsh``,
 ``_abaqus``, ``_vtu`` and ``_facet_vtu``, ``_xdmf``, ``_triangle_tetgen``). Exported
 coordinates are x, y(, z) = column, row(, plane) (``_common.export_points``); each cell is
@@ -40,17 +41,17 @@ from pathlib import Path
 
 import numpy as np
 
+from ..._validation import OptionError
 from ...io import atomic_write, check_writable
-from ._abaqus import ABAQUS_ELEMENTS, write_abaqus
-from ._common import CELL_TYPE, CELL_TYPE_2, MESH_SUFFIXES, export_points
-from ._facet_vtu import facets_companion, write_facets_vtu
-from ._gmsh import write_gmsh
+from ..model._types import Mesh
+from ._abaqus import ABAQUS_ELEMENTS
+from ._common import export_points
+from ._legacy_vtk import _meshio_of
 from ._prepare import ORDERS, ExportMesh, check_facet_selection
 from ._read import read_mesh
-from ._triangle_tetgen import FACET_SUFFIX, write_facet_markers, write_node_ele
-from ..model._types import Mesh
+from ._registry import _FACETS_STEM as FACETS_STEM
+from ._registry import MESH_SUFFIXES, mesh_format, mesh_formats
 from ._vtu import write_vtu
-from ._xdmf import require_h5py, write_xdmf_blocks
 
 __all__ = ["to_meshio", "write_mesh", "write_mesh_vtu", "read_mesh", "mesh_output_paths",
            "check_write_options", "MESH_SUFFIXES"]
@@ -99,35 +100,7 @@ def to_meshio(mesh: Mesh):
     return _meshio_of(ExportMesh(mesh, groups="none"))
 
 
-def _meshio_of(ex: ExportMesh):
-    import meshio
-
-    cell_data = {"material": [ex.material]}
-    for key, values in ex.mesh.cell_data.items():
-        values = np.asarray(values)
-        # every writer takes int64/float64; some reject int8 or bool (XDMF as XML)
-        kind = values.dtype.kind
-        cell_data[key] = [values.astype(np.int64 if kind in "biu" else np.float64)]
-    kind = (CELL_TYPE if ex.order == 1 else CELL_TYPE_2)[ex.ndim]
-    return meshio.Mesh(ex.points, [(kind, ex.all_cells())], cell_data=cell_data)
-
-
 # ----------------------------------------------------------------------------- options
-
-
-def _targets(path: Path) -> list[Path]:
-    suffix = path.suffix.lower()
-    if suffix not in MESH_SUFFIXES:
-        listed = ", ".join(MESH_SUFFIXES)
-        raise ValueError(
-            f"cannot write a mesh as {path.name!r}: unknown suffix {suffix or '(none)'!r}; "
-            f"use one of {listed}."
-        )
-    if suffix in (".node", ".ele"):
-        return [path.with_suffix(".node"), path.with_suffix(".ele")]
-    if suffix == ".xdmf":
-        return [path, path.with_suffix(".h5")]
-    return [path]
 
 
 def check_write_options(path, *, order: int = 1, binary: bool = True, facet_groups="all",
@@ -148,7 +121,7 @@ def check_write_options(path, *, order: int = 1, binary: bool = True, facet_grou
         Unknown suffix, order, element kind or facet group; ASCII asked for a format
         other than ``.msh``; facet groups named for legacy ``.vtk``, which holds none.
     """
-    suffix = _targets(Path(path))[0].suffix.lower()
+    fmt = mesh_format(path)
     if abaqus_elements not in ABAQUS_ELEMENTS:
         raise ValueError(f"abaqus_elements must be one of {', '.join(ABAQUS_ELEMENTS)}, not "
                          f"{abaqus_elements!r}.")
@@ -156,14 +129,23 @@ def check_write_options(path, *, order: int = 1, binary: bool = True, facet_grou
         raise ValueError(f"order must be 1 (linear) or 2 (mid-edge nodes), not {order!r}.")
     if not isinstance(binary, bool):
         raise TypeError(f"binary must be True or False, not {binary!r}.")
-    if not binary and suffix != ".msh":
-        raise ValueError(f"binary=False (ASCII) applies to .msh only; {suffix} has one "
-                         "encoding, so leave it out or write .msh.")
+    if not binary and "binary" not in fmt.options:
+        ascii_ = " or ".join(f.suffix for f in mesh_formats() if "binary" in f.options)
+        raise ValueError(f"binary=False (ASCII) applies to {ascii_} only; "
+                         f"{fmt.files(Path(path))[0].suffix.lower()} has one encoding, so "
+                         f"leave it out or write {ascii_}.")
     selection = check_facet_selection(facet_groups, ndim)
-    if suffix == ".vtk" and isinstance(selection, tuple):
-        raise ValueError("legacy .vtk holds no facet groups; write .vtu (its groups go to "
-                         "<stem>_facets.vtu) or .msh, or leave the facet groups out.")
+    if not fmt.facet_groups and isinstance(selection, tuple):
+        raise OptionError("facet_groups", f"{fmt.called} holds no facet groups; write "
+                          f"{_with_groups()}, or {{drop}}.", drop="leave the facet groups out")
     return selection
+
+
+def _with_groups() -> str:
+    """The formats that hold facet groups, as the refusal of one that does not names them:
+    ``.vtu (its groups go to <stem>_facets.vtu) or .msh``."""
+    vtu, msh = (next(f for f in mesh_formats() if f.name == n) for n in ("vtu", "gmsh"))
+    return f"{vtu.suffix} (its groups go to <stem>{FACETS_STEM}{vtu.suffix}) or {msh.suffix}"
 
 
 def mesh_output_paths(path, *, force: bool = False, facet_groups="all",
@@ -199,13 +181,7 @@ def mesh_output_paths(path, *, force: bool = False, facet_groups="all",
     FileNotFoundError
         The target folder does not exist.
     """
-    targets = _targets(Path(path))
-    suffix = targets[0].suffix.lower()
-    if facet_groups != "none":
-        if suffix in (".vtu", ".xdmf"):
-            targets.append(facets_companion(targets[0]))
-        elif suffix == ".node" and ndim in FACET_SUFFIX:
-            targets.append(targets[0].with_suffix(FACET_SUFFIX[ndim]))
+    targets = mesh_format(path).targets(path, facet_groups=facet_groups, ndim=ndim)
     for target in targets:
         check_writable(target, force=force)
     return targets
@@ -242,7 +218,7 @@ def write_mesh(mesh: Mesh, path, *, force: bool = False,
         Which facet groups (:func:`facet_groups`) to write: box sides, interfaces and
         exteriors by name, or patterns such as ``"interface_*"``. Every name must be a
         group of this mesh. ``.vtu`` gets them in ``<stem>_facets.vtu``, ``.xdmf`` in
-        ``<stem>_xdmf_facets.vtu`` (:func:`._facet_vtu.facets_companion`; two formats of
+        ``<stem>_xdmf_facets.vtu`` (:func:`._registry.facets_companion`; two formats of
         one mesh can share a folder), ``.node``/``.ele`` in a ``.poly``/``.face`` file;
         legacy ``.vtk`` holds none.
 
@@ -268,57 +244,17 @@ def write_mesh(mesh: Mesh, path, *, force: bool = False,
     selection = check_write_options(path, order=order, binary=binary,
                                     facet_groups=facet_groups,
                                     abaqus_elements=abaqus_elements, ndim=mesh.ndim)
-    suffix = Path(path).suffix.lower()
-    if suffix == ".vtk":
+    fmt = mesh_format(path)
+    if not fmt.facet_groups:
         selection = "none"
     targets = mesh_output_paths(path, force=force, facet_groups=selection, ndim=mesh.ndim)
-    if suffix == ".xdmf":
-        require_h5py("write")
+    if fmt.requires is not None:
+        fmt.requires("write")
     ex = ExportMesh(mesh, order=int(order), groups=selection)  # unknown groups fail here
+    options = {"binary": binary, "abaqus_elements": abaqus_elements}
     with atomic_write(targets, force=force) as temps:
-        _write(ex, temps, abaqus_elements=abaqus_elements, binary=binary)
+        fmt.write(ex, temps, **{k: v for k, v in options.items() if k in fmt.options})
     return targets
-
-
-def _write(ex: ExportMesh, temps: list[Path], *, abaqus_elements: str, binary: bool) -> None:
-    """Write `ex` to the temporary paths that :func:`atomic_write` gave for the targets of
-    :func:`mesh_output_paths` (same names, so twins name each other right)."""
-    import meshio
-
-    suffix = temps[0].suffix.lower()
-    if suffix == ".vtu":
-        write_vtu(temps[0], ex.points, ex.cell_blocks(),
-                  cell_data={"material": ex.material, **ex.mesh.cell_data})
-    elif suffix == ".msh":
-        write_gmsh(ex, temps[0], binary=binary)
-    elif suffix == ".inp":
-        write_abaqus(ex, temps[0], elements=abaqus_elements)
-    elif suffix in (".node", ".ele"):
-        write_node_ele(ex, temps[0], temps[1])
-    elif suffix == ".xdmf":
-        write_xdmf_blocks(ex, temps[0], temps[1])
-    else:
-        try:
-            meshio.write(str(temps[0]), _padded(_meshio_of(ex)), file_format="vtk42",
-                         binary=True)
-        except (meshio.WriteError, KeyError) as exc:  # meshio's own failures, in one line
-            raise ValueError(f"meshio could not write {temps[0].name}: {exc}") from exc
-    facet_file = temps[2 if suffix in (".node", ".ele", ".xdmf") else 1:]
-    if facet_file:
-        if suffix in (".node", ".ele"):
-            write_facet_markers(ex, facet_file[0])
-        else:
-            write_facets_vtu(ex, facet_file[0])
-
-
-def _padded(m):
-    """The same meshio mesh with 2-D points given z = 0 (VTK formats need 3-D points)."""
-    import meshio
-
-    if m.points.shape[1] == 3:
-        return m
-    points = np.column_stack([m.points, np.zeros(len(m.points))])
-    return meshio.Mesh(points, m.cells, cell_data=m.cell_data)
 
 
 def write_mesh_vtu(mesh: Mesh, path, *, point_data: dict | None = None,

@@ -16,34 +16,13 @@ its id (VTK's field data; meshio reads them as ``field_data``, pyvista as
 
 from __future__ import annotations
 
-from pathlib import Path
-
 import numpy as np
 
 from ._vtu import write_vtu
 
-__all__ = ["facets_companion", "write_facets_vtu", "FACETS_STEM"]
-
-FACETS_STEM = "_facets"
+__all__ = ["write_facets_vtu"]
 #: VTK cell type of the facets by (dimension of the mesh, order).
 _VTK_FACET = {(2, 1): 3, (2, 2): 21, (3, 1): 5, (3, 2): 22}
-
-
-def facets_companion(path) -> Path:
-    """The facets file beside mesh file `path`: ``<stem>_facets.vtu`` for a ``.vtu``,
-    ``<stem>_<format>_facets.vtu`` for any other format (the two never collide).
-
-    Examples
-    --------
-    >>> facets_companion("out/brain.vtu").as_posix()
-    'out/brain_facets.vtu'
-    >>> facets_companion("out/brain.xdmf").as_posix()
-    'out/brain_xdmf_facets.vtu'
-    """
-    p = Path(path)
-    kind = p.suffix.lower().lstrip(".")
-    middle = "" if kind == "vtu" else f"_{kind}"
-    return p.with_name(f"{p.stem}{middle}{FACETS_STEM}.vtu")
 
 
 def write_facets_vtu(ex, path) -> None:

@@ -19,6 +19,7 @@ from fnmatch import fnmatchcase
 
 import numpy as np
 
+from ..._validation import OptionError
 from ._common import export_points, export_turns, material_names
 from ..checks._facets import FACE_CORNERS, groups_and_signs
 from ..checks._leaf_facets import present_materials
@@ -62,18 +63,19 @@ def check_facet_selection(selection, ndim: int | None = None):
     if isinstance(selection, str):
         if selection in ("all", "none"):
             return selection
-        raise ValueError(f"facet_groups must be 'all', 'none' or a list of group names; "
-                         f"got {selection!r}.")
+        raise OptionError("facet_groups", "{option} must be 'all', 'none' or a list of "
+                          f"group names; got {OptionError.quote(selection)}.")
     try:
         names = list(selection)
     except TypeError:
         raise TypeError(f"facet_groups must be 'all', 'none' or a list of group names; "
                         f"got {type(selection).__name__}.") from None
     if not all(isinstance(n, str) and n.strip() for n in names):
-        raise ValueError("facet_groups must list non-empty group names (strings); got "
-                         f"{names!r}.")
+        raise OptionError("facet_groups", "{option} must list non-empty group names "
+                          f"(strings); got {OptionError.quote(names)}.")
     if not names:
-        raise ValueError("facet_groups lists no group; pass 'none' to write no facet group.")
+        raise OptionError("facet_groups", "{option} lists no group; pass 'none' to write no "
+                          "facet group.")
     sides = box_sides(ndim or 3)
     for name in names:
         if not (name in sides or name.startswith(("interface_", "exterior_"))

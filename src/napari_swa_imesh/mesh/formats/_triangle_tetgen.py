@@ -43,12 +43,10 @@ import numpy as np
 from ._text import int_rows, sci_rows
 
 __all__ = ["write_node_ele", "write_facet_markers", "read_node_ele", "write_rows",
-           "NODE_ELE_ATTRIBUTES", "FACET_SUFFIX"]
+           "NODE_ELE_ATTRIBUTES"]
 
 #: Names of the element attributes written, by dimension.
 NODE_ELE_ATTRIBUTES = {2: ("material", "quality"), 3: ("material",)}
-#: Suffix of the facet-group file, by dimension.
-FACET_SUFFIX = {2: ".poly", 3: ".face"}
 
 _PROGRAM = {2: "Triangle", 3: "TetGen"}
 _FAMILY = {2: "triangle", 3: "tetgen"}
@@ -206,8 +204,14 @@ def _numbers(path: Path) -> tuple[list[str], np.ndarray]:
     return lines[0].split(), values
 
 
-def read_node_ele(path) -> tuple[np.ndarray, np.ndarray, dict[str, np.ndarray]]:
-    """Read a Triangle or TetGen ``.node``/``.ele`` pair (either name may be given).
+def read_node_ele(pair) -> tuple[np.ndarray, np.ndarray, dict[str, np.ndarray]]:
+    """Read a Triangle or TetGen ``.node``/``.ele`` pair.
+
+    Parameters
+    ----------
+    pair : (Path, Path)
+        The ``.node`` and the ``.ele`` file (``_registry.node_ele_pair`` names them from
+        either).
 
     Returns
     -------
@@ -221,8 +225,7 @@ def read_node_ele(path) -> tuple[np.ndarray, np.ndarray, dict[str, np.ndarray]]:
         what we write, ``material`` for a lone (region) attribute, else
         ``attribute_1``, ``attribute_2``, ...
     """
-    p = Path(path)
-    node_path, ele_path = p.with_suffix(".node"), p.with_suffix(".ele")
+    node_path, ele_path = (Path(q) for q in pair)
     for q in (node_path, ele_path):
         if not q.is_file():
             raise FileNotFoundError(f"no file at {q}; a .node file needs its .ele twin.")

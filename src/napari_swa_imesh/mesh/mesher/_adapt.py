@@ -19,6 +19,7 @@ from ._balance import balance_tree
 from ._imesh import _mesh_arguments, _mesh_tree, _names
 from ._lattice import (MAX_REFINE, Lattice, finer_tree, lattice_tree, split_box_faces,
                        split_leaves)
+from ..model._recipe import Adapted
 from ..model._types import Mesh
 
 __all__ = ["refine_marked"]
@@ -32,7 +33,7 @@ def refine_marked(labels, mesh: Mesh, marked: np.ndarray) -> Mesh:
     labels : (M, N[, P]) array_like of int
         The label image `mesh` was made from (checked again here).
     mesh : Mesh
-        A template mesh of `labels` from :func:`mesh_labels` (its ``info`` records the
+        A template mesh of `labels` from :func:`mesh_labels` (its ``recipe`` records the
         lattice, exclusions, size cap and periodic faces), in index space (no coarsening).
     marked : (n_cells,) array_like of bool
         Elements of `mesh` to refine.
@@ -40,8 +41,8 @@ def refine_marked(labels, mesh: Mesh, marked: np.ndarray) -> Mesh:
     Returns
     -------
     Mesh
-        On the lattice one refine level finer; ``info["adapted"]`` counts the marked
-        elements and lattice cells.
+        On the lattice one refine level finer; ``recipe.adapted`` counts the steps, the
+        marked elements and the leaves split.
 
     Raises
     ------
@@ -58,32 +59,30 @@ def _refine_marked(labels, mesh: Mesh, marked: np.ndarray, tree: RegionTree | No
     """:func:`refine_marked`, with the (unbalanced) tree `mesh` was cut from when known
     (required for a mesh adapted before: its tree is not the labels' own); returns the
     new mesh and its tree, for the next step."""
-    info = mesh.info
-    if info.get("method") != "template" or "lattice" not in info or info.get("coarsen"):
+    recipe = mesh.recipe
+    if recipe is None or not recipe.remeshable:
         raise ValueError("adaptive refinement needs a template mesh made from the labels by "
                          "mesh_labels (not read from a file, not coarsened).")
     marked = np.asarray(marked, dtype=bool)
     if marked.shape != (mesh.n_cells,):
         raise ValueError(f"marked needs one flag per element ({mesh.n_cells}), not shape "
                          f"{marked.shape}.")
-    spacing = tuple(float(s) for s in info["spacing"])
-    lab, _, exclude = _mesh_arguments(labels, method="template", exclude=info["exclude"],
+    spacing = tuple(float(s) for s in mesh.spacing)
+    lab, _, exclude = _mesh_arguments(labels, method="template", exclude=recipe.exclude,
                                       spacing=spacing)
     if tuple(lab.shape) != tuple(mesh.shape):
         raise ValueError(f"the labels have shape {lab.shape} but the mesh was made from "
                          f"{tuple(mesh.shape)}: pass the labels the mesh was made from.")
-    described = info["lattice"]
-    if described["refine"] >= MAX_REFINE:
+    coarse = recipe.lattice
+    if coarse.refine >= MAX_REFINE:
         raise ValueError(f"the mesh is at refine level {MAX_REFINE} already, the finest; "
                          "it cannot be refined further.")
-    coarse = Lattice(spacing, tuple(described["factors"]), described["refine"],
-                     described.get("max_aspect"))
     fine = Lattice(spacing, coarse.factors, coarse.refine + 1, coarse.max_aspect)
-    max_size, periodic = info.get("max_size"), bool(info.get("periodic", False))
+    max_size, periodic = recipe.max_size, recipe.periodic
 
     t0 = time.perf_counter()
     if tree is None:
-        if "adapted" in info:
+        if recipe.adapted is not None:
             raise ValueError("this mesh was adapted before, so its tree is not the labels' "
                              "own: pass the tree the last step returned.")
         tree = lattice_tree(lab, coarse, exclude=exclude, max_size=max_size,
@@ -100,22 +99,16 @@ def _refine_marked(labels, mesh: Mesh, marked: np.ndarray, tree: RegionTree | No
     split[leaf[marked]] = True
     tree = _split_once(bal, split, periodic)
     seconds = {"tree": time.perf_counter() - t0}
+    before = recipe.adapted
+    adapted = Adapted(steps=(0 if before is None else before.steps) + 1,
+                      marked_elements=int(marked.sum()), split_leaves=int(split.sum()),
+                      from_refine=coarse.refine if before is None else before.from_refine)
     out = _mesh_tree(tree, method="template", exclude=exclude, spacing=fine.step,
                      material_names=_names(mesh.material_names), connectivity=None,
-                     report_face_balance=False, seconds=seconds, periodic=periodic)
-    out.shape, out.spacing = tuple(lab.shape), spacing
+                     report_face_balance=False, seconds=seconds, periodic=periodic,
+                     image=(tuple(lab.shape), spacing), lattice=fine, max_size=max_size,
+                     adapted=adapted)
     out.world = mesh.world              # the same image, so the same place in the world
-    out.info["spacing"] = list(spacing)
-    out.info["shape"] = list(lab.shape)
-    out.info["lattice"] = fine.describe()
-    if max_size is not None:
-        out.info["max_size"] = max_size
-    out.info["periodic"] = periodic
-    steps = info.get("adapted", {}).get("steps", 0) + 1
-    out.info["adapted"] = {"steps": steps, "marked_elements": int(marked.sum()),
-                           "split_leaves": int(split.sum()),
-                           "from_refine": info.get("adapted", {}).get("from_refine",
-                                                                      coarse.refine)}
     return out, tree
 
 

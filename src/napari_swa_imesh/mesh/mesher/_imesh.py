@@ -19,25 +19,29 @@ in physical units, per-element data, counts and seconds in ``info``.
 from __future__ import annotations
 
 import time
-import warnings
+from collections.abc import Generator
+from dataclasses import dataclass
+from typing import NamedTuple
 
 import numpy as np
 
 from ._tree import RegionTree, _build_tree
-from ..._validation import as_labels, normalize_spacing
+from ..._validation import normalize_spacing
 from ._balance import balance_tree, count_balanced_leaves
-from ..checks._checks import _check_mesh, count_excluded
+from ..checks._checks import _check_mesh
 from ._delaunay import delaunay_mesh
-from ._coarsen import check_coarsen, coarsen_labels
-from ._lattice import Lattice, choose_lattice, lattice_tree
-from ..checks._leaf_facets import MadeLattice
+from ._coarsen import coarsen_labels
+from ._door import (METHODS, _exclude_array, _mesh_arguments, check_max_size,  # noqa: F401
+                    check_periodic, record_coarsening, resolution_arguments,
+                    warn_lost_materials)
+from ._lattice import Lattice, lattice_tree
+from ..model._recipe import MadeLattice, Recipe
 from ._templates import template_mesh, template_quality
 from ..model._types import Mesh
 from ..model._world import world_from_affine
 
-__all__ = ["mesh_labels", "mesh_tree"]
+__all__ = ["mesh_labels", "mesh_tree", "plan_mesh", "MeshPlan", "Meshed"]
 
-METHODS = ("template", "delaunay")
 
 
 def mesh_labels(labels, *, method: str = "template", exclude=(), spacing=None,
@@ -100,16 +104,18 @@ def mesh_labels(labels, *, method: str = "template", exclude=(), spacing=None,
         ``points (N, d) float64`` in physical units, ``cells (M, d+1) intp`` positively
         oriented, ``material (M,) int64``, ``cell_data`` with ``quality`` (radius-to-edge),
         ``level`` and ``leaf`` (index of the balanced leaf), and ``min_angle``/``max_angle`` (2-D) or
-        ``min_dihedral``/``max_dihedral`` (3-D) in degrees; ``info`` holds counts, the worst
-        ratio, the angle range and seconds per step.
+        ``min_dihedral``/``max_dihedral`` (3-D) in degrees; ``recipe`` says how it was
+        made (:class:`~._recipe.Recipe`: method, exclusions, lattice, size cap, periodic
+        faces, coarsening); ``info`` holds counts, the worst ratio, the angle range and
+        seconds per step.
 
     Notes
     -----
-    The mesher works on the lattice of :func:`choose_lattice` (``info["lattice"]``): the
+    The mesher works on the lattice of :func:`choose_lattice` (``recipe.lattice``): the
     voxels themselves for cubic spacing without refinement. The per-element metrics are
     those of the physical elements; ``level`` counts lattice cells. Template elements per
     leaf, when no edge midpoint or face centre of the leaf is a vertex: 2 in 2-D, 5 in 3-D
-    (6, Kuhn's, in a periodic mesh with an odd extent: ``info["diagonal_rule"]``); else
+    (6, Kuhn's, in a periodic mesh with an odd extent: ``recipe.diagonal_rule``); else
     one cone simplex per boundary segment or face triangle (2-D: 5-8; 3-D: 12-48), or in
     3-D the fewer tetrahedra of the leaf table where it has the configuration (17-40;
     ``_templates_luts.LeafTable``).
@@ -140,8 +146,98 @@ def mesh_labels(labels, *, method: str = "template", exclude=(), spacing=None,
     >>> xy.min(axis=0).tolist(), xy.max(axis=0).tolist()
     ([-1.0, -1.5], [1.0, 4.5])
     """
+    return plan_mesh(labels, method=method, exclude=exclude, spacing=spacing,
+                     material_names=material_names, affine=affine, refine=refine,
+                     max_size=max_size, subdivide=subdivide, coarsen=coarsen,
+                     periodic=periodic, max_aspect=max_aspect).run().mesh
+
+
+class Meshed(NamedTuple):
+    """What :meth:`MeshPlan.steps` returns: the mesh, the region tree it was cut from (in
+    lattice cells; the checks reuse it) and the labels meshed (coarsened when asked)."""
+
+    mesh: Mesh
+    tree: RegionTree
+    labels: np.ndarray
+
+
+@dataclass
+class MeshPlan:
+    """A meshing run checked at the door (:func:`plan_mesh`), to run step by step, once.
+
+    The command line, the napari Mesh tab and the batch pipeline (through
+    :func:`mesh_labels`) drive this one plan: what it knows before meshing (the lattice,
+    for a memory estimate; the labels, for a format's limits) is here, and
+    :meth:`steps` does the rest. Running lets go of `labels` (None after), so coarsened
+    labels do not keep the full-size ones alive while they are meshed.
+    """
+
+    labels: np.ndarray               # the door's labels: dtype kept, no copy
+    method: str
+    exclude: np.ndarray              # sorted unique int64
+    spacing: tuple[float, ...]
+    world: np.ndarray | None
+    lattice: Lattice
+    max_size: float | None
+    coarsen: int
+    periodic: bool
+    material_names: dict[int, str]
+
+    def steps(self, *, report_checks: bool = True
+              ) -> Generator[tuple[int, int, str], None, Meshed]:
+        """Coarsen (when asked), mesh, then (Delaunay, with `report_checks`) check, as
+        (done, total, message) progress; returns :class:`Meshed`."""
+        if self.labels is None:
+            raise ValueError("this plan has run already; make another with plan_mesh.")
+        checks = report_checks and self.method == "delaunay"
+        total = 1 + bool(self.coarsen) + checks
+        lab, self.labels = self.labels, None
+        if self.coarsen:
+            yield 0, total, f"coarsening the labels to blocks of {2 ** self.coarsen} voxels"
+        lab, report = coarsen_labels(lab, self.coarsen, self.exclude)
+        yield int(bool(self.coarsen)), total, f"{self.method} mesh of the balanced 2^d-tree"
+        mesh, tree = _mesh_labels(lab, method=self.method, exclude=self.exclude,
+                                  spacing=self.spacing, material_names=self.material_names,
+                                  lattice=self.lattice, max_size=self.max_size,
+                                  periodic=self.periodic)
+        mesh.world = self.world
+        if self.coarsen:
+            record_coarsening(mesh, report)
+        if checks:  # report the reference's step as it is
+            yield total - 1, total, "checking the mesh"
+            t = time.perf_counter()
+            found = _check_mesh(mesh, lab, self.exclude, tree)
+            mesh.info["checks"] = found.to_dict()
+            mesh.info["conforming"] = found.conforming
+            mesh.info["seconds"]["checks"] = round(time.perf_counter() - t, 6)
+        return Meshed(mesh, tree, lab)
+
+    def run(self, **options) -> Meshed:
+        """:meth:`steps` to the end."""
+        steps = self.steps(**options)
+        while True:
+            try:
+                next(steps)
+            except StopIteration as done:
+                return done.value
+
+
+def plan_mesh(labels, *, method: str = "template", exclude=(), spacing=None,
+              material_names: dict[int, str] | None = None, affine=None, refine: int = 0,
+              max_size: float | None = None, subdivide: bool = True, coarsen: int = 0,
+              periodic: bool = False, max_aspect: float | None = None,
+              name: str = "labels") -> MeshPlan:
+    """Check the arguments of :func:`mesh_labels` (same parameters; `name` is how errors
+    call the labels) and return the :class:`MeshPlan` that meshes them.
+
+    Examples
+    --------
+    >>> plan = plan_mesh(np.array([[1, 1], [1, 2]]), spacing=(2.0, 1.0))
+    >>> plan.lattice.factors, plan.run().mesh.n_cells
+    ((2, 1), 13)
+    """
     lab, spacing_t, exclude_arr = _mesh_arguments(labels, method=method, exclude=exclude,
-                                                   spacing=spacing)
+                                                   spacing=spacing, name=name)
     world = None
     if affine is not None:
         if spacing is not None:
@@ -152,85 +248,8 @@ def mesh_labels(labels, *, method: str = "template", exclude=(), spacing=None,
         spacing_t, method=method, refine=refine, max_size=max_size, subdivide=subdivide,
         coarsen=coarsen, max_aspect=max_aspect)
     check_periodic(method, periodic)
-    lab, coarse_report = coarsen_labels(lab, coarsen, exclude_arr)
-    mesh, tree = _mesh_labels(lab, method=method, exclude=exclude_arr, spacing=spacing_t,
-                              material_names=material_names, lattice=lattice,
-                              max_size=max_size, periodic=bool(periodic))
-    mesh.world = world
-    if coarsen:
-        mesh.info["coarsen"] = coarse_report
-        warn_lost_materials(coarse_report, mesh.material_names)
-    if method == "delaunay":  # report the reference's step as it is
-        t = time.perf_counter()
-        checks = _check_mesh(mesh, lab, exclude_arr, tree)
-        mesh.info["checks"] = checks.to_dict()
-        mesh.info["conforming"] = checks.conforming
-        mesh.info["seconds"]["checks"] = round(time.perf_counter() - t, 6)
-    return mesh
-
-
-def resolution_arguments(spacing: tuple, *, method: str, refine, max_size, subdivide,
-                         coarsen, max_aspect=None) -> tuple[Lattice, float | None, int]:
-    """Check the resolution options at the door: (lattice, max_size, coarsen level).
-
-    Raises ValueError with what to pass for a refine level outside 0..4, a size cap below
-    one lattice cell, a coarsening level outside 0..5, or a non-template method with any
-    of them.
-    """
-    lattice = choose_lattice(spacing, refine=refine, subdivide=bool(subdivide),
-                             max_aspect=max_aspect)
-    max_size = check_max_size(max_size, lattice)
-    coarsen = check_coarsen(coarsen)
-    if method != "template" and (not lattice.is_voxel_lattice or max_size is not None):
-        raise ValueError("the delaunay method meshes voxels as they are; use the template "
-                         "method for refine, max_size or anisotropic subdivision (or "
-                         "subdivide=False).")
-    return lattice, max_size, coarsen
-
-
-def check_periodic(method: str, periodic: bool) -> None:
-    """Periodic faces come from the templates (cells of one lattice cell are always cut
-    alike); ValueError for any other method."""
-    if periodic and method != "template":
-        raise ValueError("periodic meshes need the template method (the delaunay method "
-                         "cannot match opposite faces).")
-
-
-def warn_lost_materials(report: dict, names: dict | None = None) -> None:
-    """Warn (naming them) about materials the coarsening removed entirely."""
-    if report.get("lost"):
-        lost = ", ".join(f"{m}" + (f" ({names[m]})" if names and m in names else "")
-                         for m in report["lost"])
-        warnings.warn(f"coarsening by 2^{report['level']} voxels removed material(s) {lost} "
-                      "entirely: they are thinner than a block. Use a smaller --coarsen to "
-                      "keep them.", UserWarning, stacklevel=3)
-
-
-def _exclude_array(exclude) -> np.ndarray:
-    """`exclude` (an id or ids) as a sorted unique int64 array, or TypeError."""
-    arr = np.unique(np.asarray(list(exclude) if not np.isscalar(exclude) else [exclude]))
-    if arr.size and arr.dtype.kind not in "iu":
-        raise TypeError(f"exclude must hold integer material ids; got {exclude!r}.")
-    return arr.astype(np.int64)
-
-
-def _mesh_arguments(labels, *, method, exclude, spacing, name: str = "labels"):
-    """The door of :func:`mesh_labels`: (labels, spacing tuple, exclude array), checked.
-
-    The labels keep their dtype (no copy for integer input). The command line calls
-    this with the file's name, then :func:`_mesh_labels`.
-    """
-    lab = as_labels(labels, name=name, min_ndim=2, max_ndim=3)
-    if method not in METHODS:
-        raise ValueError(f"method must be one of {', '.join(METHODS)}; got {method!r}.")
-    spacing_t = normalize_spacing(spacing, lab.ndim)
-    exclude_arr = _exclude_array(exclude)
-    if exclude_arr.size and count_excluded(lab, exclude_arr) == lab.size:
-        raise ValueError(
-            f"every pixel is excluded (labels present: {np.unique(lab).tolist()}, "
-            f"exclude={exclude_arr.tolist()}); nothing is left to mesh. Exclude fewer materials."
-        )
-    return lab, spacing_t, exclude_arr
+    return MeshPlan(lab, method, exclude_arr, spacing_t, world, lattice, max_size, coarsen,
+                    bool(periodic), _names(material_names))
 
 
 def _mesh_labels(lab: np.ndarray, *, method: str, exclude: np.ndarray, spacing: tuple,
@@ -251,38 +270,13 @@ def _mesh_labels(lab: np.ndarray, *, method: str, exclude: np.ndarray, spacing: 
         tree = lattice_tree(lab, lattice, exclude=exclude, max_size=max_size,
                             periodic=periodic)
     seconds = {"tree": time.perf_counter() - t0}
+    # the mesh describes the image it came from; the lattice is in its recipe
     mesh = _mesh_tree(tree, method=method, exclude=exclude, spacing=lattice.step,
                       material_names=_names(material_names), connectivity=None,
-                      report_face_balance=False, seconds=seconds, periodic=periodic)
-    # the mesh describes the image it came from; the lattice is in info
-    mesh.shape, mesh.spacing = tuple(lab.shape), tuple(spacing)
-    mesh.info["spacing"] = list(spacing)
-    mesh.info["shape"] = list(lab.shape)
-    mesh.info["lattice"] = lattice.describe()
-    if max_size is not None:
-        mesh.info["max_size"] = max_size
-    mesh.info["periodic"] = bool(periodic)
+                      report_face_balance=False, seconds=seconds, periodic=periodic,
+                      image=(tuple(lab.shape), tuple(spacing)), lattice=lattice,
+                      max_size=max_size)
     return mesh, tree
-
-
-def check_max_size(max_size, lattice: Lattice) -> float | None:
-    """`max_size` as a float no smaller than one lattice cell's diagonal, or ValueError."""
-    if max_size is None:
-        return None
-    try:
-        value = float(max_size)
-    except (TypeError, ValueError):
-        value = float("nan")
-    smallest = float(np.linalg.norm(lattice.step))
-    if not np.isfinite(value) or value <= 0:
-        raise ValueError(f"max_size must be a positive length; got {max_size!r}.")
-    if value < smallest:
-        raise ValueError(
-            f"max_size {value:g} is below the longest edge of the smallest element "
-            f"({smallest:.4g}: the diagonal of one lattice cell of size "
-            f"{tuple(round(h, 6) for h in lattice.step)}); ask for at least {smallest:.4g}."
-        )
-    return value
 
 
 def _names(material_names) -> dict[int, str]:
@@ -340,10 +334,15 @@ def mesh_tree(tree: RegionTree, *, method: str = "template", exclude=(), spacing
 
 def _mesh_tree(tree: RegionTree, *, method: str, exclude: np.ndarray, spacing: tuple,
                material_names: dict[int, str], connectivity: int | None,
-               report_face_balance: bool, seconds: dict, periodic: bool = False) -> Mesh:
+               report_face_balance: bool, seconds: dict, periodic: bool = False,
+               image: tuple[tuple, tuple] | None = None, lattice: Lattice | None = None,
+               max_size: float | None = None, adapted=None) -> Mesh:
     """The worker behind :func:`mesh_tree` and :func:`mesh_labels`: trusted arguments;
     `seconds` holds the steps already timed (the tree) and receives the others.
-    `periodic`: the tree's box faces are to be cut alike (the diagonal rule follows)."""
+    `periodic`: the tree's box faces are to be cut alike (the diagonal rule follows).
+    `image`: the (shape, voxel spacing) of the label image the tree is the lattice of
+    (default: the tree's own shape and `spacing`); `lattice`, `max_size` and `adapted`
+    go into the recipe as they are."""
     d = tree.ndim
     if connectivity is None:
         connectivity = 1 if method == "delaunay" else max(1, d - 1)
@@ -353,13 +352,6 @@ def _mesh_tree(tree: RegionTree, *, method: str, exclude: np.ndarray, spacing: t
     seconds["balance"] = time.perf_counter() - t
     meshed = bal.inside & ~np.isin(bal.label, exclude)
     info = {
-        "method": method,
-        "dim": d,
-        "shape": list(tree.shape),
-        "spacing": list(spacing),
-        "exclude": exclude.tolist(),
-        "balance": {1: "faces", 2: "faces+edges", 3: "faces+edges+corners"}.get(
-            connectivity, f"connectivity {connectivity}"),
         "n_leaves_tree": int(np.count_nonzero(tree.inside)),
         "n_leaves_balanced": int(np.count_nonzero(bal.inside)),
         "n_leaves_meshed": int(np.count_nonzero(meshed)),
@@ -377,8 +369,8 @@ def _mesh_tree(tree: RegionTree, *, method: str, exclude: np.ndarray, spacing: t
     if method == "template":
         # a periodic mesh needs the rule to survive the translation by the box size
         rule = "lowest" if periodic and any(n % 2 for n in tree.shape) else "parity"
-        points, cells, leaf, template_id, vseconds, packed = template_mesh(bal, meshed,
-                                                                          rule=rule)
+        points, cells, leaf, template_id, vseconds, packed, n_plain = template_mesh(
+            bal, meshed, rule=rule)
         seconds.update(vseconds)
         t = time.perf_counter()
         table = template_quality(d, spacing)
@@ -386,9 +378,7 @@ def _mesh_tree(tree: RegionTree, *, method: str, exclude: np.ndarray, spacing: t
         cell_data = {name: values[template_id] for name, values in table.items()}
         del template_id
         seconds["quality"] = time.perf_counter() - t
-        info["n_plain_leaves"] = int(vseconds.pop("_n_plain"))
-        seconds.pop("_n_plain", None)
-        info["diagonal_rule"] = rule if d == 3 else "lowest"
+        info["n_plain_leaves"] = n_plain
     else:
         points, cells, leaf, cell_data, dinfo, vseconds = delaunay_mesh(bal, meshed)
         seconds.update(vseconds)
@@ -400,13 +390,21 @@ def _mesh_tree(tree: RegionTree, *, method: str, exclude: np.ndarray, spacing: t
     material = bal.label[leaf]
     cell_data = {"quality": cell_data.pop("quality"), "level": bal.level[leaf],
                  "leaf": leaf, **cell_data}
-    mesh = Mesh._trusted(points, cells, material, cell_data, spacing=spacing,
-                         shape=tuple(tree.shape), material_names=dict(material_names or {}),
+    shape, voxel = image if image is not None else (tuple(tree.shape), spacing)
+    mesh = Mesh._trusted(points, cells, material, cell_data, spacing=tuple(voxel),
+                         shape=tuple(shape), material_names=dict(material_names or {}),
                          info=info)
+    mesh.recipe = Recipe(
+        method=method, exclude=tuple(exclude.tolist()),
+        balance={1: "faces", 2: "faces+edges", 3: "faces+edges+corners"}.get(
+            connectivity, f"connectivity {connectivity}"),
+        lattice=lattice, max_size=max_size, periodic=bool(periodic),
+        diagonal_rule=(rule if d == 3 else "lowest") if method == "template" else None,
+        adapted=adapted)
     if method == "template":
         # what the facet groups' pass would otherwise recompute from the points, valid
-        # while the mesh's arrays are the ones made here
-        mesh._made = MadeLattice.record(mesh, packed, bal.origin)
+        # while the mesh holds the (now read-only) arrays made here
+        mesh.made = MadeLattice.record(mesh, packed, bal.origin)
     seconds["assemble"] = time.perf_counter() - t
 
     t = time.perf_counter()

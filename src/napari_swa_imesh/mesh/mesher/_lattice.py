@@ -338,7 +338,7 @@ def labels_on_lattice(lab: np.ndarray, points: np.ndarray, *, factors=None,
     points : (N, d) ndarray
         The mesh's points in voxel units.
     factors : sequence of int, optional
-        The subdivision the mesh records (``info["lattice"]["factors"]``).
+        The subdivision the mesh records (``recipe.lattice.factors``).
     spacing : sequence of float, optional
         Without `factors` (a mesh read from a file): the voxel spacing. The subdivision
         the mesher chooses for it is used when every point lies on its lattice, else none.

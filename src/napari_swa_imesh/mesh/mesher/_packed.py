@@ -8,16 +8,9 @@ the time of the checks and of the facet groups.
 
 from __future__ import annotations
 
-import zlib
-
 import numpy as np
 
-__all__ = ["pack_points", "corners", "unpack", "array_fingerprint"]
-
-_FP_CHUNK = 1 << 16
-_FP_WEIGHTS = (np.random.default_rng(0x5EED).integers(0, 2**63, _FP_CHUNK, dtype=np.uint64)
-               * np.uint64(2) + np.uint64(1))        # odd: every value counts in every bit
-_FP_MIX = np.uint64(0xBF58476D1CE4E5B9)
+__all__ = ["pack_points", "corners", "unpack"]
 
 
 def pack_points(coords: np.ndarray) -> tuple[np.ndarray, int] | None:
@@ -62,39 +55,3 @@ def unpack(q: np.ndarray, bits: int, d: int, dtype=np.int64) -> list:
     field = (1 << bits) - 1
     return [[((q[k] >> (bits * (d - 1 - a))) & field).astype(dtype, copy=False)
              for a in range(d)] for k in range(d + 1)]
-
-
-def array_fingerprint(a: np.ndarray) -> int:
-    """A 64-bit fingerprint of `a`'s values in order (with its shape and dtype), to tell
-    whether an array changed since it was recorded: a weighted sum of its 8-byte words,
-    each mixed (an odd multiply, its high half folded into the low) and weighted by a
-    fixed random odd number, chunk by chunk, a few ns per word.
-
-    Two different arrays share it with a chance of about 2**-64 each, unless chosen to.
-
-    Examples
-    --------
-    >>> a = np.arange(6).reshape(3, 2)
-    >>> array_fingerprint(a) == array_fingerprint(a.copy())
-    True
-    >>> array_fingerprint(a) == array_fingerprint(a[:, ::-1])
-    False
-    >>> x = np.ones(4)
-    >>> array_fingerprint(x) == array_fingerprint(-x)      # four sign bits flipped
-    False
-    """
-    data = np.ascontiguousarray(a).reshape(-1).view(np.uint8)
-    if len(data) % 8:
-        data = np.concatenate([data, np.zeros(8 - len(data) % 8, np.uint8)])
-    words = data.view(np.uint64)
-    h = len(words)
-    for start in range(0, len(words), _FP_CHUNK):
-        # mixed before the weighted sum, which alone is linear: a sign flip adds 2**63 to
-        # a word, and any even number of them would cancel
-        mixed = np.multiply(words[start:start + _FP_CHUNK], _FP_MIX)
-        mixed ^= mixed >> np.uint64(32)
-        mixed *= _FP_WEIGHTS[:len(mixed)]
-        s = int(mixed.sum(dtype=np.uint64))
-        h = (h * 0x9E3779B97F4A7C15 + s) & 0xFFFFFFFFFFFFFFFF
-    layout = zlib.crc32(repr((np.shape(a), np.asarray(a).dtype.str)).encode())
-    return (h * 0x9E3779B97F4A7C15 + layout) & 0xFFFFFFFFFFFFFFFF

@@ -63,8 +63,8 @@ def template_mesh(bal: RegionTree, meshed: np.ndarray, *, rule: str = "parity"):
     2-D meshes always use the lowest-corner rule.
 
     Returns points (index space), cells, leaf index and template id per element, the
-    seconds spent per step, and the points packed (``_packed.pack_points``; None when
-    they do not fit).
+    seconds spent per step, the points packed (``_packed.pack_points``; None when they
+    do not fit) and the number of plain leaves (no edge midpoint or face centre a vertex).
     """
     d = bal.ndim
     seconds = {}
@@ -111,8 +111,7 @@ def template_mesh(bal: RegionTree, meshed: np.ndarray, *, rule: str = "parity"):
     packed = pack_points(points)          # the facet groups' pass reads corners from it
     points = points.astype(np.float64)
     seconds["numbering"] = time.perf_counter() - t
-    seconds["_n_plain"] = int(plain.sum())
-    return points, cells, leaf_of, template_of, seconds, packed
+    return points, cells, leaf_of, template_of, seconds, packed, int(plain.sum())
 
 
 def cut_leaves(okey: np.ndarray, size: np.ndarray, hanging: np.ndarray, strides: np.ndarray,

@@ -11,15 +11,26 @@ Conventions
   to x, y(, z) (a NIfTI affine, :func:`world_from_affine`). The writers call
   ``_common.export_points`` for it and reorder each cell so its volume stays positive
   there. Everything else (checks, facet groups, quality, simulation) works on ``points``.
+* ``recipe`` and ``made`` (:mod:`._recipe`) say how the mesher made the mesh; assigning
+  the arrays, the spacing or the shape anew clears both, and a mesh built from arrays or
+  copied by ``dataclasses.replace`` has neither (carry them with a method that says so).
 """
 
 from __future__ import annotations
 
+import copy
 from dataclasses import dataclass, field
+from typing import TYPE_CHECKING
 
 import numpy as np
 
+if TYPE_CHECKING:
+    from ._recipe import MadeLattice, Recipe
+
 __all__ = ["Mesh"]
+
+#: fields a recipe describes: assigning one anew makes the mesh another mesh
+_MADE_OF = frozenset({"points", "cells", "material", "cell_data", "spacing", "shape"})
 
 
 @dataclass
@@ -48,6 +59,14 @@ class Mesh:
         Optional names for material ids (used by Gmsh physical groups and Abaqus sets).
     info : dict
         Counts and timings of the run that made the mesh (for reports and ``--json``).
+    recipe : Recipe or None
+        How the mesher made the mesh (method, exclusions, lattice, size cap, periodic
+        faces, coarsening, adaptive steps); None for a mesh built from arrays, read from
+        a file, copied with ``dataclasses.replace`` or changed since (an array, the
+        spacing or the shape assigned anew). Not a constructor argument.
+    made : MadeLattice or None
+        The template mesher's cache for the facet groups (its arrays are read-only);
+        None as `recipe` is.
     world : (d+1, d+1) ndarray of float64 or None
         Homogeneous map from `points` to the coordinates files get (x, y(, z)); its
         last row is ``[0, .., 0, 1]`` and its linear part invertible. None: the axes
@@ -78,6 +97,16 @@ class Mesh:
     material_names: dict[int, str] = field(default_factory=dict)
     info: dict = field(default_factory=dict)
     world: np.ndarray | None = None
+    recipe: "Recipe | None" = field(default=None, init=False, compare=False)
+    made: "MadeLattice | None" = field(default=None, init=False, repr=False, compare=False)
+
+    def __setattr__(self, name, value):
+        # after construction, a new array, spacing or shape is another mesh: what the
+        # mesher recorded of this one no longer holds
+        if name in _MADE_OF and "made" in self.__dict__:
+            object.__setattr__(self, "recipe", None)
+            object.__setattr__(self, "made", None)
+        object.__setattr__(self, name, value)
 
     def __post_init__(self):
         self.points = _as_points(self.points)
@@ -105,7 +134,24 @@ class Mesh:
         mesh.points, mesh.cells, mesh.material, mesh.cell_data = points, cells, material, cell_data
         mesh.spacing, mesh.shape = spacing, shape
         mesh.material_names, mesh.info, mesh.world = material_names, info, world
+        mesh.recipe = mesh.made = None
         return mesh
+
+    def with_material_names(self, names: dict[int, str]) -> "Mesh":
+        """The same mesh (the same arrays, recipe and record) with other material names.
+
+        Examples
+        --------
+        >>> m = Mesh([[0, 0], [0, 1], [1, 0]], [[0, 2, 1]], [1])
+        >>> m.with_material_names({1: "pore"}).material_names
+        {1: 'pore'}
+        """
+        out = copy.copy(self)
+        # the same arrays: the recipe and the record still hold (the dicts are the copy's)
+        object.__setattr__(out, "cell_data", dict(self.cell_data))
+        out.info = dict(self.info)
+        out.material_names = {int(k): str(v) for k, v in dict(names or {}).items()}
+        return out
 
     @property
     def ndim(self) -> int:
