@@ -149,6 +149,8 @@ def check_write_options(path, *, order: int = 1, binary: bool = True, facet_grou
         other than ``.msh``; facet groups named for legacy ``.vtk``, which holds none.
     """
     suffix = _targets(Path(path))[0].suffix.lower()
+    if suffix == ".xdmf":
+        require_h5py("write")       # names the [xdmf] extra before any work
     if abaqus_elements not in ABAQUS_ELEMENTS:
         raise ValueError(f"abaqus_elements must be one of {', '.join(ABAQUS_ELEMENTS)}, not "
                          f"{abaqus_elements!r}.")
