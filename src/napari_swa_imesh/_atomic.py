@@ -130,7 +130,7 @@ def remove_stale_temporaries(folder) -> list[Path]:
     list of Path
         The folders removed.
     """
-    removed = []
+    removed: list[Path] = []
     host, me = _host(), os.getpid()
     uid = os.geteuid() if hasattr(os, "geteuid") else None
     try:
@@ -242,7 +242,7 @@ def _publish(temps: list[Path], targets: list[Path], force: bool) -> None:
         raise
 
 
-def _disk_full(exc: BaseException, folders) -> bool:
+def _disk_full(exc: BaseException | None, folders) -> bool:
     """Whether `exc` (or an error it wraps) says a disk holding `folders` is full."""
     seen = set()
     while exc is not None and id(exc) not in seen:
@@ -379,6 +379,9 @@ def hdf5_file(path) -> Iterator:
     fail that way, and the final write fails with an ordinary ``OSError`` (ENOSPC). Costs
     memory of the file's (compressed) size.
     """
+    from ._extras import require
+
+    require("h5py", purpose="writing an HDF5 file")
     import h5py
 
     buffer = io.BytesIO()
