@@ -103,3 +103,15 @@ def test_the_paths_every_user_takes_need_no_extra(scene, tmp_path, capsys, monke
     code, err = _run(capsys, "simulate", scene / "labels.npy", "--conductivity", "1=1",
                      "2=10", "-o", tmp_path / "field.vtu")
     assert code == 0, err
+
+
+@pytest.mark.slow
+def test_the_readme_first_command_runs_the_whole_demo_without_extras(tmp_path):
+    import subprocess
+
+    block = (f"import sys\nfor m in {ALL!r}: sys.modules[m] = None\n"
+             "from napari_swa_imesh.cli import main\nsys.exit(main(['demo', '--json']))")
+    done = subprocess.run([sys.executable, "-c", block], cwd=tmp_path, capture_output=True,
+                          text=True, timeout=900)
+    assert done.returncode == 0, done.stderr[-3000:]
+    assert (tmp_path / "swa-imesh-demo" / "field.vtu").is_file()
