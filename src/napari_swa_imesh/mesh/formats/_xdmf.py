@@ -26,7 +26,7 @@ from xml.etree import ElementTree as ET
 
 import numpy as np
 
-from .._atomic import hdf5_file
+from ..._atomic import hdf5_file
 
 __all__ = ["require_h5py", "write_xdmf_blocks", "BLOCK"]
 
@@ -37,7 +37,7 @@ _GZIP = 1                         # after the byte shuffle: smaller than meshio'
 
 def require_h5py(verb: str) -> None:
     """Raise ValueError (the extra to install, what to choose) when h5py is missing."""
-    from .._extras import require
+    from ..._extras import require
 
     doing = {"read": "reading", "write": "writing"}.get(verb, verb)
     require("h5py", purpose=f"{doing} .xdmf (with its .h5)", alternative="or choose .vtu")
