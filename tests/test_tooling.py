@@ -101,7 +101,9 @@ def _probe(tmp_path, *, mark="slow", category="UserWarning", module="elsewhere")
         [sys.executable, "-m", "pytest", "-c", str(ROOT / "pyproject.toml"), "--rootdir",
          str(tmp_path), "-p", "no:cacheprovider", "-q", str(tmp_path / "test_probe.py")],
         cwd=tmp_path, capture_output=True, text=True, timeout=300,
-        env={**os.environ, "PYTEST_DISABLE_PLUGIN_AUTOLOAD": "1"})   # no Qt, no napari
+        # no plugins (no Qt, no napari, no coverage: CI's --cov in PYTEST_ADDOPTS stays out)
+        env={**{k: v for k, v in os.environ.items() if k != "PYTEST_ADDOPTS"},
+             "PYTEST_DISABLE_PLUGIN_AUTOLOAD": "1"})
     return done.returncode, done.stdout + done.stderr
 
 
