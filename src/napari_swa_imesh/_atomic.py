@@ -47,7 +47,7 @@ _MB = 1024 * 1024
 
 
 def _host() -> str:
-    """This host's name, and on Linux its process-id namespace: a container sharing the
+    """The name of this host, and on Linux its process-id namespace: a container sharing the
     host name and the folder counts pids apart, so its folders are never judged here."""
     name = re.sub(r"[^A-Za-z0-9.]", "_", socket.gethostname())[:64] or "host"
     try:
@@ -61,7 +61,7 @@ _TEMP_NAME = re.compile(re.escape(TEMP_PREFIX) + r"(\d+)@([A-Za-z0-9._]+)-[a-z0-
 
 
 def _temp_prefix() -> str:
-    """This process's temporary-folder prefix: the name :data:`_TEMP_NAME` parses."""
+    """The temporary-folder prefix of this process: the name :data:`_TEMP_NAME` parses."""
     return f"{TEMP_PREFIX}{os.getpid()}@{_host()}-"
 
 
