@@ -5,10 +5,12 @@ batch``: one function, so a cohort's labels equal one-by-one runs.
 
 The chunked path (:mod:`._chunked`) is taken for a Zarr image or a Zarr output, when a
 memory budget is given, or when the in-memory path would not fit the default budget; a
-reference (tile) model works on chunks aligned to its tiles (:mod:`._chunked_reference`). :func:`fit_apply` is ``segment IMAGE --samples S.json`` on
-that path: the model is fitted on the boxes read from the store
-(:func:`~._chunked_fit.fit_chunked`), then applied as a saved one. The labels go to a Zarr store chunk by chunk, or (another
-format) are gathered whole (one or two bytes per voxel, counted in the budget).
+reference (tile) model works on chunks aligned to its tiles (:mod:`._chunked_reference`).
+:func:`fit_apply` is ``segment IMAGE --samples S.json`` on that path: the model is fitted
+on the boxes read from the store (:func:`~._chunked_fit.fit_chunked`), then applied as a
+saved one. The labels go to a Zarr store chunk by chunk, or (another format) are gathered
+whole (one or two bytes per voxel, counted in the budget). Without the ``[scale]`` extra
+(dask, zarr) the chunked path is refused at its door (:func:`require_chunked`).
 """
 
 from __future__ import annotations
