@@ -47,7 +47,7 @@ _MB = 1024 * 1024
 
 
 def _host() -> str:
-    """This host's name, and on Linux its process-id namespace: a container sharing the
+    """The name of this host, and on Linux its process-id namespace: a container sharing the
     host name and the folder counts pids apart, so its folders are never judged here."""
     name = re.sub(r"[^A-Za-z0-9.]", "_", socket.gethostname())[:64] or "host"
     try:
@@ -61,7 +61,7 @@ _TEMP_NAME = re.compile(re.escape(TEMP_PREFIX) + r"(\d+)@([A-Za-z0-9._]+)-[a-z0-
 
 
 def _temp_prefix() -> str:
-    """This process's temporary-folder prefix: the name :data:`_TEMP_NAME` parses."""
+    """The temporary-folder prefix of this process: the name :data:`_TEMP_NAME` parses."""
     return f"{TEMP_PREFIX}{os.getpid()}@{_host()}-"
 
 
@@ -130,7 +130,7 @@ def remove_stale_temporaries(folder) -> list[Path]:
     list of Path
         The folders removed.
     """
-    removed = []
+    removed: list[Path] = []
     host, me = _host(), os.getpid()
     uid = os.geteuid() if hasattr(os, "geteuid") else None
     try:
@@ -242,7 +242,7 @@ def _publish(temps: list[Path], targets: list[Path], force: bool) -> None:
         raise
 
 
-def _disk_full(exc: BaseException, folders) -> bool:
+def _disk_full(exc: BaseException | None, folders) -> bool:
     """Whether `exc` (or an error it wraps) says a disk holding `folders` is full."""
     seen = set()
     while exc is not None and id(exc) not in seen:
@@ -379,6 +379,9 @@ def hdf5_file(path) -> Iterator:
     fail that way, and the final write fails with an ordinary ``OSError`` (ENOSPC). Costs
     memory of the file's (compressed) size.
     """
+    from ._extras import require
+
+    require("h5py", purpose="writing an HDF5 file")
     import h5py
 
     buffer = io.BytesIO()

@@ -12,6 +12,7 @@ hold (:func:`check_affine`, :func:`complete_frame`).
 from __future__ import annotations
 
 from pathlib import Path
+from typing import Literal
 
 import numpy as np
 
@@ -131,7 +132,7 @@ def complete_frame(affine: np.ndarray, ndim: int) -> np.ndarray:
     return out
 
 
-def load_npy(path, *, mmap_mode: str | None = None) -> np.ndarray:
+def load_npy(path, *, mmap_mode: Literal["r"] | None = None) -> np.ndarray:
     """``numpy.load`` of a ``.npy`` array of numbers (no pickles), with refusals that say
     what the file is: not a ``.npy`` file at all, or an array of Python objects.
 

@@ -21,6 +21,8 @@ from pathlib import Path
 
 import numpy as np
 
+from ._extras import has, require
+
 __all__ = ["is_zarr", "is_lazy", "open_lazy", "open_levels", "write_zarr_to",
            "SPACING_KEY"]
 
@@ -36,11 +38,15 @@ def is_zarr(path) -> bool:
 
 
 def is_lazy(path) -> bool:
-    """Whether `path` is read lazily (Zarr or ``.npy``) rather than loaded whole."""
-    return is_zarr(path) or Path(path).name.lower().endswith(".npy")
+    """Whether `path` is read lazily rather than loaded whole: a ``.zarr`` store, or a
+    ``.npy`` when dask is installed (without the ``[scale]`` extra it is loaded whole).
+    """
+    name = Path(path).name.lower()
+    return name.endswith(".zarr") or (name.endswith(".npy") and has("dask"))
 
 
 def _open_node(p: Path):
+    require("zarr", purpose=f"reading the Zarr store {p.name}")
     import zarr
 
     if not p.exists():
@@ -84,6 +90,7 @@ def open_levels(path, *, chunks=None):
         Not a Zarr store, a group that is not an OME-Zarr image, or an image with more
         than one channel or time point.
     """
+    require("dask", "zarr", purpose="reading or writing a Zarr store")
     import dask.array as da
     import zarr
 
@@ -208,6 +215,7 @@ def open_lazy(path, *, chunks=None):
     FileNotFoundError, ValueError
         As :func:`open_levels` and :func:`~napari_swa_imesh.io.read_image`.
     """
+    require("dask", purpose="opening an image without loading it (chunked work)")
     import dask.array as da
 
     p = Path(path)
@@ -249,6 +257,7 @@ def write_zarr_to(tmp, data, *, spacing=None, **compute) -> None:
     **compute
         Passed to ``dask.array.store`` (``scheduler``, ``num_workers``...).
     """
+    require("dask", "zarr", purpose="reading or writing a Zarr store")
     import dask.array as da
     import zarr
 

@@ -13,6 +13,7 @@ axes scaled by the spacing. The atomic writer every output goes through
 from __future__ import annotations
 
 from pathlib import Path
+from typing import cast
 
 import numpy as np
 
@@ -181,7 +182,7 @@ def _read_tiff(p: Path):
     with tifffile.TiffFile(p) as tif:
         image = tif.asarray()
         spacing = [1.0] * image.ndim
-        page = tif.pages[0]
+        page = cast("tifffile.TiffPage", tif.pages[0])   # the first is a page, not a frame
         try:
             xres = page.tags.get("XResolution")
             yres = page.tags.get("YResolution")

@@ -117,7 +117,7 @@ def test_the_table_leaves_every_aspect_and_stretch_bound_as_it_was():
     assert len(table) == len(TABLE.simplex)
     grid = (0.25, 0.5, 0.8, 1.0, 1.2, 1.5, 2.0, 3.0, 5.0)
     for shape in [(1.0, b, c) for b, c in itertools.product(grid, grid)]:
-        def metrics(t):
+        def metrics(t, shape=shape):
             pts = (t * np.asarray(shape)).reshape(-1, 3)
             return quality_data(pts, np.arange(len(pts)).reshape(-1, 4))
         old, new = metrics(base), metrics(table)
@@ -164,7 +164,7 @@ def test_the_table_commutes_with_the_cubes_symmetries():
     site_of = {tuple(s): i for i, s in enumerate(sites.tolist())}
     for perm in itertools.permutations(range(3)):
         for flips in itertools.product((False, True), repeat=3):
-            def move(points):
+            def move(points, perm=perm, flips=flips):
                 q = points[..., list(perm)].copy()
                 q[..., list(flips)] = 2 - q[..., list(flips)]
                 return q

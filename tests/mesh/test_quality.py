@@ -82,10 +82,10 @@ def _brute_dihedral(p):
     out = []
     for i in range(4):
         for j in range(i + 1, 4):
-            k, l = [m for m in range(4) if m not in (i, j)]
+            k, q = [m for m in range(4) if m not in (i, j)]
             e = (p[j] - p[i]) / np.linalg.norm(p[j] - p[i])
             u = p[k] - p[i] - (p[k] - p[i]) @ e * e
-            v = p[l] - p[i] - (p[l] - p[i]) @ e * e
+            v = p[q] - p[i] - (p[q] - p[i]) @ e * e
             out.append(math.degrees(math.acos(u @ v / np.linalg.norm(u) / np.linalg.norm(v))))
     return min(out), max(out)
 

@@ -69,7 +69,7 @@ def test_sci_rows_has_13_correct_digits():
     unit = 10.0 ** (np.floor(np.log10(np.where(values == 0, 1, np.abs(values)))) - 12)
     assert (np.abs(back - values) <= 0.501 * unit).all()
     assert (back[values == 0] == 0).all()
-    reference = [[float("%.12e" % v) for v in row] for row in values.tolist()]
+    reference = [[float(f"{v:.12e}") for v in row] for row in values.tolist()]
     assert (back == np.array(reference)).mean() > 0.999   # ties may round the other way
     assert all(len(f) == 20 for r in rows for f in r[1:])  # ", " + 18 + sign: CalculiX's 20
 
@@ -80,7 +80,7 @@ def test_sci_rows_leaves_what_it_cannot_write_to_percent_formatting(bad):
     assert sci_rows(np.array([1]), values) is None
     fh = io.StringIO()
     write_rows(fh, np.array([[1]]), values, sep=", ", float_format="%.12e")
-    assert fh.getvalue() == "1, %.12e, %.12e, %.12e\n" % (1.0, bad, 2.0)
+    assert fh.getvalue() == f"1, {1.0:.12e}, {bad:.12e}, {2.0:.12e}\n"
 
 
 def test_write_rows_keeps_the_order_of_text_and_bytes_in_a_file(tmp_path):

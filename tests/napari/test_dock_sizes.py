@@ -60,7 +60,7 @@ def test_docks_fit_a_1080_px_screen(make_napari_viewer, qtbot):
     empty = [body.minimumSizeHint().width() for body in bodies]
     _fill(widgets, truth, qtbot)
     QApplication.processEvents()
-    for (dock, widget), name in zip(docked, DOCKS):
+    for (dock, _widget), name in zip(docked, DOCKS):
         hint, minimum = dock.sizeHint().height(), dock.minimumSizeHint().height()
         print(f"{name}: sizeHint {hint} px, minimumSizeHint {minimum} px")
         assert hint <= MAX_HINT and minimum <= MAX_HINT, name

@@ -68,8 +68,8 @@ def test_plots_follow_the_napari_theme(mosaic_viewer, qtbot):
         # transparent figures: the dock's napari background shows through
         assert flow.res.figure.get_facecolor()[3] == 0 == flow.mesh.figure.get_facecolor()[3]
         assert to_hex(text[theme][1]) == get_theme(theme).text.as_hex()
-    for d, l in zip(text["dark"], text["light"]):
-        assert sum(to_rgb(d)) > 1.5 > sum(to_rgb(l))      # light text, then dark text
+    for dark, light in zip(text["dark"], text["light"]):
+        assert sum(to_rgb(dark)) > 1.5 > sum(to_rgb(light))      # light text, then dark text
 
 
 def _change_samples(kind, viewer, flow, image):

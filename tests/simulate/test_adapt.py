@@ -57,7 +57,7 @@ def _assert_matching_faces(mesh):
     lo, hi = mesh.image_box()
     d = mesh.ndim
     for name, axis in zip("xyz"[:d], range(d - 1, -1, -1)):
-        def facet_set(group, shift):
+        def facet_set(group, shift, axis=axis):
             corners = mesh.points[group.facets].copy()
             corners[:, :, axis] -= shift
             keys = np.sort(np.round(corners * 1e6).astype(np.int64).view(

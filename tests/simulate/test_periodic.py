@@ -97,7 +97,7 @@ def test_periodic_meshes_have_matching_opposite_faces(d, shape, spacing, rule):
     groups = facet_groups(mesh)
     lo, hi = mesh.image_box()
     for name, axis in zip("xyz"[:d], range(d - 1, -1, -1)):
-        def facet_set(group, shift):
+        def facet_set(group, shift, axis=axis):
             corners = mesh.points[group.facets].copy()
             corners[:, :, axis] -= shift
             keys = np.round(corners * 1e6).astype(np.int64)

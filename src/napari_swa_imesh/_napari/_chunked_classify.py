@@ -42,6 +42,9 @@ def chunked_steps(data, model, *, memory: int | None = None, chunks=None
     plan : dict
         As :func:`~napari_swa_imesh.segmentation.predict_chunked` returns it.
     """
+    from .._extras import require
+
+    require("dask", "zarr", purpose="classifying a lazy image chunk by chunk")
     import dask.array as da
     import zarr
 

@@ -53,6 +53,10 @@ def _run_batch(args: argparse.Namespace) -> int:
     import os
     import sys
 
+    from .._extras import require
+
+    require("dask", "distributed", "zarr", purpose="the batch command (a Dask cluster)")
+
     from ..io import check_writable
     from ..segmentation import default_memory, load_model, parse_memory
     from ._batch import (connect, expand_inputs, mesh_for, missing_folders, output_for,

@@ -5,15 +5,18 @@ batch``: one function, so a cohort's labels equal one-by-one runs.
 
 The chunked path (:mod:`._chunked`) is taken for a Zarr image or a Zarr output, when a
 memory budget is given, or when the in-memory path would not fit the default budget; a
-reference (tile) model works on chunks aligned to its tiles (:mod:`._chunked_reference`). :func:`fit_apply` is ``segment IMAGE --samples S.json`` on
-that path: the model is fitted on the boxes read from the store
-(:func:`~._chunked_fit.fit_chunked`), then applied as a saved one. The labels go to a Zarr store chunk by chunk, or (another
-format) are gathered whole (one or two bytes per voxel, counted in the budget).
+reference (tile) model works on chunks aligned to its tiles (:mod:`._chunked_reference`).
+:func:`fit_apply` is ``segment IMAGE --samples S.json`` on that path: the model is fitted
+on the boxes read from the store (:func:`~._chunked_fit.fit_chunked`), then applied as a
+saved one. The labels go to a Zarr store chunk by chunk, or (another format) are gathered
+whole (one or two bytes per voxel, counted in the budget). Without the ``[scale]`` extra
+(dask, zarr) the chunked path is refused at its door (:func:`require_chunked`).
 """
 
 from __future__ import annotations
 
 import time
+from pathlib import Path
 
 import numpy as np
 
@@ -38,17 +41,37 @@ def wants_chunks(image, output, model, *, memory: int | None = None,
     what "too big for memory" means (default :func:`~._chunked.default_memory`). `model`
     None: fitting (:func:`fit_apply`), at :data:`FIT_BYTES_PER_VOXEL`.
     """
-    from .._zarr_io import is_zarr, open_lazy
+    from .._headers import Refused, load_npy
+    from .._zarr_io import is_zarr
 
     if is_zarr(image) or is_zarr(output) or memory is not None:
         return True
     if not str(image).lower().endswith(".npy"):
         return False
-    lazy, _ = open_lazy(image)
+    if not Path(image).is_file():
+        raise FileNotFoundError(f"no image file at {image}; check the path.")
+    try:
+        lazy = load_npy(image, mmap_mode="r")      # the header: nothing is read
+    except Refused:            # not a .npy file, or one of objects: said in full
+        raise
+    except Exception as exc:   # a damaged file
+        raise ValueError(f"cannot read {image} as a .npy image: {exc}") from exc
     per_voxel = (FIT_BYTES_PER_VOXEL if model is None else TILE_BYTES_PER_VOXEL
                  if isinstance(model, SWAModel) else bytes_per_voxel(model, lazy.ndim))
     need = lazy.size * (per_voxel + lazy.dtype.itemsize + 4)
     return need > (default_memory() if budget is None else budget)
+
+
+def require_chunked(image, output) -> None:
+    """Raise :class:`~napari_swa_imesh._extras.MissingExtra` (naming ``[scale]``) unless
+    the chunked path's packages are installed: dask, and zarr for a Zarr image or output.
+    """
+    from .._extras import require
+    from .._zarr_io import is_zarr
+
+    zarr = ("zarr",) if is_zarr(image) or is_zarr(output) else ()
+    require("dask", *zarr, purpose="segmenting chunk by chunk (a Zarr image or output, "
+            "--memory, or an image too big for memory)")
 
 
 def material_volumes(counts: dict[int, int], spacing) -> dict[int, dict]:
@@ -114,6 +137,8 @@ def apply_model(image, model, output, *, memory: int | None = None,
         check_label_format(output, label_array(np.zeros((1, 1), np.int64) + max(model.labels)))
     if chunked is None:
         chunked = wants_chunks(image, output, model, memory=memory)
+    if chunked:
+        require_chunked(image, output)
     affine = read_affine(image) if image_suffix(output) in (".nii", ".nii.gz") else None
     plan = None
     if not chunked:
@@ -183,6 +208,7 @@ def fit_apply(image, samples, output, *, max_scale: int | None = None,
     from ..io import check_writable
 
     t0 = time.perf_counter()
+    require_chunked(image, output)
     check_writable(output, force=force)
     if model_out is not None:
         from ._model_base import check_model_path

@@ -106,6 +106,9 @@ def parse_memory(text) -> int:
     ValueError
         For anything else, or a budget of zero or less.
     """
+    from .._extras import require
+
+    require("dask", purpose="a memory budget (segmenting chunk by chunk)")
     from dask.utils import parse_bytes
 
     try:

@@ -105,7 +105,8 @@ def add_commands(subparsers) -> None:
 
 
 def _run_res(args: argparse.Namespace) -> int:
-    from ..io import check_figure_path, is_store, read_image, write_figure
+    from .._zarr_io import is_lazy, open_lazy
+    from ..io import check_figure_path, read_image, write_figure
     from ._res import format_res_table, plot_res, res_statistics, res_statistics_of_boxes
     from ._samples import load_samples
 
@@ -114,11 +115,9 @@ def _run_res(args: argparse.Namespace) -> int:
         check_figure_path(args.plot, force=args.force)
     if args.max_scale is not None and args.max_scale < 0:
         raise ValueError(f"--max-scale must be 0 or more; got {args.max_scale}.")
-    lazy = not args.gray and (is_store(args.image) or str(args.image).lower().endswith(".npy"))
+    lazy = not args.gray and is_lazy(args.image)
     with timer("read"):
         if lazy:   # a store or .npy stays on disk: the statistics read the boxes only
-            from .._zarr_io import open_lazy
-
             image, _ = open_lazy(args.image)
         else:
             image, _ = read_image(args.image, gray=args.gray)

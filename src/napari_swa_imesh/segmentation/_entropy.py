@@ -84,7 +84,8 @@ def _slab_entropy(padded: np.ndarray, scale: int) -> np.ndarray:
     grid = tuple(side // 2**scale for side in padded.shape)
     out = np.empty(grid + (n_bands * scale + 1,), dtype=np.float64)
     approx = padded
-    for level, (approx, details) in enumerate(iter_haar_levels(padded, scale), start=1):
+    for level, (approx, details) in enumerate(  # noqa: B007 (the last level is used below)
+            iter_haar_levels(padded, scale), start=1):
         # details (B, c_0, ...) -> per-tile mean over blocks of 2**(scale - level)
         entropy = _neg_abs_log(details)
         block = 2 ** (scale - level)

@@ -127,7 +127,7 @@ def haar_analysis(image, levels: int) -> tuple[np.ndarray, list[np.ndarray]]:
         )
     approx = arr.astype(np.float64, copy=True)
     details: list[np.ndarray] = []
-    for approx, level_details in iter_haar_levels(approx, levels):
+    for approx, level_details in iter_haar_levels(approx, levels):  # noqa: B007, B020 (the last level)
         details.append(level_details)
     return approx, details
 

@@ -19,6 +19,7 @@ from __future__ import annotations
 
 import json
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -27,9 +28,13 @@ from .._validation import IMAGE_NDIM, as_image, label_dtype
 from ..io import atomic_write
 from ._samples import Material, check_contrast
 
-__all__ = ["SegmentationModel", "MODEL_FORMAT", "check_model_path", "write_model_to"]
+__all__ = ["SegmentationModel", "MODEL_FORMAT", "MODEL_FORMAT_VERSION", "check_model_path",
+           "write_model_to"]
 
 MODEL_FORMAT = "swa-imesh-model"
+#: the layout of ``meta`` and the arrays; raise it when a reader of the previous layout
+#: would misread a new file (files written before the number existed are format 0)
+MODEL_FORMAT_VERSION = 1
 
 
 def check_model_path(path) -> None:
@@ -38,9 +43,10 @@ def check_model_path(path) -> None:
         raise ValueError(f"model files end in .npz; got {Path(path).name}.")
 
 
-def write_model_to(tmp, meta: dict, arrays: dict[str, np.ndarray]) -> None:
-    """Write `meta` (JSON, with the format tag) and `arrays` to the path `tmp`."""
-    meta = {"format": MODEL_FORMAT, **meta}
+def write_model_to(tmp, meta: dict, arrays: dict[str, Any]) -> None:
+    """Write `meta` (JSON, with the format tag and version) and `arrays` to the path `tmp`."""
+    meta = {"format": MODEL_FORMAT, "format_version": MODEL_FORMAT_VERSION,
+            "version": __version__, **meta}
     with open(tmp, "wb") as fh:
         np.savez_compressed(fh, meta=np.array(json.dumps(meta)), **arrays)
 
@@ -85,7 +91,8 @@ class SegmentationModel:
     @staticmethod
     def checked_training_image(image, samples, check_input: bool = True) -> np.ndarray:
         """`image` checked for fitting on `samples` (no copy of float input): a real
-        single-channel image that holds every box and some contrast in them."""
+        single-channel image that holds every box and some contrast in them.
+        """
         if not check_input:
             return image
         img = as_image(image, max_ndim=IMAGE_NDIM[-1], copy=False)
@@ -95,7 +102,7 @@ class SegmentationModel:
 
     def _common_meta(self) -> dict:
         """The ``meta`` entries both models write."""
-        return {"version": __version__, "ndim": self.ndim, "spacing": self.spacing,
+        return {"version": __version__, "method": self.method, "ndim": self.ndim, "spacing": self.spacing,
                 "materials": [{"label": m.label, "name": m.name, "color": m.color}
                               for m in self.materials]}
 

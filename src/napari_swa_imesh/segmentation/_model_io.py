@@ -1,7 +1,8 @@
 """The model file, and :func:`load_model` for both models.
 
 Format (``.npz``, no pickles): arrays under their own names plus ``meta``, a JSON string
-with ``format`` ("swa-imesh-model"), ``version`` (of this package), ``method``, ``scale``,
+with ``format`` ("swa-imesh-model"), ``format_version`` (:data:`MODEL_FORMAT_VERSION`, the
+layout), ``version`` (of the package that wrote it), ``method``, ``scale``,
 ``feature_set``, ``feature_names``, ``classifier``, ``ndim``, ``materials`` (label, name,
 colour), ``spacing`` (units of the training image) and the training ``scores``.
 
@@ -15,8 +16,11 @@ colour), ``spacing`` (units of the training image) and the training ``scores``.
 Both are written by :meth:`~._model_base.SegmentationModel.save` (through
 :func:`~napari_swa_imesh.io.atomic_write`); every file is read by :func:`read_model_file`,
 which turns any damage (truncation, random bytes, a ``meta`` that is not an object) into
-one ValueError that says so. A saved model applies to any image of the same
-dimensionality.
+one ValueError that says so, and checks the format version: a newer format than this
+package reads is refused with one sentence (update napari-swa-imesh); a format 0 file
+(written before the number existed, when absent keys meant defaults) is brought to format 1
+by :func:`_upgrade` before either model reads it. A saved model applies to any image of the
+same dimensionality.
 """
 
 from __future__ import annotations
@@ -27,14 +31,16 @@ from pathlib import Path
 
 import numpy as np
 
+from .. import __version__
 from ._model import SWAModel
-from ._model_base import MODEL_FORMAT, check_model_path, write_model_to
+from ._model_base import MODEL_FORMAT, MODEL_FORMAT_VERSION, check_model_path, write_model_to
 from ._recommended import RECOMMENDED_METHOD, RecommendedModel
 
-__all__ = ["MODEL_FORMAT", "check_model_path", "write_model_to", "read_model_file",
-           "load_model", "MODELS"]
+__all__ = ["MODEL_FORMAT", "MODEL_FORMAT_VERSION", "check_model_path", "write_model_to",
+           "read_model_file", "load_model", "MODELS"]
 
-MODELS = {"reference": SWAModel, RECOMMENDED_METHOD: RecommendedModel}
+MODELS: dict[str, type[SWAModel] | type[RecommendedModel]] = {
+    "reference": SWAModel, RECOMMENDED_METHOD: RecommendedModel}
 
 
 def read_model_file(path) -> tuple[dict, dict[str, np.ndarray]]:
@@ -45,7 +51,8 @@ def read_model_file(path) -> tuple[dict, dict[str, np.ndarray]]:
     FileNotFoundError
         No file at `path`.
     ValueError
-        The file is not a complete swa-imesh model file.
+        The file is not a complete swa-imesh model file, or its format is newer than this
+        package reads.
     """
     p = Path(path)
     if not p.is_file():
@@ -64,7 +71,25 @@ def read_model_file(path) -> tuple[dict, dict[str, np.ndarray]]:
         raise ValueError(f"{bad} ({type(exc).__name__}).") from exc
     if not isinstance(meta, dict) or meta.get("format") != MODEL_FORMAT:
         raise ValueError(bad + ".")
-    return meta, arrays
+    fmt = meta.get("format_version", 0)
+    if not isinstance(fmt, int) or isinstance(fmt, bool) or fmt < 0:
+        raise ValueError(f"{bad} (format_version {fmt!r} is not a whole number).")
+    if fmt > MODEL_FORMAT_VERSION:
+        raise ValueError(
+            f"{p} is a model file of format {fmt} (written by napari-swa-imesh "
+            f"{meta.get('version', '?')}), newer than this napari-swa-imesh {__version__} "
+            f"reads (format {MODEL_FORMAT_VERSION}); update napari-swa-imesh.")
+    return _upgrade(meta), arrays
+
+
+def _upgrade(meta: dict) -> dict:
+    """`meta` in the current format: a format 0 file gets the values its absence meant."""
+    if meta.get("format_version", 0) == 0:
+        meta = {"method": "reference", **meta, "format_version": MODEL_FORMAT_VERSION}
+        if meta["method"] == RECOMMENDED_METHOD:
+            # saved before the coherence features and the intensity standardisation
+            meta = {"coherence": False, "intensity": {"offset": 0.0, "scale": 1.0}, **meta}
+    return meta
 
 
 def load_model(path) -> SWAModel | RecommendedModel:
@@ -73,7 +98,7 @@ def load_model(path) -> SWAModel | RecommendedModel:
     Returns
     -------
     SWAModel or RecommendedModel
-        As the file's ``method`` says (files without one are reference models).
+        As the file's ``method`` says (format 0 files without one are reference models).
 
     Raises
     ------
@@ -84,7 +109,10 @@ def load_model(path) -> SWAModel | RecommendedModel:
     """
     meta, arrays = read_model_file(path)
     p = Path(path)
-    method = meta.get("method", "reference")
+    method = meta.get("method")
+    if not isinstance(method, str):
+        raise ValueError(f"{p} is a damaged or incomplete swa-imesh model file (no method); "
+                         "save the model again.")
     if method not in MODELS:
         raise ValueError(f"{p} holds a model of method {method!r}, which this version does "
                          "not know; update napari-swa-imesh.")

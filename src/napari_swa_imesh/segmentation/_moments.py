@@ -259,7 +259,7 @@ def tile_moments_worker(x: np.ndarray, valid: np.ndarray | None,
     if scale == 0:
         return _pixel_moments(x, valid)
     level = None
-    for level in _iter_moment_levels(x, valid, scale):
+    for level in _iter_moment_levels(x, valid, scale):  # noqa: B007 (run to the last level)
         pass
     return _finalize(*level)
 

@@ -57,7 +57,7 @@ def haar_energy(x: np.ndarray, level: int) -> np.ndarray:
         c = np.cumsum(np.pad(x, pad, mode="symmetric"), axis=axis, dtype=np.float64)
         c = np.concatenate([np.zeros_like(np.take(c, [0], axis=axis)), c], axis=axis)
 
-        def part(a, start, stop):
+        def part(a, start, stop, axis=axis):
             return a[(slice(None),) * axis + (slice(start, stop),)]
 
         # block[m] = mean of the s pixels from original index m - s, m = 0 .. n + s

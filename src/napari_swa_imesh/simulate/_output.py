@@ -7,6 +7,7 @@ from pathlib import Path
 import numpy as np
 
 from .._atomic import hdf5_file
+from .._extras import require
 from ..io import atomic_write, check_writable
 from ..mesh import to_meshio, write_mesh_vtu
 from ..mesh import export_vectors
@@ -24,6 +25,9 @@ def check_field_path(path, *, force: bool = False) -> list[Path]:
     if suffix not in FIELD_SUFFIXES:
         raise ValueError(f"cannot write a field to {p.name!r}: use {' or '.join(FIELD_SUFFIXES)}"
                          " (VTK XML or XDMF/HDF5, both read by ParaView).")
+    if suffix == ".xdmf":
+        require("h5py", purpose="writing a field as .xdmf (with its .h5)",
+                alternative="or write it as .vtu")
     targets = [p] if suffix == ".vtu" else [p, p.with_suffix(".h5")]
     return [check_writable(t, force=force) for t in targets]
 
@@ -116,6 +120,7 @@ def check_series_path(path, *, force: bool = False) -> list[Path]:
     if p.suffix.lower() != ".xdmf":
         raise ValueError(f"a time series is written as XDMF/HDF5: name the output "
                          f"{p.with_suffix('.xdmf').name!r} instead of {p.name!r}.")
+    require("h5py", purpose="writing a time series (.xdmf with its .h5)")
     return [check_writable(t, force=force) for t in (p, p.with_suffix(".h5"))]
 
 

@@ -122,6 +122,8 @@ def check_write_options(path, *, order: int = 1, binary: bool = True, facet_grou
         other than ``.msh``; facet groups named for legacy ``.vtk``, which holds none.
     """
     fmt = mesh_format(path)
+    if fmt.requires is not None:
+        fmt.requires("write")       # names the extra (e.g. [xdmf]) before any work
     if abaqus_elements not in ABAQUS_ELEMENTS:
         raise ValueError(f"abaqus_elements must be one of {', '.join(ABAQUS_ELEMENTS)}, not "
                          f"{abaqus_elements!r}.")

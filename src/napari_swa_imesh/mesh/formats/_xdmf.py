@@ -36,14 +36,11 @@ _GZIP = 1                         # after the byte shuffle: smaller than meshio'
 
 
 def require_h5py(verb: str) -> None:
-    """Raise ValueError (what to install, what to choose) when h5py is missing."""
-    try:
-        import h5py  # noqa: F401
-    except ImportError:
-        raise ValueError(
-            f"cannot {verb} .xdmf: meshio's XDMF support needs the h5py package, which is "
-            "not installed; `pip install h5py`, or choose .vtu."
-        ) from None
+    """Raise ValueError (the extra to install, what to choose) when h5py is missing."""
+    from ..._extras import require
+
+    doing = {"read": "reading", "write": "writing"}.get(verb, verb)
+    require("h5py", purpose=f"{doing} .xdmf (with its .h5)", alternative="or choose .vtu")
 
 
 def write_xdmf_blocks(ex, xdmf_path, h5_path) -> None:

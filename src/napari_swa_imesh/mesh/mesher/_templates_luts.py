@@ -62,6 +62,7 @@ from __future__ import annotations
 
 import itertools
 import math
+import threading
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -313,9 +314,42 @@ def table_new_points(key: np.ndarray, offset: np.ndarray, member: np.ndarray,
     return new_entry.astype(np.int64), lattice[new_idx]
 
 
-LEAF_TABLE: dict[int, LeafTable] = {}
-_table = _load_table(Path(__file__).with_name("leaf_tables.npz"))
-if _table is not None:
-    LEAF_TABLE[3] = _table
-    TEMPLATES[3] = np.concatenate([TEMPLATES[3], _table.simplex.astype(float) / 2.0])
-del _table
+class _LoadedOnFirstRead(dict):
+    """A dict that first loads ``leaf_tables.npz`` (:func:`_load_leaf_tables`) when read."""
+
+    def __getitem__(self, key):
+        _load_leaf_tables()
+        return super().__getitem__(key)
+
+    def get(self, key, default=None):
+        _load_leaf_tables()
+        return super().get(key, default)
+
+    def __contains__(self, key):
+        _load_leaf_tables()
+        return super().__contains__(key)
+
+
+_LEAF_LOCK = threading.Lock()
+_leaf_tables_loaded = False
+
+
+def _load_leaf_tables() -> None:
+    """Add the 3-D leaf table to :data:`LEAF_TABLE` and its simplices to ``TEMPLATES[3]``,
+    once, on the first read of either (not at import: ``import`` stays cheap)."""
+    global _leaf_tables_loaded
+    if _leaf_tables_loaded:
+        return
+    with _LEAF_LOCK:
+        if _leaf_tables_loaded:
+            return
+        table = _load_table(Path(__file__).with_name("leaf_tables.npz"))
+        if table is not None:
+            dict.__setitem__(LEAF_TABLE, 3, table)
+            dict.__setitem__(TEMPLATES, 3, np.concatenate(
+                [dict.__getitem__(TEMPLATES, 3), table.simplex.astype(float) / 2.0]))
+        _leaf_tables_loaded = True
+
+
+LEAF_TABLE: dict[int, LeafTable] = _LoadedOnFirstRead()
+TEMPLATES = _LoadedOnFirstRead(TEMPLATES)

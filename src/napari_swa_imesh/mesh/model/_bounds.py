@@ -176,7 +176,7 @@ def quality_table(dim: int) -> list[dict]:
     plain_ids = {v: set(range(first, first + len(luts.PLAIN[d][v])))
                  for v, first in enumerate(luts.PLAIN_TEMPLATE_ID[d])}
     rows = []
-    for key, entry in classes.items():
+    for entry in classes.values():
         simplex = entry["simplex"].astype(float)
         cell = np.arange(d + 1)[None]
         ratio = float(radius_edge_ratio(simplex, cell)[0])

@@ -277,8 +277,8 @@ def dihedral_angles(points, cells) -> tuple[np.ndarray, np.ndarray]:
             normals.append(n)
         # the dihedral angle at the edge shared by faces k and l is pi - angle(n_k, n_l)
         angles = np.stack([180.0 - np.degrees(np.arccos(np.clip(
-            np.einsum("mi,mi->m", normals[k], normals[l]), -1, 1)))
-            for k, l in _pairs(4)], axis=1)
+            np.einsum("mi,mi->m", normals[k], normals[m]), -1, 1)))
+            for k, m in _pairs(4)], axis=1)
         lo[start:start + len(p)] = angles.min(axis=1)
         hi[start:start + len(p)] = angles.max(axis=1)
     return lo, hi
@@ -295,4 +295,4 @@ def quality_data(points: np.ndarray, cells: np.ndarray) -> dict[str, np.ndarray]
 
 
 def _pairs(n: int):
-    return [(k, l) for k in range(n) for l in range(k + 1, n)]
+    return [(k, m) for k in range(n) for m in range(k + 1, n)]
