@@ -75,7 +75,7 @@ def markdown_page(path: str | os.PathLike | None, title: str, *,
     path = Path(path)
     check_writable(path, force=force)
     captured = io.StringIO()
-    started = datetime.datetime.now(datetime.timezone.utc)
+    started = datetime.datetime.now(datetime.UTC)
     command = " ".join(["python", Path(sys.argv[0]).as_posix(), *sys.argv[1:]])
     stdout = sys.stdout
     sys.stdout = _Tee(stdout, captured)

@@ -28,7 +28,6 @@ import time
 import numpy as np
 
 
-
 def _ms(seconds: float) -> str:
     return f"{seconds * 1e3:7.1f} ms"
 

@@ -39,7 +39,8 @@ class CliHelp(SphinxDirective):
         sub = next(a for a in parser._actions if a.dest == "command")
         for name, command in sub.choices.items():
             title = f"swa-imesh {name}"
-            section = nodes.section(ids=[nodes.make_id(title)], names=[nodes.fully_normalize_name(title)])
+            section = nodes.section(ids=[nodes.make_id(title)],
+                                    names=[nodes.fully_normalize_name(title)])
             section += nodes.title(text=title)
             section += nodes.literal_block(text=_help(command), language="text")
             self.state.document.note_implicit_target(section)

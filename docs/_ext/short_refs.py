@@ -45,7 +45,6 @@ def _missing(app: Sphinx, env, node: pending_xref, contnode):
         public = sorted({h for h in hits if not any(p.startswith("_") for p in h.split("."))})
         if len(public) == 1:
             name = public[0]
-            obj = domain.objects[name]
             found = domain.resolve_xref(env, node["refdoc"], app.builder, "obj", name, node,
                                         contnode)
             if found is not None:

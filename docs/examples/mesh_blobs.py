@@ -8,8 +8,13 @@ mesh, and the worst radius-to-edge ratio stays within the proven bound for cubic
 import math
 
 from napari_swa_imesh.data import blob_labels
-from napari_swa_imesh.mesh import (check_mesh, mesh_labels, quality_bounds, signed_volumes,
-                                   write_mesh)
+from napari_swa_imesh.mesh import (
+    check_mesh,
+    mesh_labels,
+    quality_bounds,
+    signed_volumes,
+    write_mesh,
+)
 
 labels = blob_labels((24, 24, 24), 3, seed=0, sigma=3.0)          # labels 0, 1, 2
 mesh = mesh_labels(labels, exclude=[0])                          # background left out

@@ -1,5 +1,6 @@
 """Sample data made on the fly: texture mosaics from scikit-image's photos, a 3-D
-tissue phantom and seeded random label images. Used by the demo, the benchmarks, the tests and the napari sample menu.
+tissue phantom and seeded random label images. Used by the demo, the benchmarks, the
+tests and the napari sample menu.
 
 Nothing is downloaded: the texture photos (brick, grass, gravel) ship with scikit-image, and
 so do the two texture-like pictures added for mosaics of more than three materials: the
