@@ -75,3 +75,33 @@ def test_benchmark_page_includes_the_generated_table(site):
     assert "Written by `python benchmarks/bench_mesh.py" in table
     page = (site / "benchmarks" / "meshing.html").read_text()
     assert "faces+edges+corners" in page and "Written by" in page
+
+
+def _mini_site(tmp_path, text: str) -> subprocess.CompletedProcess:
+    """Build a one-page site with this documentation's extensions and warning rules."""
+    source = tmp_path / "src"
+    source.mkdir(parents=True)
+    (source / "conf.py").write_text(
+        "import sys\n"
+        f"sys.path.insert(0, {str(DOCS / '_ext')!r})\n"
+        "extensions = ['myst_parser', 'sphinx.ext.autodoc', 'numpydoc', 'short_refs']\n"
+        "numpydoc_show_class_members = False\n")
+    (source / "index.md").write_text(text)
+    return subprocess.run([sys.executable, "-m", "sphinx", "-W", "-n", "-q", "-b", "html",
+                           str(source), str(tmp_path / "out")],
+                          capture_output=True, text=True, timeout=300, check=False)
+
+
+def test_short_references_resolve_and_misspelt_ones_fail(tmp_path):
+    page = ("# t\n\n```{eval-rst}\n.. autofunction:: napari_swa_imesh.mesh.mesh_labels\n"
+            ".. autofunction:: napari_swa_imesh.mesh.quality_bounds\n\n"
+            "REF\n```\n")
+    # a short name of a documented object, and a private helper that exists: both fine
+    good = _mini_site(tmp_path / "good", page.replace(
+        "REF", ":func:`quality_bounds` and :func:`napari_swa_imesh._atomic.check_writable`"))
+    assert good.returncode == 0, good.stderr
+    html = (tmp_path / "good" / "out" / "index.html").read_text()
+    assert 'href="#napari_swa_imesh.mesh.quality_bounds"' in html
+    # a name that exists nowhere fails the build under -n -W
+    bad = _mini_site(tmp_path / "bad", page.replace("REF", ":func:`quality_boundz`"))
+    assert bad.returncode != 0 and "quality_boundz" in bad.stderr

@@ -100,10 +100,19 @@ def _exists(module: str | None, cls: str | None, target: str) -> bool:
     except ImportError:
         return False
     dotted = target[len(root) + 1:] if target.startswith(root + ".") else target
-    package = module.rsplit(".", 1)[0] if module else root
-    scopes += [m for name, m in sorted(sys.modules.items())
-               if m is not None and name.startswith(package + ".")]
-    return any(_lookup(scope, dotted) is not None for scope in scopes)
+    if any(_lookup(scope, dotted) is not None for scope in scopes):
+        return True
+    # a name of a sibling module (``_lattice.choose_lattice``), wherever in the package
+    # that module lives: the docstrings name modules as their neighbours see them
+    first, _, rest = dotted.partition(".")
+    for name, loaded in sorted(sys.modules.items()):
+        if loaded is None or not name.startswith(root + "."):
+            continue
+        if _lookup(loaded, dotted) is not None:
+            return True
+        if rest and name.endswith("." + first) and _lookup(loaded, rest) is not None:
+            return True
+    return False
 
 
 def setup(app: Sphinx) -> dict:
