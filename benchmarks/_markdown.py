@@ -54,7 +54,7 @@ class _Tee(io.TextIOBase):
 
 
 @contextlib.contextmanager
-def markdown_page(path: str | os.PathLike | None, title: str, *,
+def markdown_page(path: str | os.PathLike | None, title: str, *, code: bool = False,
                   force: bool = True) -> Iterator[None]:
     """Tee standard output into a Markdown page at `path` (nothing when `path` is None).
 
@@ -64,6 +64,9 @@ def markdown_page(path: str | os.PathLike | None, title: str, *,
         The page to write; its folder must exist (checked before the block runs).
     title : str
         The page's heading.
+    code : bool
+        The script prints aligned text, not Markdown tables: the page shows it as a
+        text block, as printed.
     force : bool
         Replace an existing page (the default: a benchmark re-run updates its page).
     """
@@ -85,5 +88,8 @@ def markdown_page(path: str | os.PathLike | None, title: str, *,
         sys.stdout = stdout
     header = (f"## {title}\n\n"
               f"Written by `{command}` on {started:%Y-%m-%d %H:%M} UTC, on {machine()}.\n\n")
+    body = captured.getvalue().rstrip()
+    if code:
+        body = f"```text\n{body}\n```"
     with atomic_write([path], force=force) as (tmp,):
-        tmp.write_text(header + captured.getvalue().rstrip() + "\n", encoding="utf-8")
+        tmp.write_text(header + body + "\n", encoding="utf-8")
