@@ -8,6 +8,7 @@ and an option of the command-line reference (from the argparse parser), an API p
 public name of each package face, the benchmark tables the scripts wrote.
 """
 
+import re
 import shutil
 import subprocess
 import sys
@@ -75,6 +76,8 @@ def test_benchmark_page_includes_the_generated_table(site):
     assert "Written by `python benchmarks/bench_mesh.py" in table
     page = (site / "benchmarks" / "meshing.html").read_text()
     assert "faces+edges+corners" in page and "Written by" in page
+    page = re.sub(r"<[^>]+>", "", (site / "benchmarks" / "simulation.html").read_text())
+    assert "IMESH P1, refine 0" in page and "bench_refine.py --quick" in page
 
 
 def _mini_site(tmp_path, text: str) -> subprocess.CompletedProcess:
