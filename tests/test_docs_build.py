@@ -61,7 +61,7 @@ def test_command_line_reference_is_the_parser(site):
 def test_api_pages_cover_every_public_name(site):
     import importlib
 
-    for package in ("segmentation", "mesh", "simulate", "io", "data"):
+    for package in ("segmentation", "mesh", "simulate", "pipeline", "io", "data"):
         module = importlib.import_module(f"napari_swa_imesh.{package}")
         for name in module.__all__:
             obj = getattr(module, name)
