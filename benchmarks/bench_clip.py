@@ -24,11 +24,8 @@ from __future__ import annotations
 import argparse
 import sys
 import time
-from pathlib import Path
 
 import numpy as np
-
-sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests" / "mesh"))
 
 
 def _ms(seconds: float) -> str:
@@ -115,8 +112,7 @@ def in_napari(labels, spacing) -> None:
 
 
 def main() -> int:
-    from imesh_cases import blobs
-
+    from napari_swa_imesh.data import blob_labels
     from napari_swa_imesh.mesh import mesh_labels
 
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
@@ -125,7 +121,7 @@ def main() -> int:
     args = parser.parse_args()
     shape = (24, 40, 40) if args.quick else (48, 80, 80)
     spacing = (2.0, 1.0, 1.0)
-    labels = blobs(shape, 3, seed=1, sigma=4.0).astype(np.uint8) + 1
+    labels = blob_labels(shape, 3, seed=1, sigma=4.0).astype(np.uint8) + 1
     seconds, mesh = _time(mesh_labels, labels, spacing=spacing)
     print(f"{shape} labels, spacing {spacing}: {mesh.n_cells} tetrahedra, "
           f"{len(mesh.points)} vertices ({seconds:.1f} s to mesh)")

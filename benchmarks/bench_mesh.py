@@ -263,6 +263,9 @@ def main(argv=None) -> int:
                         help="shape of the --pipeline volume (default 256 256 256)")
     parser.add_argument("--formats", nargs="+", default=list(PIPELINE_FORMATS),
                         help="suffixes written by --pipeline (default: .vtu .inp .msh .xdmf)")
+    parser.add_argument("--markdown", metavar="OUT.md",
+                        help="also write the tables to this Markdown page (the docs' "
+                             "benchmarks pages include docs/benchmarks/generated/*.md)")
     parser.add_argument("--one", help=argparse.SUPPRESS)
     parser.add_argument("--pipeline-step", help=argparse.SUPPRESS)
     parser.add_argument("--pipeline-command", help=argparse.SUPPRESS)
@@ -275,6 +278,15 @@ def main(argv=None) -> int:
         print(json.dumps(run(json.loads(args.pipeline_step or args.pipeline_command)),
                          default=float))
         return 0
+    from _markdown import markdown_page
+
+    title = "IMESH " + ("pipeline" if args.pipeline else "template vs Delaunay") + (
+        ", quick sizes" if args.quick else "")
+    with markdown_page(args.markdown, title):
+        return _tables(args)
+
+
+def _tables(args) -> int:
     if args.pipeline:
         import tempfile
 

@@ -56,8 +56,19 @@ def main(argv=None) -> int:
                         help="keep the reference values in this file and reuse them on the "
                              "next run of the same size, sigma and quickness (the 64^3 "
                              "reference takes most of the run)")
+    parser.add_argument("--markdown", metavar="OUT.md",
+                        help="also write what is printed to this Markdown page (the docs' "
+                             "benchmarks pages include docs/benchmarks/generated/*.md)")
     args = parser.parse_args(argv)
+    from _markdown import markdown_page
+
     n = 32 if args.quick else args.size
+    with markdown_page(args.markdown, f"Interface refinement against adaptivity, {n}^3",
+                       code=True):
+        return _run(args, n)
+
+
+def _run(args, n: int) -> int:
     labels = three_phase(n, sigma=args.sigma)
     axis, axis_name = 2, "x"
     print(f"## {n}^3 three phases (sigma {args.sigma:g}), k = {K3D}, along {axis_name}")

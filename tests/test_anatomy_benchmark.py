@@ -1,13 +1,9 @@
 """The real-anatomy development set of the benchmarks (benchmarks/anatomy.py)."""
 
-import sys
-from pathlib import Path
-
 import numpy as np
 import pytest
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "benchmarks"))
-import anatomy  # noqa: E402
+from benchmarks import anatomy
 
 
 def _box(crop):

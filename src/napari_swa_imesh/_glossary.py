@@ -12,7 +12,7 @@ import re
 __all__ = ["GLOSSARY", "define", "terms_in", "glossary_text"]
 
 GLOSSARY: dict[str, str] = {
-    "SWA": "Statistical window analysis: each tile (or window) of the image is described by "
+    "SWA": "Stochastic wavelet analysis: each tile (or window) of the image is described by "
            "the statistics of its grey levels, and a classifier trained on sample boxes "
            "labels it with a material.",
     "IMESH": "Image meshing on a balanced 2^d-tree: blocks split until one material fills "

@@ -1,5 +1,6 @@
-"""Sample data made on the fly: texture mosaics from scikit-image's photos and a 3-D
-tissue phantom. Used by the demo, the benchmarks, the tests and the napari sample menu.
+"""Sample data made on the fly: texture mosaics from scikit-image's photos, a 3-D
+tissue phantom and seeded random label images. Used by the demo, the benchmarks, the
+tests and the napari sample menu.
 
 Nothing is downloaded: the texture photos (brick, grass, gravel) ship with scikit-image, and
 so do the two texture-like pictures added for mosaics of more than three materials: the
@@ -15,7 +16,7 @@ from scipy import ndimage as ndi
 from .segmentation import Material, SampleBox, Samples
 
 __all__ = ["TEXTURES", "texture_photo", "texture_mosaic", "texture_training",
-           "tissue_phantom", "TISSUE_NAMES"]
+           "tissue_phantom", "TISSUE_NAMES", "blob_labels"]
 
 TEXTURES = ("brick", "grass", "gravel", "moon", "hubble")
 TISSUE_NAMES = {1: "csf", 2: "grey matter", 3: "white matter"}
@@ -171,3 +172,42 @@ def tissue_phantom(shape=(64, 96, 96), *, noise: float = 0.03, bias: float = 0.0
     image = np.sqrt((clean + sigma * rng.standard_normal(shape)) ** 2
                     + (sigma * rng.standard_normal(shape)) ** 2)
     return image.astype(np.float32), truth
+
+
+def blob_labels(shape, n_materials: int, *, seed: int, sigma: float = 2.0) -> np.ndarray:
+    """Smooth random regions: big homogeneous blocks with boundaries of every slope.
+
+    Uniform noise smoothed by a Gaussian of `sigma` pixels, cut at its quantiles into
+    `n_materials` labels of about equal volume. The meshing tests and benchmarks use it.
+
+    Parameters
+    ----------
+    shape : tuple of int
+        Image shape (plane, row, column), any dimension.
+    n_materials : int
+        Number of labels, at least 1.
+    seed : int
+        Seed of the random generator: the same seed gives the same labels.
+    sigma : float
+        Smoothing in pixels; larger gives larger regions.
+
+    Returns
+    -------
+    labels : ndarray of int64, shape `shape`
+        Labels 0 .. `n_materials` - 1.
+
+    Examples
+    --------
+    >>> labels = blob_labels((16, 16), 3, seed=0)
+    >>> labels.shape, sorted(set(labels.ravel().tolist()))
+    ((16, 16), [0, 1, 2])
+    """
+    shape = tuple(int(n) for n in np.atleast_1d(shape))
+    if not shape or min(shape) < 1:
+        raise ValueError(f"blob_labels needs a shape of positive sizes, got {shape}")
+    if int(n_materials) < 1:
+        raise ValueError(f"blob_labels needs at least one material, got {n_materials}")
+    rng = np.random.default_rng(seed)
+    field = ndi.gaussian_filter(rng.random(shape), sigma)
+    cuts = np.quantile(field, np.linspace(0, 1, int(n_materials) + 1)[1:-1])
+    return np.digitize(field, cuts).astype(np.int64)

@@ -3,15 +3,14 @@
 from __future__ import annotations
 
 import numpy as np
-from scipy import ndimage
+
+from napari_swa_imesh.data import blob_labels
 
 
 def blobs(shape, n_materials: int, seed: int, sigma: float = 2.0) -> np.ndarray:
-    """Smooth random regions: big homogeneous leaves with boundaries of every slope."""
-    rng = np.random.default_rng(seed)
-    field = ndimage.gaussian_filter(rng.random(shape), sigma)
-    cuts = np.quantile(field, np.linspace(0, 1, n_materials + 1)[1:-1])
-    return np.digitize(field, cuts).astype(np.int64)
+    """Smooth random regions: big homogeneous leaves with boundaries of every slope
+    (:func:`napari_swa_imesh.data.blob_labels`, which the benchmarks use too)."""
+    return blob_labels(shape, n_materials, seed=seed, sigma=sigma)
 
 
 def noise(shape, n_materials: int, seed: int, p: float = 0.05) -> np.ndarray:

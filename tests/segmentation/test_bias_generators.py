@@ -1,15 +1,10 @@
 """The held-out phantom generator (benchmarks/anatomy_heldout.py) is independent of the
 tuning one (benchmarks/anatomy.py) and makes what it says."""
 
-import sys
-from pathlib import Path
-
 import numpy as np
 import pytest
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[2] / "benchmarks"))
-import anatomy
-import anatomy_heldout
+from benchmarks import anatomy, anatomy_heldout
 
 
 def test_heldout_shares_no_crop_seed_or_contrast_with_tuning():

@@ -149,6 +149,13 @@ def plan_chunks(shape, model: RecommendedModel, memory: int, *, workers: int | N
     multiple : int
         Chunk sides are multiples of this (the bias field's grid cells).
 
+    Returns
+    -------
+    chunk : tuple of int
+        Chunk shape, without its margin.
+    workers : int
+        Number of worker threads.
+
     Raises
     ------
     ValueError

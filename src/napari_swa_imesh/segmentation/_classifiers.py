@@ -245,7 +245,11 @@ def _regularise(covs: np.ndarray, shrinkage: float):
 
 
 class MinimumDistanceClassifier(_Standardised):
-    """Nearest training tile in standardised feature space (K-nn with K = 1, "MD")."""
+    """Nearest training tile in standardised feature space (K-nn with K = 1, "MD").
+
+    It takes no parameters: :meth:`fit` keeps the standardised training tiles and their
+    labels, and :meth:`predict` gives each tile the label of the nearest one.
+    """
 
     name = "md"
 
@@ -277,6 +281,17 @@ class LVQClassifier(_Standardised):
     towards the mean of the training tiles it wins correctly and away from those it wins
     wrongly, with a learning rate decreasing linearly to zero (the batch form of the
     reference's update rule, so no Python loop runs per tile).
+
+    Parameters
+    ----------
+    prototypes_per_class : int
+        Prototypes per class (fewer when a class has fewer training tiles).
+    epochs : int
+        Batch epochs of training.
+    learning_rate : float
+        Initial learning rate, decreasing linearly to zero over the epochs.
+    seed : int
+        Seed of the k-means start.
     """
 
     name = "lvq"
@@ -370,6 +385,22 @@ def leave_one_out_error(classifier, X, y) -> tuple[float, str]:
     """Leave-one-out error eps_l in percent over the training tiles, and how it was found.
 
     Exact for GM and MD; LVQ uses 10-fold cross-validation (it would need n retrainings).
+
+    Parameters
+    ----------
+    classifier : GaussianClassifier, MinimumDistanceClassifier or LVQClassifier
+        A classifier of this package (its ``leave_one_out`` method is used).
+    X : (n, F) ndarray of float
+        Training features, one row per tile.
+    y : (n,) ndarray of int
+        Training labels.
+
+    Returns
+    -------
+    error : float
+        Percentage of training tiles misclassified when left out.
+    method : {"exact", "10-fold"}
+        How the error was found.
     """
     pred = classifier.leave_one_out(X, y)
     method = "10-fold" if isinstance(classifier, LVQClassifier) else "exact"

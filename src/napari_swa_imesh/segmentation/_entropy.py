@@ -30,6 +30,18 @@ def entropy_feature_names(ndim: int, scale: int) -> list[str]:
     (band numbering as in :mod:`._haar`: binary index of the high-pass axes,
     axis 0 most significant).
 
+    Parameters
+    ----------
+    ndim : int
+        Image dimensionality.
+    scale : int
+        Tile scale j.
+
+    Returns
+    -------
+    list of str
+        The names.
+
     Examples
     --------
     >>> entropy_feature_names(2, 1)

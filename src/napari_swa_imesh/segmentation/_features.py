@@ -72,6 +72,20 @@ def n_features(feature_set: str, ndim: int, scale: int) -> int:
 
     M gives 4, H gives ``(2**ndim - 1) * scale + 1``, Z gives ``ndim``.
 
+    Parameters
+    ----------
+    feature_set : str
+        One of :data:`FEATURE_SETS` (``"F1"`` .. ``"F7"``).
+    ndim : int
+        Image dimensionality.
+    scale : int
+        Tile scale j.
+
+    Returns
+    -------
+    int
+        The length of a tile's feature vector.
+
     Examples
     --------
     >>> n_features("F2", 2, 3), n_features("F7", 3, 2)

@@ -56,17 +56,46 @@ def confusion_matrix(labels, truth, *, materials=None) -> tuple[np.ndarray, np.n
 
 
 def dice_scores(labels, truth, *, materials=None) -> dict[int, float]:
-    """Dice coefficient per material, eq. 2.36: 2|S∩G| / (|S| + |G|).
+    """Dice coefficient per material, eq. 2.36: ``2 |S ∩ G| / (|S| + |G|)``.
 
     Materials default to the labels above 0 present in the truth. A material absent
     from both images scores NaN.
+
+    Parameters
+    ----------
+    labels : ndarray of int
+        The segmentation.
+    truth : ndarray of int
+        The reference labels, same shape.
+    materials : sequence of int, optional
+        Materials to score (default: the labels above 0 in `truth`).
+
+    Returns
+    -------
+    dict of int to float
+        Dice per material, in [0, 1].
     """
     seg, ref = _pair(labels, truth)
     return {k: v[0] for k, v in _overlaps(seg, ref, materials).items()}
 
 
 def jaccard_scores(labels, truth, *, materials=None) -> dict[int, float]:
-    """Tanimoto/Jaccard coefficient per material, eq. 2.37: |S∩G| / |S∪G|."""
+    """Tanimoto/Jaccard coefficient per material, eq. 2.37: ``|S ∩ G| / |S ∪ G|``.
+
+    Parameters
+    ----------
+    labels : ndarray of int
+        The segmentation.
+    truth : ndarray of int
+        The reference labels, same shape.
+    materials : sequence of int, optional
+        Materials to score (default: the labels above 0 in `truth`).
+
+    Returns
+    -------
+    dict of int to float
+        Jaccard per material, in [0, 1] (NaN for a material absent from both).
+    """
     seg, ref = _pair(labels, truth)
     return {k: v[1] for k, v in _overlaps(seg, ref, materials).items()}
 
@@ -87,7 +116,24 @@ def _overlaps(seg, ref, materials):
 
 
 def evaluate(labels, truth, *, materials=None) -> dict:
-    """Dice, Jaccard and confusion matrix in one dictionary (what ``swa-imesh evaluate`` prints)."""
+    """Dice, Jaccard and confusion matrix in one dictionary (what ``swa-imesh evaluate`` prints).
+
+    Parameters
+    ----------
+    labels : ndarray of int
+        The segmentation.
+    truth : ndarray of int
+        The reference labels, same shape.
+    materials : sequence of int, optional
+        Materials to score (default: the labels above 0 in `truth`).
+
+    Returns
+    -------
+    dict
+        ``materials`` (list), ``dice`` and ``jaccard`` (material to score),
+        ``mean_dice``, ``accuracy`` (fraction of pixels equal), ``confusion_labels`` and
+        ``confusion`` (rows: truth, columns: segmentation, as lists).
+    """
     seg, ref = _pair(labels, truth)
     ov = _overlaps(seg, ref, materials)
     matrix, mats = confusion_matrix(seg, ref)

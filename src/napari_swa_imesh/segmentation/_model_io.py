@@ -95,6 +95,12 @@ def _upgrade(meta: dict) -> dict:
 def load_model(path) -> SWAModel | RecommendedModel:
     """Read a model written by ``save`` (either model) or ``swa-imesh segment --model-out``.
 
+    Parameters
+    ----------
+    path : str or Path
+        The ``.npz`` model file (arrays and a JSON ``meta`` entry; pickles are never
+        loaded).
+
     Returns
     -------
     SWAModel or RecommendedModel

@@ -57,6 +57,13 @@ BAND_COLOR = "#9aa7b8"
 class ResStatistics:
     """Tile-moment statistics per material and scale.
 
+    Made by :func:`res_statistics`; its fields are the constructor's parameters.
+
+    Parameters
+    ----------
+    scales, materials, names, mean, std, min, max, n_tiles, ndim, suggested_scale, material_res, reason, method
+        The attributes below, in this order.
+
     Attributes
     ----------
     scales : (S,) ndarray of int

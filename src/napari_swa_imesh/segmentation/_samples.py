@@ -28,7 +28,17 @@ __all__ = ["Material", "SampleBox", "Samples", "load_samples", "save_samples",
 
 @dataclass(frozen=True)
 class Material:
-    """A material (class): its label id in the output, a name, an optional colour."""
+    """A material (class): its label id in the output, a name, an optional colour.
+
+    Parameters
+    ----------
+    label : int
+        Label of the material in the output image (1, 2, ...; 0 is background).
+    name : str
+        Its name, as files and tables show it.
+    color : str or None
+        A colour for drawing (any matplotlib colour string), or None.
+    """
 
     label: int
     name: str
@@ -37,7 +47,17 @@ class Material:
 
 @dataclass(frozen=True)
 class SampleBox:
-    """An axis-aligned box of pixels known to hold one material (stop exclusive)."""
+    """An axis-aligned box of pixels known to hold one material (stop exclusive).
+
+    Parameters
+    ----------
+    label : int
+        The material's label.
+    start : tuple of int
+        First pixel index per axis, (plane, row, column) order, inclusive.
+    stop : tuple of int
+        Last pixel index + 1 per axis (exclusive).
+    """
 
     label: int
     start: tuple[int, ...]
@@ -55,6 +75,13 @@ class SampleBox:
 @dataclass
 class Samples:
     """Materials and their sample boxes.
+
+    Parameters
+    ----------
+    materials : list of Material
+        Every material, each label once.
+    boxes : list of SampleBox
+        The boxes; each box's label is one of the materials'.
 
     Examples
     --------
@@ -318,7 +345,25 @@ def window_scale(shape) -> int:
 
 
 def load_samples(path) -> Samples:
-    """Read a samples JSON file (see the module docstring for the schema)."""
+    """Read a samples JSON file (see the module docstring for the schema).
+
+    Parameters
+    ----------
+    path : str or Path
+        The JSON file.
+
+    Returns
+    -------
+    Samples
+        Its materials and boxes, checked.
+
+    Raises
+    ------
+    FileNotFoundError
+        No file at `path`.
+    ValueError
+        The file is not valid JSON, or not a samples file.
+    """
     p = Path(path)
     if not p.is_file():
         raise FileNotFoundError(f"no samples file at {p}; check the path.")
@@ -330,7 +375,22 @@ def load_samples(path) -> Samples:
 
 
 def save_samples(samples: Samples, path, *, force: bool = False) -> Path:
-    """Write `samples` as JSON; an existing file is replaced only with ``force``."""
+    """Write `samples` as JSON; an existing file is replaced only with ``force``.
+
+    Parameters
+    ----------
+    samples : Samples
+        What to write.
+    path : str or Path
+        The JSON file (written atomically: whole or not at all).
+    force : bool
+        Replace an existing file.
+
+    Returns
+    -------
+    Path
+        `path`.
+    """
     from ..io import atomic_write
 
     with atomic_write([path], force=force) as (tmp,):

@@ -51,6 +51,13 @@ STEPS = 5                                         # steps segment_steps reports
 class SegmentationResult:
     """Everything a segmentation run produced.
 
+    Made by :func:`segment`; its fields are the constructor's parameters.
+
+    Parameters
+    ----------
+    labels, tile_labels, scale, model, signatures, res, seconds, method, scales, level, notes
+        The attributes below, in this order.
+
     Attributes
     ----------
     labels : ndarray of int32 (int64 for labels >= 2^31)
@@ -184,6 +191,18 @@ def sieve_labels(labels: np.ndarray, min_size: int) -> np.ndarray:
     Components are face-connected (sec. 2.5.2.1); each pixel of a removed component takes
     the label of the nearest pixel of a kept component (Euclidean distance transform),
     so no Python loop runs per component.
+
+    Parameters
+    ----------
+    labels : ndarray of int
+        A label image, any dimension.
+    min_size : int
+        Components of fewer pixels are removed (0 or 1 keeps all).
+
+    Returns
+    -------
+    ndarray of int
+        The labels with small components replaced; same shape and dtype.
     """
     if min_size <= 1:
         return labels.copy()
@@ -228,6 +247,23 @@ def segment_steps(image, samples: Samples | None = None, *, method: str = RECOMM
                   ) -> Generator[tuple[int, int, str], None, SegmentationResult]:
     """Run the segmentation step by step, yielding ``(done, total, message)``; returns the
     result. See :func:`segment` for the parameters (``total`` is 5 for both methods).
+
+    Parameters
+    ----------
+    image, samples, method, scale, sieve, model, spacing, feature_set, classifier
+        As for :func:`segment`.
+
+    Yields
+    ------
+    done, total : int
+        Steps finished, of ``total``.
+    message : str
+        What the step did.
+
+    Returns
+    -------
+    SegmentationResult
+        The generator's return value (``StopIteration.value``), as :func:`segment` returns.
     """
     if (samples is None) == (model is None):
         raise ValueError("give either sample boxes (to fit a classifier) or a fitted model, "

@@ -57,7 +57,22 @@ def signatures_csv_text(signatures: list[dict]) -> str:
 
 
 def write_signatures_csv(signatures: list[dict], path, *, force: bool = False) -> Path:
-    """Write the material-signature table (one row per material) as CSV."""
+    """Write the material-signature table (one row per material) as CSV.
+
+    Parameters
+    ----------
+    signatures : list of dict
+        Per material, as :attr:`SegmentationResult.signatures` holds them.
+    path : str or Path
+        The CSV file (written atomically).
+    force : bool
+        Replace an existing file.
+
+    Returns
+    -------
+    Path
+        `path`.
+    """
     with atomic_write([path], force=force) as (tmp,):
         tmp.write_text(signatures_csv_text(signatures))
     return Path(path)

@@ -161,6 +161,15 @@ def majority_tiles(labels: np.ndarray, scale: int, materials) -> np.ndarray:
     Ties go to the smallest label, so the result does not depend on the order in which
     `materials` are listed.
 
+    Parameters
+    ----------
+    labels : ndarray of int
+        Full-resolution labels.
+    scale : int
+        Tile scale j.
+    materials : sequence of int
+        The labels counted.
+
     Returns
     -------
     (ceil(M/2^scale), ceil(N/2^scale)[, ...]) ndarray of int32 (int64 for labels >= 2^31)
@@ -180,6 +189,20 @@ def majority_tiles(labels: np.ndarray, scale: int, materials) -> np.ndarray:
 
 def upsample_tiles(tile_labels: np.ndarray, scale: int, shape: tuple[int, ...]) -> np.ndarray:
     """Full-resolution labels from tile labels: repeat each tile 2^scale times, crop to `shape`.
+
+    Parameters
+    ----------
+    tile_labels : ndarray of int
+        One label per tile.
+    scale : int
+        Tile scale j.
+    shape : tuple of int
+        Shape of the image.
+
+    Returns
+    -------
+    ndarray of int
+        Labels of `shape`, same dtype as `tile_labels`.
 
     Examples
     --------
@@ -201,6 +224,22 @@ def tile_placement(scale: int, spacing=None, ndim: int | None = None
     t*s .. t*s+s-1, so its centre sits at ``t*s*spacing + (s-1)/2*spacing``. The command
     line writes these into the header of ``--tiles`` output; a napari Labels layer of tile
     labels takes them as its ``scale`` and ``translate``.
+
+    Parameters
+    ----------
+    scale : int
+        Tile scale j (tiles of 2^j px per axis).
+    spacing : sequence of float or float, optional
+        Pixel size per axis (default 1).
+    ndim : int, optional
+        Image dimensionality, when `spacing` does not give it.
+
+    Returns
+    -------
+    spacing : tuple of float
+        Tile size per axis in physical units.
+    origin : tuple of float
+        Centre of the first tile.
 
     Examples
     --------

@@ -124,6 +124,18 @@ def squared_coherence(x: np.ndarray, k: int, m: int) -> np.ndarray:
 def multiscale_feature_names(max_scale: int, coherence: bool = True) -> list[str]:
     """Names of the features of levels 0..max_scale, in stack order.
 
+    Parameters
+    ----------
+    max_scale : int
+        The coarsest level.
+    coherence : bool
+        Include the structure-tensor coherence features (from level 3 on).
+
+    Returns
+    -------
+    list of str
+        One name per feature channel of :func:`multiscale_features`.
+
     Examples
     --------
     >>> multiscale_feature_names(2)
