@@ -98,7 +98,9 @@ def test_saved_frames_are_the_field_at_their_times():
     assert np.allclose(r.values[0][x > 0], 0.0)                 # the start, not the end
     changes = np.abs(np.diff(r.values, axis=0)).max(axis=1)
     assert np.all(changes > 1e-3)                               # every frame differs
-    assert np.all(np.diff(r.values[:, x == 8].mean(axis=1)) > 0)  # the front advances
+    # the front advances (at x = 2: at x = 8 the first frames are at 1e-6 and below, where
+    # the consistent mass undershoots by as much ahead of the front)
+    assert np.all(np.diff(r.values[:, x == 2].mean(axis=1)) > 0)
 
 
 def test_p1_start_stays_within_its_values_and_p2_nearly():
