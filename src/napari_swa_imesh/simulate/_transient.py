@@ -406,7 +406,7 @@ def _front_plan(labels, conductivity, capacity, initial, fixed, *, spacing, excl
             "last": float(np.sqrt(d_max * duration))}
 
 
-def _error_warnings(estimate: "ErrorEstimate", plan, record, order: int,
+def _error_warnings(estimate: ErrorEstimate, plan, record, order: int,
                     from_mesh: bool) -> list[str]:
     """One sentence per way the run may miss its asked error."""
     out = []
@@ -423,7 +423,7 @@ def _error_warnings(estimate: "ErrorEstimate", plan, record, order: int,
                    "label image (it is then meshed for the diffusion length) or mesh it "
                    "finer, or save later times (fewer --steps)")
         elif plan is not None and not plan.get("met", True):
-            fix = ("the mesh could not be refined enough within the budget (largest "
+            fix = (f"the mesh could not be refined enough ({plan['reason']}; largest "
                    f"element {plan['max_ratio']:.2g} times its size): save later times "
                    "(fewer --steps) or a smaller image")
         else:

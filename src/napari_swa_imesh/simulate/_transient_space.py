@@ -34,8 +34,8 @@ from ._fe import fe_basis, mass_basis, mass_matrix
 from ._protocols import face_dofs
 from ._solve import DirichletSolver, SPDSolver, connected_parts
 
-__all__ = ["CURVATURE_CONSTANT", "ESTIMATE_UNKNOWNS", "front_curvature", "resolve_fronts",
-           "SpaceEstimator"]
+__all__ = ["CURVATURE_CONSTANT", "ESTIMATE_UNKNOWNS", "SpaceEstimator", "front_curvature",
+           "resolve_fronts"]
 
 #: P1's max error per ``h^2 |u''|`` on the front (1/8 for interpolation; Galerkin with
 #: the consistent mass measured up to about twice that on the erfc front).
@@ -112,7 +112,7 @@ def source_distance(mesh: Mesh, centroids: np.ndarray, faces: list[str],
 def allowed_size(distance: np.ndarray, first: float, last: float, error: float
                  ) -> np.ndarray:
     """Largest element side at `distance` for a P1 error `error` (relative to the jump)."""
-    with np.errstate(divide="ignore"):
+    with np.errstate(all="ignore"):      # far from every source the curvature is 0
         return np.sqrt(error / (CURVATURE_CONSTANT * front_curvature(distance, first, last)))
 
 
@@ -138,7 +138,7 @@ def resolve_fronts(labels, *, spacing, exclude, material_names, faces: list[str]
     -------
     (Mesh, dict)
         The mesh and what was done: ``rounds``, ``max_ratio`` (largest element side over
-        its allowance, <= 1 when met) and ``met``.
+        its allowance, <= 1 when met), ``met``, and the ``reason`` it was not.
     """
     spacing_arr = np.broadcast_to(np.asarray(1.0 if spacing is None else spacing,
                                              dtype=float), (np.ndim(labels),))
@@ -146,8 +146,9 @@ def resolve_fronts(labels, *, spacing, exclude, material_names, faces: list[str]
     cap = smallest * 2 ** SIZE_ROUNDS
     extent = float(np.max(np.asarray(np.shape(labels)) * spacing_arr))
     # mesh_labels' cap is on a leaf's Kuhn diagonal: side times |step| / max(step)
-    max_size = (cap * float(np.linalg.norm(spacing_arr) / spacing_arr.max())
-                if cap < extent else None)
+    max_size = cap * float(np.linalg.norm(spacing_arr) / spacing_arr.max())
+    if cap >= extent or max_size <= float(np.linalg.norm(spacing_arr)):
+        max_size = None          # no cap, or none coarser than the voxels: the splits do it
     budget = min(VERTEX_BUDGET, VERTEX_FACTOR * float(np.prod(np.asarray(np.shape(labels))
                                                                + 1)))
     mesh = mesh_labels(labels, spacing=spacing, exclude=exclude,
@@ -156,8 +157,10 @@ def resolve_fronts(labels, *, spacing, exclude, material_names, faces: list[str]
                                            last, error)
     from ._adapt import MAX_REFINE
 
-    while ratio.max(initial=0.0) > 1 and rounds < SIZE_ROUNDS:
-        if int(mesh.info["lattice"]["refine"]) >= MAX_REFINE:
+    reason = ""
+    while ratio.max(initial=0.0) > 1:
+        if rounds >= SIZE_ROUNDS or int(mesh.info["lattice"]["refine"]) >= MAX_REFINE:
+            reason = f"{rounds} levels of splitting, the most"
             break
         leaf = np.asarray(mesh.cell_data["leaf"])
         per_leaf = np.zeros(int(leaf.max()) + 1)
@@ -166,11 +169,12 @@ def resolve_fronts(labels, *, spacing, exclude, material_names, faces: list[str]
         mesh, tree = refine_within(labels, mesh, per_leaf, budget, tree)
         rounds += 1
         ratio = _ratios(mesh, faces, start_labels, spacing_arr, first, last, error)
-        if len(mesh.points) == before:
+        if len(mesh.points) == before or len(mesh.points) > (1 - 0.05) * budget:
+            reason = f"the vertex budget of {int(budget)}, {VERTEX_FACTOR:g} times the voxels'"
             break
     worst = float(ratio.max(initial=0.0))
     return mesh, {"rounds": rounds, "max_ratio": worst, "met": worst <= 1.0 + 1e-9,
-                  "allowed_at_source": smallest}
+                  "allowed_at_source": smallest, "reason": reason}
 
 
 def _ratios(mesh, faces, start_labels, spacing, first, last, error) -> np.ndarray:
