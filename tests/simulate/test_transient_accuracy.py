@@ -11,6 +11,8 @@ import warnings
 
 import numpy as np
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 from scipy.special import erfc
 
 from napari_swa_imesh.mesh import mesh_labels
@@ -198,3 +200,28 @@ def test_the_cli_prints_the_estimate_and_writes_it_beside_the_series(tmp_path, c
     assert "warning: the estimated error" in err and report["warnings"]
     rc = main(["simulate", str(path), "-k", "1=1", "--transient", "16", "--error", "much"])
     assert rc == 2 and "--error takes a share" in capsys.readouterr().err
+
+
+@settings(max_examples=25, deadline=None)
+@given(st.integers(3, 12), st.integers(0, 2 ** 32 - 1), st.sampled_from([0.0, 1e-2, 1e-4]))
+def test_steps_keep_the_amount_of_an_insulated_chain(n, seed, tol):
+    """Any conductances and capacities, adaptive or fixed steps: ``1' M u`` is kept
+    (each implicit Euler solve keeps it, so does the extrapolation) and the saved times
+    are the asked ones."""
+    from scipy import sparse
+
+    rng = np.random.default_rng(seed)
+    g = rng.uniform(0.1, 10.0, n - 1)                       # conductance of each link
+    diagonal = np.zeros(n)
+    diagonal[:-1] += g
+    diagonal[1:] += g
+    stiffness = sparse.diags([-g, diagonal, -g], [-1, 0, 1], format="csr")
+    mass = sparse.diags(rng.uniform(0.5, 2.0, n), format="csr")
+    u = rng.uniform(0.0, 1.0, n)
+    records = list(adaptive_euler(mass, stiffness, u, np.ones(n, dtype=bool), base=0.25,
+                                  saves=[1, 2, 4], duration=1.0, tol=tol,
+                                  solver_tol=1e-12))
+    assert [r.time for r in records] == [0.25, 0.5, 1.0]
+    start = float(mass.diagonal() @ u)
+    for r in records:
+        assert float(mass.diagonal() @ r.values) == pytest.approx(start, rel=1e-9)

@@ -54,8 +54,10 @@ VERTEX_BUDGET = 3_000_000
 def front_curvature(distance: np.ndarray, first: float, last: float) -> np.ndarray:
     """Largest ``|d^2/dx^2 erfc(x / 2L)|`` at `distance` for ``L`` in ``[first, last]``.
 
-    >>> float(front_curvature(np.array([0.0]), 1.0, 2.0)[0])
-    0.0
+    At the source: the earliest front's largest curvature, ``exp(-1/2) / sqrt(2 pi)``.
+
+    >>> round(float(front_curvature(np.array([0.0]), 1.0, 2.0)[0]), 3)
+    0.242
     """
     x = np.asarray(distance, dtype=float)
     # s exp(-s^2) / L^2 in L at fixed x is largest at s^2 = 3/2
@@ -140,6 +142,11 @@ def resolve_fronts(labels, *, spacing, exclude, material_names, faces: list[str]
         The mesh and what was done: ``rounds``, ``max_ratio`` (largest element side over
         its allowance, <= 1 when met), ``met``, and the ``reason`` it was not.
     """
+    if not faces and start_labels is None:          # nothing to resolve: the labels' mesh
+        mesh = mesh_labels(labels, spacing=spacing, exclude=exclude,
+                           material_names=dict(material_names or {}))
+        return mesh, {"rounds": 0, "max_ratio": 0.0, "met": True,
+                      "allowed_at_source": np.inf, "reason": ""}
     spacing_arr = np.broadcast_to(np.asarray(1.0 if spacing is None else spacing,
                                              dtype=float), (np.ndim(labels),))
     smallest = float(allowed_size(np.zeros(1), first, last, error)[0])
