@@ -225,3 +225,19 @@ def test_steps_keep_the_amount_of_an_insulated_chain(n, seed, tol):
     start = float(mass.diagonal() @ u)
     for r in records:
         assert float(mass.diagonal() @ r.values) == pytest.approx(start, rel=1e-9)
+
+
+def test_a_substance_released_across_an_interface_follows_the_analytic_front():
+    """Material 2 (x < 32) starts at 1, material 1 at 0, equal diffusivity:
+    ``u = erfc((x - 32) / 2L) / 2`` and ``L / sqrt(pi)`` per unit area has crossed."""
+    labels = np.ones((8, 64), dtype=np.uint8)
+    labels[:, :32] = 2
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", UserWarning)
+        r = simulate_transient(labels, {1: 1.0, 2: 1.0}, duration=16.0, steps=1,
+                               initial={2: 1.0})
+    x = r.mesh.points[:, -1]
+    error = float(np.abs(r.values[-1] - 0.5 * erfc((x - 32) / 8.0)).max())
+    crossed = r.amount[1][-1] / 8 / (4 / np.sqrt(np.pi)) - 1
+    assert error <= 0.01 and abs(crossed) <= 0.01
+    assert error <= r.error.relative() <= 0.01

@@ -47,6 +47,9 @@ __all__ = ["DEFAULT_ERROR", "ErrorEstimate", "TransientResult", "simulate_transi
 DEFAULT_ERROR = 0.01
 #: Share of the asked error given to space (the mesh); the rest goes to time.
 SPACE_SHARE = 0.75
+#: Times a label image is meshed again where the space estimate is largest, when it is
+#: over its share of the asked error after the a priori mesh (each reruns the steps).
+POSTERIORI_ROUNDS = 2
 #: Most saved times the space error is estimated at (one P2 solve each).
 ESTIMATED_TIMES = 12
 
@@ -67,6 +70,8 @@ class ErrorEstimate:
         The asked error (share of `jump`); None for fixed steps.
     steps, rejected : int
         Time steps taken and tries rejected.
+    refined : int
+        Times the labels were meshed again where the space estimate was largest.
     """
 
     space: np.ndarray
@@ -75,6 +80,7 @@ class ErrorEstimate:
     asked: float | None
     steps: int
     rejected: int
+    refined: int = 0
 
     def total(self) -> np.ndarray:
         """(T,) space plus time estimate (absolute)."""
@@ -95,7 +101,8 @@ class ErrorEstimate:
             return [None if not np.isfinite(v) else float(v) for v in a]
         return {"asked": self.asked, "estimate": _plain(self.relative()),
                 "jump": self.jump, "space": plain(self.space), "time": plain(self.time),
-                "time_steps": self.steps, "rejected_steps": self.rejected}
+                "time_steps": self.steps, "rejected_steps": self.rejected,
+                "refined_by_estimate": self.refined}
 
     def describe(self) -> str:
         """One line for people."""
@@ -271,91 +278,154 @@ order, exclude, save_every, material_names, tol, error
                                      first=plan["first"], last=plan["last"],
                                      error=SPACE_SHARE * error)
         plan.update(sized)
-    materials, cell_material = np.unique(mesh.material, return_inverse=True)
-    tensors = conductivity_tensors(conductivity, materials, mesh.ndim, mesh.material_names)
-    cap = _per_material(capacity, materials, mesh.material_names, "capacity", 1.0)
-    if np.any(cap <= 0):
-        raise ValueError("capacity must be positive for every material.")
-    start = _per_material(initial, materials, mesh.material_names, "initial value", 0.0)
-    total = len(saves) + 2
-    yield 1, total, f"assembling P{order} on {mesh.n_cells} elements"
+    refinements = 0
+    seconds: dict[str, float] = {}
+    while True:
+        materials, cell_material = np.unique(mesh.material, return_inverse=True)
+        tensors = conductivity_tensors(conductivity, materials, mesh.ndim, mesh.material_names)
+        cap = _per_material(capacity, materials, mesh.material_names, "capacity", 1.0)
+        if np.any(cap <= 0):
+            raise ValueError("capacity must be positive for every material.")
+        start = _per_material(initial, materials, mesh.material_names, "initial value", 0.0)
+        total = len(saves) + 2
+        yield 1, total, f"assembling P{order} on {mesh.n_cells} elements"
 
-    basis = fe_basis(mesh, order)                # mass and loads; same dof numbering
-    space = fe_space(mesh, order)
-    stiffness = stiffness_matrix(space, tensors, cell_material)
-    exact = mass_basis(basis)                  # mass, start and amounts share it
-    mass = mass_matrix(exact, cap[cell_material])
-    lo, hi = mesh.image_box()
-    fixed_dofs = []
-    for face in fixed:
-        dofs_on_face = face_dofs(basis.doflocs, lo, hi, face)
-        if dofs_on_face.size == 0:
-            raise ValueError(f"no meshed material touches the {face} face, so a value fixed "
-                             "there acts on nothing; fix another face or mesh the material "
-                             "on it.")
-        fixed_dofs.append(dofs_on_face)
-    dofs = np.concatenate(fixed_dofs) if fixed_dofs else np.zeros(0, dtype=np.intp)
-    values = np.concatenate([np.full(d.size, float(fixed[f]))
-                             for f, d in zip(fixed, fixed_dofs)]) if fixed_dofs else np.zeros(0)
-    free = np.ones(mass.shape[0], dtype=bool)
-    free[dofs] = False
-    coarse = p1_embedding(space)             # P2: the P1 functions, first coarse level
-    if coarse is not None:
-        coarse = coarse[free][:, free[:coarse.shape[1]]]
-    data = np.concatenate([values, start])
-    jump = float(data.max() - data.min()) if data.size else 0.0
-    u = _initial_field(exact, order, mass, (cap * start)[cell_material])
-    u[dofs] = values
-    cell_amount = _amount_per_cell_fn(exact, cap[cell_material])
-    estimator, notes = None, []
-    if order == 1 and jump > 0:
-        unknowns = len(mesh.points) + _edge_count(mesh)
-        if unknowns <= ESTIMATE_UNKNOWNS:
-            estimator = SpaceEstimator(mesh, tensors, cell_material, cap[cell_material],
-                                       fixed, tol, mass, stiffness, free)
-        else:
-            notes.append(f"the space error was not estimated: its P2 reconstruction "
-                            f"would take {unknowns} unknowns (more than "
-                            f"{ESTIMATE_UNKNOWNS}); check the result on a coarser image.")
-    estimate_at = set(_estimate_indices(len(saves)))
-    seconds = {"mesh_and_assembly": time.perf_counter() - t0}
+        basis = fe_basis(mesh, order)                # mass and loads; same dof numbering
+        space = fe_space(mesh, order)
+        stiffness = stiffness_matrix(space, tensors, cell_material)
+        exact = mass_basis(basis)                  # mass, start and amounts share it
+        mass = mass_matrix(exact, cap[cell_material])
+        lo, hi = mesh.image_box()
+        fixed_dofs = []
+        for face in fixed:
+            dofs_on_face = face_dofs(basis.doflocs, lo, hi, face)
+            if dofs_on_face.size == 0:
+                raise ValueError(f"no meshed material touches the {face} face, so a value fixed "
+                                 "there acts on nothing; fix another face or mesh the material "
+                                 "on it.")
+            fixed_dofs.append(dofs_on_face)
+        dofs = np.concatenate(fixed_dofs) if fixed_dofs else np.zeros(0, dtype=np.intp)
+        values = np.concatenate([np.full(d.size, float(fixed[f]))
+                                 for f, d in zip(fixed, fixed_dofs)]) if fixed_dofs else np.zeros(0)
+        free = np.ones(mass.shape[0], dtype=bool)
+        free[dofs] = False
+        coarse = p1_embedding(space)             # P2: the P1 functions, first coarse level
+        if coarse is not None:
+            coarse = coarse[free][:, free[:coarse.shape[1]]]
+        data = np.concatenate([values, start])
+        jump = float(data.max() - data.min()) if data.size else 0.0
+        u = _initial_field(exact, order, mass, (cap * start)[cell_material])
+        u[dofs] = values
+        cell_amount = _amount_per_cell_fn(exact, cap[cell_material])
+        estimator, notes = None, []
+        if order == 1 and jump > 0:
+            unknowns = len(mesh.points) + _edge_count(mesh)
+            if unknowns <= ESTIMATE_UNKNOWNS:
+                estimator = SpaceEstimator(mesh, tensors, cell_material, cap[cell_material],
+                                           fixed, tol, mass, stiffness, free)
+            else:
+                notes.append(f"the space error was not estimated: its P2 reconstruction "
+                                f"would take {unknowns} unknowns (more than "
+                                f"{ESTIMATE_UNKNOWNS}); check the result on a coarser image.")
+        estimate_at = set(_estimate_indices(len(saves)))
+        seconds["mesh_and_assembly"] = (seconds.get("mesh_and_assembly", 0.0)
+                                        + time.perf_counter() - t0)
 
-    times, saved, amounts = [0.0], [vertex_values(u, len(mesh.points))], [cell_amount(u)]
-    space_error, time_error, iterations = [0.0], [0.0], []
-    t0 = time.perf_counter()
-    t_estimate = 0.0
-    record = None
-    run = adaptive_euler(mass, stiffness, u, free, base=base, saves=saves,
-                         duration=duration,
-                         tol=0.0 if error is None else (1 - SPACE_SHARE) * error * jump,
-                         solver_tol=tol, coarse=coarse)
-    for i, record in enumerate(run):
-        yield i + 2, total, f"t = {record.time:g} of {duration:g} ({record.steps} steps)"
-        times.append(record.time)
-        saved.append(vertex_values(record.values, len(mesh.points)))
-        amounts.append(cell_amount(record.values))
-        time_error.append(record.time_error)
-        iterations.append(record.iterations - sum(iterations))
-        if estimator is not None and i in estimate_at:
-            t1 = time.perf_counter()
-            space_error.append(estimator.error(record.values)[0])
-            t_estimate += time.perf_counter() - t1
-        else:
-            space_error.append(np.nan if jump > 0 else 0.0)
-    seconds["steps"] = time.perf_counter() - t0 - t_estimate
-    seconds["error_estimate"] = t_estimate
+        times, saved, amounts = [0.0], [vertex_values(u, len(mesh.points))], [cell_amount(u)]
+        space_error, time_error, iterations = [0.0], [0.0], []
+        t0 = time.perf_counter()
+        t_estimate = 0.0
+        record = None
+        run = adaptive_euler(mass, stiffness, u, free, base=base, saves=saves,
+                             duration=duration,
+                             tol=0.0 if error is None else (1 - SPACE_SHARE) * error * jump,
+                             solver_tol=tol, coarse=coarse)
+        for i, record in enumerate(run):
+            yield i + 2, total, f"t = {record.time:g} of {duration:g} ({record.steps} steps)"
+            times.append(record.time)
+            saved.append(vertex_values(record.values, len(mesh.points)))
+            amounts.append(cell_amount(record.values))
+            time_error.append(record.time_error)
+            iterations.append(record.iterations - sum(iterations))
+            if estimator is not None and i in estimate_at:
+                t1 = time.perf_counter()
+                value, difference = estimator.error(record.values)
+                if value >= np.nanmax(space_error):
+                    estimator.worst = difference      # where to refine, if asked to
+                space_error.append(value)
+                t_estimate += time.perf_counter() - t1
+            else:
+                space_error.append(np.nan if jump > 0 else 0.0)
+        seconds["steps"] = seconds.get("steps", 0.0) + time.perf_counter() - t0 - t_estimate
+        seconds["error_estimate"] = seconds.get("error_estimate", 0.0) + t_estimate
+        per_cell = np.stack(amounts)                                      # (T, M)
+        amount = {int(m): per_cell[:, cell_material == i].sum(axis=1)
+                  for i, m in enumerate(materials)}
+        estimate = ErrorEstimate(np.array(space_error), np.array(time_error), jump, error,
+                                 record.steps, record.rejected)
+        if not _worth_refining(estimate, plan, estimator, error):
+            break
+        if refinements >= POSTERIORI_ROUNDS:
+            plan.update(met=False, reason=f"{refinements} remeshings by the estimate, the "
+                                          "most")
+            break
+        refined, why = _refine_by_estimate(mesh_or_labels, mesh, estimator,
+                                           0.5 * SPACE_SHARE * error * jump,
+                                           plan.get("tree"))
+        if refined is None:
+            plan.update(met=False, reason=why)
+            break
+        mesh, plan["tree"] = refined
+        refinements += 1
+        t0 = time.perf_counter()
     yield total, total, "done"
-    per_cell = np.stack(amounts)                                      # (T, M)
-    amount = {int(m): per_cell[:, cell_material == i].sum(axis=1)
-              for i, m in enumerate(materials)}
-    estimate = ErrorEstimate(np.array(space_error), np.array(time_error), jump, error,
-                             record.steps, record.rejected)
+    estimate.refined = refinements
     notes += _error_warnings(estimate, plan, record, order, isinstance(mesh_or_labels, Mesh))
     for note in notes:
         warnings.warn(note, UserWarning, stacklevel=3)
     return TransientResult(np.array(times), np.stack(saved), amount, mesh, order,
                            int(mass.shape[0]), np.array(iterations, dtype=int), seconds,
                            estimate, notes)
+
+
+def _worth_refining(estimate: ErrorEstimate, plan, estimator, error) -> bool:
+    """Whether to mesh again where the space estimate is largest and run again: a label
+    image, an ask, and a space estimate over its share."""
+    if plan is None or estimator is None or error is None or estimate.jump == 0:
+        return False
+    if getattr(estimator, "worst", None) is None:
+        return False
+    space = np.nanmax(estimate.space) if np.any(np.isfinite(estimate.space)) else 0.0
+    return bool(space > SPACE_SHARE * error * estimate.jump)
+
+
+def _refine_by_estimate(labels, mesh: Mesh, estimator, threshold: float, tree):
+    """The labels meshed again with the leaves split where the elliptic reconstruction
+    differs from the field by more than `threshold` (within the vertex budget), with its
+    tree, or None and the reason nothing can be split."""
+    from ._adapt import MAX_REFINE, refine_within
+    from ._transient_space import VERTEX_FACTOR, vertex_budget
+
+    if int(mesh.info["lattice"]["refine"]) >= MAX_REFINE:
+        return None, f"refine level {MAX_REFINE}, the finest"
+    n = len(mesh.points)
+    difference = np.abs(estimator.worst)
+    vertex = difference[:n].copy()
+    np.maximum.at(vertex, estimator.edges[:, 0], difference[n:])
+    np.maximum.at(vertex, estimator.edges[:, 1], difference[n:])
+    cell = vertex[mesh.cells].max(axis=1)
+    leaf = np.asarray(mesh.cell_data["leaf"])
+    per_leaf = np.zeros(int(leaf.max()) + 1)
+    np.maximum.at(per_leaf, leaf, np.where(cell > threshold, cell, 0.0))
+    budget = vertex_budget(labels)
+    if not per_leaf.any():
+        return None, "no element over the threshold"
+    if n >= (1 - 0.05) * budget:
+        return None, f"the vertex budget of {int(budget)}, {VERTEX_FACTOR:g} times the voxels'"
+    new, tree = refine_within(labels, mesh, per_leaf, budget, tree)
+    if len(new.points) <= n:
+        return None, f"the vertex budget of {int(budget)}, {VERTEX_FACTOR:g} times the voxels'"
+    return (new, tree), ""
 
 
 def _edge_count(mesh: Mesh) -> int:
@@ -423,9 +493,10 @@ def _error_warnings(estimate: ErrorEstimate, plan, record, order: int,
                    "label image (it is then meshed for the diffusion length) or mesh it "
                    "finer, or save later times (fewer --steps)")
         elif plan is not None and not plan.get("met", True):
-            fix = (f"the mesh could not be refined enough ({plan['reason']}; largest "
-                   f"element {plan['max_ratio']:.2g} times its size): save later times "
-                   "(fewer --steps) or a smaller image")
+            size = (f"; largest element {plan['max_ratio']:.2g} times the size the "
+                    "diffusion length asks" if plan.get("max_ratio", 0) > 1 else "")
+            fix = (f"the mesh could not be refined enough ({plan['reason']}{size}): save "
+                   "later times (fewer --steps) or a smaller image")
         else:
             fix = "ask a looser error or save later times (fewer --steps)"
         out.append(f"the estimated error {100 * worst:.2g} % of the jump exceeds "

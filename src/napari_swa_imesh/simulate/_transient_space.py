@@ -111,6 +111,13 @@ def source_distance(mesh: Mesh, centroids: np.ndarray, faces: list[str],
     return np.maximum(out, 0.0)
 
 
+def vertex_budget(labels) -> float:
+    """Most vertices a transient run's mesh of `labels` may have (:data:`VERTEX_FACTOR`
+    times the voxel lattice's, at most :data:`VERTEX_BUDGET`)."""
+    return min(VERTEX_BUDGET, VERTEX_FACTOR * float(np.prod(np.asarray(np.shape(labels))
+                                                            + 1)))
+
+
 def allowed_size(distance: np.ndarray, first: float, last: float, error: float
                  ) -> np.ndarray:
     """Largest element side at `distance` for a P1 error `error` (relative to the jump)."""
@@ -146,7 +153,7 @@ def resolve_fronts(labels, *, spacing, exclude, material_names, faces: list[str]
         mesh = mesh_labels(labels, spacing=spacing, exclude=exclude,
                            material_names=dict(material_names or {}))
         return mesh, {"rounds": 0, "max_ratio": 0.0, "met": True,
-                      "allowed_at_source": np.inf, "reason": ""}
+                      "allowed_at_source": np.inf, "reason": "", "tree": None}
     spacing_arr = np.broadcast_to(np.asarray(1.0 if spacing is None else spacing,
                                              dtype=float), (np.ndim(labels),))
     smallest = float(allowed_size(np.zeros(1), first, last, error)[0])
@@ -156,8 +163,7 @@ def resolve_fronts(labels, *, spacing, exclude, material_names, faces: list[str]
     max_size = cap * float(np.linalg.norm(spacing_arr) / spacing_arr.max())
     if cap >= extent or max_size <= float(np.linalg.norm(spacing_arr)):
         max_size = None          # no cap, or none coarser than the voxels: the splits do it
-    budget = min(VERTEX_BUDGET, VERTEX_FACTOR * float(np.prod(np.asarray(np.shape(labels))
-                                                               + 1)))
+    budget = vertex_budget(labels)
     mesh = mesh_labels(labels, spacing=spacing, exclude=exclude,
                        material_names=dict(material_names or {}), max_size=max_size)
     tree, rounds, ratio = None, 0, _ratios(mesh, faces, start_labels, spacing_arr, first,
@@ -181,7 +187,7 @@ def resolve_fronts(labels, *, spacing, exclude, material_names, faces: list[str]
             break
     worst = float(ratio.max(initial=0.0))
     return mesh, {"rounds": rounds, "max_ratio": worst, "met": worst <= 1.0 + 1e-9,
-                  "allowed_at_source": smallest, "reason": reason}
+                  "allowed_at_source": smallest, "reason": reason, "tree": tree}
 
 
 def _ratios(mesh, faces, start_labels, spacing, first, last, error) -> np.ndarray:
@@ -215,6 +221,8 @@ class SpaceEstimator:
         self.stiff1 = stiffness1[free1].tocsr()
         self.mass1 = SPDSolver(mass1[free1][:, free1].tocsr(), tol=tol)
         space = fe_space(mesh, 2)
+        self.edges = space.edges                           # (E, 2) vertices of P2's edges
+        self.worst = None                                  # set by the caller
         self.embed = p1_embedding(space)                   # (n2, n1)
         stiffness = stiffness_matrix(space, tensors, cell_material)
         basis = fe_basis(mesh, 2)
