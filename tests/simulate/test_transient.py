@@ -37,7 +37,9 @@ def test_a_long_run_reaches_the_steady_potential():
     labels = rng.integers(1, 3, size=(10, 12)).astype(np.uint8)
     k = {1: 1.0, 2: 4.0}
     steady = simulate(labels, k, axes="x", order=1, adapt=0)
-    r = simulate_transient(labels, k, duration=2000.0, steps=40,
+    # on the steady run's mesh: from the labels the transient run meshes finer where its
+    # error estimate asks (2.4 % estimated on this mesh, the steady P1 error)
+    r = simulate_transient(steady.mesh, k, duration=2000.0, steps=40,
                            fixed={"xmin": 0.0, "xmax": 1.0})
     assert np.allclose(r.values[-1], steady.potential["x"], atol=1e-6)
 
@@ -98,7 +100,9 @@ def test_saved_frames_are_the_field_at_their_times():
     assert np.allclose(r.values[0][x > 0], 0.0)                 # the start, not the end
     changes = np.abs(np.diff(r.values, axis=0)).max(axis=1)
     assert np.all(changes > 1e-3)                               # every frame differs
-    assert np.all(np.diff(r.values[:, x == 8].mean(axis=1)) > 0)  # the front advances
+    # the front advances (at x = 2: at x = 8 the first frames are at 1e-6 and below, where
+    # the consistent mass undershoots by as much ahead of the front)
+    assert np.all(np.diff(r.values[:, x == 2].mean(axis=1)) > 0)
 
 
 def test_p1_start_stays_within_its_values_and_p2_nearly():

@@ -8,8 +8,9 @@
   protocol, checked against its Voigt-Reuss bounds;
 * :func:`solve_boundary_value`: one steady problem with Dirichlet, Neumann and Robin
   conditions on the mesh's named facet groups and volume sources;
-* :func:`simulate_transient` (and :func:`transient_steps`): implicit Euler on the same
-  assembly, a heat front from a face or a substance released from a material;
+* :func:`simulate_transient` (and :func:`transient_steps`): a heat front from a face or a
+  substance released from a material, the mesh and the time steps chosen for an asked
+  error and the error estimated (:mod:`._transient_space`, :mod:`._time_steps`);
 * :func:`conductivity_tensors`, :func:`parse_conductivity_args`: the conductivity table;
 * :func:`simulation_report` (with :func:`read_signatures`, :func:`write_report`): the
   per-material signatures of the segmentation and k_eff in one table.

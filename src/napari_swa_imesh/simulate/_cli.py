@@ -78,11 +78,19 @@ def add_commands(subparsers) -> None:
     b.add_argument("--source", nargs="+", action="extend", default=[],
                    metavar="MATERIAL=F", help="volume source density per material: 2=1.5")
     t = p.add_argument_group(
-        "transient", "with --transient, solve c du/dt = div(k grad u) by implicit Euler "
-        "instead of k_eff; faces not fixed are insulated")
+        "transient", "with --transient, solve c du/dt = div(k grad u) instead of k_eff, the "
+        "mesh and time steps chosen for --error; faces not fixed are insulated")
     t.add_argument("--transient", type=float, default=None, metavar="DURATION",
                    help="end time of a transient run")
-    t.add_argument("--steps", type=int, default=None, help="implicit Euler steps (default 50)")
+    t.add_argument("--steps", type=int, default=None,
+                   help="saved times duration*k/steps (default 50); the time steps adapt "
+                        "within them")
+    t.add_argument("--error", default=None, metavar="E|fixed",
+                   help="asked max error as a share of the largest jump of the fixed and "
+                        "initial values (default 0.01): the mesh resolves the earliest saved "
+                        "time's diffusion length and the steps adapt; the estimate is "
+                        "printed, with a warning when it is exceeded. fixed: the mesh as "
+                        "the labels give it and equal implicit Euler steps")
     t.add_argument("--fixed", nargs="+", action="extend", default=[], metavar="FACE=VALUE",
                    help="fixed values on box faces: xmin=1 (faces xmin..zmax)")
     t.add_argument("--initial", nargs="+", action="extend", default=[],
@@ -257,6 +265,7 @@ def _transient_options(args) -> dict | None:
         given = [flag for flag, value in (("--fixed", args.fixed), ("--initial", args.initial),
                                           ("--capacity", args.capacity),
                                           ("--steps", args.steps is not None),
+                                          ("--error", args.error is not None),
                                           ("--save-every", args.save_every is not None))
                  if value]
         if given:
@@ -280,7 +289,17 @@ def _transient_options(args) -> dict | None:
     for flag, value in (("--steps", args.steps), ("--save-every", args.save_every)):
         if value is not None and value < 1:
             raise ValueError(f"{flag} must be a positive whole number, not {value}.")
+    from ._transient import DEFAULT_ERROR
+
+    error = DEFAULT_ERROR if args.error is None else args.error
+    if error != "fixed":
+        try:
+            error = float(error)
+        except ValueError:
+            raise ValueError(f"--error takes a share such as 0.01, or fixed, not "
+                             f"{args.error!r}.") from None
     return {"duration": args.transient, "steps": 50 if args.steps is None else args.steps,
+            "error": None if error == "fixed" else error,
             "fixed": fixed,
             "initial": _numbers(args.initial, "--initial", 0.0),
             "capacity": _numbers(args.capacity, "--capacity", 1.0),

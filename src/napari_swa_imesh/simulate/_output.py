@@ -130,7 +130,9 @@ def write_series(result, path, *, force: bool = False, name: str = "u") -> list[
     One HDF5 file beside the ``.xdmf`` holds the mesh once (x, y(, z) order, ``material``
     per cell) and field `name` at the vertices for every saved time; the XDMF names it by
     its file name only, so the pair can be moved together. (meshio's own time-series
-    writer puts the ``.h5`` in the working directory, not beside the ``.xdmf``.)
+    writer puts the ``.h5`` in the working directory, not beside the ``.xdmf``.) The
+    error estimate per saved time goes in ``error/space`` and ``error/time`` (absolute,
+    NaN where not estimated) beside ``error/jump``, the scale it is relative to.
     """
     targets = check_series_path(path, force=force)
     m = to_meshio(result.mesh)
@@ -152,6 +154,11 @@ def write_series(result, path, *, force: bool = False, name: str = "u") -> list[
             h5["points"] = points
             h5["cells"] = cells.astype(np.int64)
             h5["material"] = material.astype(np.int64)
+            estimate = getattr(result, "error", None)
+            if estimate is not None:       # per saved time; NaN where not estimated
+                h5["error/space"] = np.asarray(estimate.space, dtype=np.float64)
+                h5["error/time"] = np.asarray(estimate.time, dtype=np.float64)
+                h5["error/jump"] = float(estimate.jump)
             for k, (time, values) in enumerate(zip(result.times, result.values)):
                 h5[f"{name}/{k}"] = np.asarray(values, dtype=np.float64)
                 grids.append(

@@ -1,17 +1,29 @@
-"""Transient diffusion: implicit Euler on the same assembly as the steady solve.
+"""Transient diffusion with error control, on the same assembly as the steady solve.
 
     c du/dt - div(k grad u) = 0,
 
 ``c`` the capacity per material (heat capacity rho*c_p, or porosity for a solute), ``k``
-the conductivity. Implicit Euler is unconditionally stable and, with the consistent mass
-matrix and insulated faces, conserves the total amount ``int c u`` to solver precision
-(tested); each step solves ``(M / dt + K) u_new = M u_old / dt`` with one AMG hierarchy
-built once for all steps.
+the conductivity. The run is asked an accuracy, ``error`` (default 1 % of the largest jump
+of the data: fixed values and initial values), and chooses its resolution for it:
+
+* **space** (:mod:`._transient_space`): a label image is meshed so that elements near the
+  fixed faces and the jumps of the initial value resolve the diffusion length
+  ``sqrt(D t)`` of the earliest saved time (the IMESH octree alone coarsens a uniform
+  material to a handful of elements: 18 vertices for a 8 x 64 slab, 0.09 max error);
+* **time** (:mod:`._time_steps`): implicit Euler with step doubling and Richardson
+  extrapolation, dyadic steps that start short at t = 0 and grow as the field smooths;
+* **estimate**: at the saved times, the space error by the P2 elliptic reconstruction
+  and the time error as the sum of the step estimates; printed, in the summary, and a
+  sentence when it exceeds what was asked.
+
+Each implicit Euler solve with the consistent mass matrix and insulated faces conserves
+the total amount ``int c u`` to solver precision, and so does the extrapolation (tested).
 """
 
 from __future__ import annotations
 
 import time
+import warnings
 from collections.abc import Mapping
 from dataclasses import dataclass, field
 from numbers import Real
@@ -24,9 +36,92 @@ from ._conductivity import conductivity_tensors, material_label
 from ._fe import fe_basis, mass_basis, mass_matrix, vertex_values
 from ._protocols import face_dofs, face_names
 from ._simulate import check_tolerance, prepare_mesh
-from ._solve import DEFAULT_TOLERANCE, SPDSolver, solve_spd, split_fixed
+from ._solve import DEFAULT_TOLERANCE, solve_spd
+from ._time_steps import adaptive_euler
+from ._transient_space import ESTIMATE_UNKNOWNS, SpaceEstimator, resolve_fronts
 
-__all__ = ["TransientResult", "simulate_transient", "transient_steps"]
+__all__ = ["DEFAULT_ERROR", "ErrorEstimate", "TransientResult", "simulate_transient",
+           "transient_steps"]
+
+#: Asked max error of a transient run, as a share of the largest jump of the data.
+DEFAULT_ERROR = 0.01
+#: Share of the asked error given to space (the mesh); the rest goes to time.
+SPACE_SHARE = 0.75
+#: Times a label image is meshed again where the space estimate is largest, when it is
+#: over its share of the asked error after the a priori mesh (each reruns the steps).
+POSTERIORI_ROUNDS = 2
+#: Most saved times the space error is estimated at (one P2 solve each).
+ESTIMATED_TIMES = 12
+
+
+@dataclass
+class ErrorEstimate:
+    """Estimated errors of a transient run, at the saved times.
+
+    Attributes
+    ----------
+    space : (T,) ndarray
+        ``max |w - u|`` of the P2 elliptic reconstruction (NaN where not estimated).
+    time : (T,) ndarray
+        Sum of the step estimates up to each saved time.
+    jump : float
+        Largest difference of the data (fixed and initial values): the errors' scale.
+    asked : float or None
+        The asked error (share of `jump`); None for fixed steps.
+    steps, rejected : int
+        Time steps taken and tries rejected.
+    refined : int
+        Times the labels were meshed again where the space estimate was largest.
+    """
+
+    space: np.ndarray
+    time: np.ndarray
+    jump: float
+    asked: float | None
+    steps: int
+    rejected: int
+    refined: int = 0
+
+    def total(self) -> np.ndarray:
+        """(T,) space plus time estimate (absolute)."""
+        return np.nan_to_num(self.space, nan=0.0) + self.time
+
+    def relative(self) -> float:
+        """Largest total estimate over the saved times, as a share of `jump` (NaN when
+        the space error was estimated nowhere)."""
+        if self.jump == 0:
+            return 0.0
+        if self.space.size > 1 and np.all(np.isnan(self.space[1:])):
+            return float("nan")
+        return float(self.total().max() / self.jump)
+
+    def summary(self) -> dict:
+        """Plain JSON (NaN as None)."""
+        def plain(a):
+            return [None if not np.isfinite(v) else float(v) for v in a]
+        return {"asked": self.asked, "estimate": _plain(self.relative()),
+                "jump": self.jump, "space": plain(self.space), "time": plain(self.time),
+                "time_steps": self.steps, "rejected_steps": self.rejected,
+                "refined_by_estimate": self.refined}
+
+    def describe(self) -> str:
+        """One line for people."""
+        if self.jump == 0:
+            return "error: none (the data are uniform, so is the field)"
+        worst = self.relative()
+        space = np.nanmax(self.space) / self.jump if np.any(np.isfinite(self.space[1:])) \
+            else float("nan")
+        asked = "fixed steps" if self.asked is None else f"asked {100 * self.asked:g} %"
+        if not np.isfinite(worst):
+            return (f"estimated error: time {100 * self.time.max() / self.jump:.2g} % of "
+                    f"the jump, space not estimated ({asked})")
+        return (f"estimated max error {100 * worst:.2g} % of the jump (space "
+                f"{100 * space:.2g} %, time {100 * self.time.max() / self.jump:.2g} %; "
+                f"{asked})")
+
+
+def _plain(value: float):
+    return None if not np.isfinite(value) else float(value)
 
 
 @dataclass
@@ -44,9 +139,12 @@ class TransientResult:
     mesh : Mesh
     order : int
     dofs : int
-    iterations : (steps,) ndarray of int
-        Conjugate-gradient iterations per step.
+    iterations : (T - 1,) ndarray of int
+        Conjugate-gradient iterations between consecutive saved times.
     seconds : dict of str to float
+    error : ErrorEstimate or None
+    warnings : list of str
+        One sentence per way the run may miss the asked error.
     """
 
     times: np.ndarray
@@ -57,24 +155,35 @@ class TransientResult:
     dofs: int
     iterations: np.ndarray
     seconds: dict[str, float] = field(default_factory=dict)
+    error: ErrorEstimate | None = None
+    warnings: list[str] = field(default_factory=list)
 
     def summary(self) -> dict:
         """Plain-JSON summary."""
-        return {
+        out = {
             "times": self.times.tolist(),
             "amount": {str(m): a.tolist() for m, a in self.amount.items()},
             "order": self.order, "dofs": self.dofs, "elements": self.mesh.n_cells,
+            "vertices": len(self.mesh.points),
             "iterations": int(self.iterations.sum()),
             "seconds": dict(self.seconds),
+            "warnings": list(self.warnings),
         }
+        if self.error is not None:
+            out["error"] = self.error.summary()
+        return out
 
     def describe(self) -> str:
-        """Two lines for people: the run's size and cost, the amount at start and end."""
+        """The run's size and cost, the amount at start and end, the error estimate, one
+        line each (the warnings are raised as ``UserWarning`` and kept in `warnings`)."""
         total = sum(a for a in self.amount.values())
+        steps = self.error.steps if self.error is not None else self.iterations.size
         lines = [f"transient diffusion, P{self.order} on {self.mesh.n_cells} elements, "
-                 f"{self.dofs} unknowns, {self.iterations.size} implicit Euler steps to "
+                 f"{self.dofs} unknowns, {steps} implicit Euler steps to "
                  f"t = {self.times[-1]:g} ({int(self.iterations.sum())} CG iterations)",
                  f"total amount {total[0]:.6g} at t = 0, {total[-1]:.6g} at the end"]
+        if self.error is not None:
+            lines.append(self.error.describe())
         return "\n".join(lines)
 
 
@@ -110,19 +219,19 @@ def transient_steps(mesh_or_labels, conductivity: Mapping, *, duration: float, s
                     capacity=1.0, initial=0.0, fixed: Mapping[str, float] | None = None,
                     spacing=None, order: int = 1, exclude=(), save_every: int = 1,
                     material_names: Mapping[int, str] | None = None,
-                    tol: float = DEFAULT_TOLERANCE):
+                    tol: float = DEFAULT_TOLERANCE, error: float | None = DEFAULT_ERROR):
     """Run :func:`simulate_transient` step by step, for a progress bar.
 
     Parameters
     ----------
     mesh_or_labels, conductivity, duration, steps, capacity, initial, fixed, spacing, \
-order, exclude, save_every, material_names, tol
+order, exclude, save_every, material_names, tol, error
         As for :func:`simulate_transient`.
 
     Yields
     ------
     (done, total, message) : (int, int, str)
-        Progress: assembly, then one report per time step.
+        Progress: assembly, then one report per saved time.
 
     Returns
     -------
@@ -137,75 +246,266 @@ order, exclude, save_every, material_names, tol
     steps = _whole(steps, "steps")
     save_every = _whole(save_every, "save_every")
     check_tolerance(tol)
+    if error is not None:
+        error = _number(error, "error")
+        if not 0 < error < 1:
+            raise ValueError(f"error must lie between 0 and 1 (a share of the largest "
+                             f"jump of the data, e.g. 0.01), not {error!r}.")
     fixed = dict(fixed or {})
     t0 = time.perf_counter()
-    mesh = prepare_mesh(mesh_or_labels, spacing=spacing, exclude=exclude,
-                        material_names=material_names)
+    ndim = (mesh_or_labels.ndim if isinstance(mesh_or_labels, Mesh)
+            else np.ndim(mesh_or_labels))
     for face, value in fixed.items():
-        if face not in face_names(mesh.ndim):
-            raise ValueError(f"unknown face {face!r}; the faces of a {mesh.ndim}-D box are "
-                             f"{', '.join(face_names(mesh.ndim))}.")
+        if face not in face_names(ndim):
+            raise ValueError(f"unknown face {face!r}; the faces of a {ndim}-D box are "
+                             f"{', '.join(face_names(ndim))}.")
         _number(value, f"the value fixed on {face}")
-    materials, cell_material = np.unique(mesh.material, return_inverse=True)
-    tensors = conductivity_tensors(conductivity, materials, mesh.ndim, mesh.material_names)
-    cap = _per_material(capacity, materials, mesh.material_names, "capacity", 1.0)
+    saves = [k for k in range(save_every, steps + 1, save_every)]
+    if not saves or saves[-1] != steps:
+        saves.append(steps)
+    base = duration / steps
+    plan = None
+    if isinstance(mesh_or_labels, Mesh) or error is None:
+        mesh = prepare_mesh(mesh_or_labels, spacing=spacing, exclude=exclude,
+                            material_names=material_names)
+    else:
+        plan = _front_plan(mesh_or_labels, conductivity, capacity, initial, fixed,
+                           spacing=spacing, exclude=exclude, names=material_names,
+                           first=saves[0] * base, duration=duration)
+        mesh, sized = resolve_fronts(mesh_or_labels, spacing=spacing, exclude=exclude,
+                                     material_names=material_names, faces=list(fixed),
+                                     start_labels=plan["start_labels"],
+                                     first=plan["first"], last=plan["last"],
+                                     error=SPACE_SHARE * error)
+        plan.update(sized)
+    refinements = 0
+    seconds: dict[str, float] = {}
+    while True:
+        materials, cell_material = np.unique(mesh.material, return_inverse=True)
+        tensors = conductivity_tensors(conductivity, materials, mesh.ndim, mesh.material_names)
+        cap = _per_material(capacity, materials, mesh.material_names, "capacity", 1.0)
+        if np.any(cap <= 0):
+            raise ValueError("capacity must be positive for every material.")
+        start = _per_material(initial, materials, mesh.material_names, "initial value", 0.0)
+        total = len(saves) + 2
+        yield 1, total, f"assembling P{order} on {mesh.n_cells} elements"
+
+        basis = fe_basis(mesh, order)                # mass and loads; same dof numbering
+        space = fe_space(mesh, order)
+        stiffness = stiffness_matrix(space, tensors, cell_material)
+        exact = mass_basis(basis)                  # mass, start and amounts share it
+        mass = mass_matrix(exact, cap[cell_material])
+        lo, hi = mesh.image_box()
+        fixed_dofs = []
+        for face in fixed:
+            dofs_on_face = face_dofs(basis.doflocs, lo, hi, face)
+            if dofs_on_face.size == 0:
+                raise ValueError(f"no meshed material touches the {face} face, so a value fixed "
+                                 "there acts on nothing; fix another face or mesh the material "
+                                 "on it.")
+            fixed_dofs.append(dofs_on_face)
+        dofs = np.concatenate(fixed_dofs) if fixed_dofs else np.zeros(0, dtype=np.intp)
+        values = np.concatenate([np.full(d.size, float(fixed[f]))
+                                 for f, d in zip(fixed, fixed_dofs)]) if fixed_dofs else np.zeros(0)
+        free = np.ones(mass.shape[0], dtype=bool)
+        free[dofs] = False
+        coarse = p1_embedding(space)             # P2: the P1 functions, first coarse level
+        if coarse is not None:
+            coarse = coarse[free][:, free[:coarse.shape[1]]]
+        data = np.concatenate([values, start])
+        jump = float(data.max() - data.min()) if data.size else 0.0
+        u = _initial_field(exact, order, mass, (cap * start)[cell_material])
+        u[dofs] = values
+        cell_amount = _amount_per_cell_fn(exact, cap[cell_material])
+        estimator, notes = None, []
+        if order == 1 and jump > 0:
+            unknowns = len(mesh.points) + _edge_count(mesh)
+            if unknowns <= ESTIMATE_UNKNOWNS:
+                estimator = SpaceEstimator(mesh, tensors, cell_material, cap[cell_material],
+                                           fixed, tol, mass, stiffness, free)
+            else:
+                notes.append(f"the space error was not estimated: its P2 reconstruction "
+                                f"would take {unknowns} unknowns (more than "
+                                f"{ESTIMATE_UNKNOWNS}); check the result on a coarser image.")
+        estimate_at = set(_estimate_indices(len(saves)))
+        seconds["mesh_and_assembly"] = (seconds.get("mesh_and_assembly", 0.0)
+                                        + time.perf_counter() - t0)
+
+        times, saved, amounts = [0.0], [vertex_values(u, len(mesh.points))], [cell_amount(u)]
+        space_error, time_error, iterations = [0.0], [0.0], []
+        t0 = time.perf_counter()
+        t_estimate = 0.0
+        record = None
+        run = adaptive_euler(mass, stiffness, u, free, base=base, saves=saves,
+                             duration=duration,
+                             tol=0.0 if error is None else (1 - SPACE_SHARE) * error * jump,
+                             solver_tol=tol, coarse=coarse)
+        for i, record in enumerate(run):
+            yield i + 2, total, f"t = {record.time:g} of {duration:g} ({record.steps} steps)"
+            times.append(record.time)
+            saved.append(vertex_values(record.values, len(mesh.points)))
+            amounts.append(cell_amount(record.values))
+            time_error.append(record.time_error)
+            iterations.append(record.iterations - sum(iterations))
+            if estimator is not None and i in estimate_at:
+                t1 = time.perf_counter()
+                value, difference = estimator.error(record.values)
+                if value >= np.nanmax(space_error):
+                    estimator.worst = difference      # where to refine, if asked to
+                space_error.append(value)
+                t_estimate += time.perf_counter() - t1
+            else:
+                space_error.append(np.nan if jump > 0 else 0.0)
+        seconds["steps"] = seconds.get("steps", 0.0) + time.perf_counter() - t0 - t_estimate
+        seconds["error_estimate"] = seconds.get("error_estimate", 0.0) + t_estimate
+        per_cell = np.stack(amounts)                                      # (T, M)
+        amount = {int(m): per_cell[:, cell_material == i].sum(axis=1)
+                  for i, m in enumerate(materials)}
+        estimate = ErrorEstimate(np.array(space_error), np.array(time_error), jump, error,
+                                 record.steps, record.rejected)
+        if not _worth_refining(estimate, plan, estimator, error):
+            break
+        if refinements >= POSTERIORI_ROUNDS:
+            plan.update(met=False, reason=f"{refinements} remeshings by the estimate, the "
+                                          "most")
+            break
+        refined, why = _refine_by_estimate(mesh_or_labels, mesh, estimator,
+                                           0.5 * SPACE_SHARE * error * jump,
+                                           plan.get("tree"))
+        if refined is None:
+            plan.update(met=False, reason=why)
+            break
+        mesh, plan["tree"] = refined
+        refinements += 1
+        t0 = time.perf_counter()
+    yield total, total, "done"
+    estimate.refined = refinements
+    notes += _error_warnings(estimate, plan, record, order, isinstance(mesh_or_labels, Mesh))
+    for note in notes:
+        warnings.warn(note, UserWarning, stacklevel=3)
+    return TransientResult(np.array(times), np.stack(saved), amount, mesh, order,
+                           int(mass.shape[0]), np.array(iterations, dtype=int), seconds,
+                           estimate, notes)
+
+
+def _worth_refining(estimate: ErrorEstimate, plan, estimator, error) -> bool:
+    """Whether to mesh again where the space estimate is largest and run again: a label
+    image, an ask, and a space estimate over its share."""
+    if plan is None or estimator is None or error is None or estimate.jump == 0:
+        return False
+    if getattr(estimator, "worst", None) is None:
+        return False
+    space = np.nanmax(estimate.space) if np.any(np.isfinite(estimate.space)) else 0.0
+    return bool(space > SPACE_SHARE * error * estimate.jump)
+
+
+def _refine_by_estimate(labels, mesh: Mesh, estimator, threshold: float, tree):
+    """The labels meshed again with the leaves split where the elliptic reconstruction
+    differs from the field by more than `threshold` (within the vertex budget), with its
+    tree, or None and the reason nothing can be split."""
+    from ._adapt import MAX_REFINE, refine_within
+    from ._transient_space import VERTEX_FACTOR, vertex_budget
+
+    if int(mesh.info["lattice"]["refine"]) >= MAX_REFINE:
+        return None, f"refine level {MAX_REFINE}, the finest"
+    n = len(mesh.points)
+    difference = np.abs(estimator.worst)
+    vertex = difference[:n].copy()
+    np.maximum.at(vertex, estimator.edges[:, 0], difference[n:])
+    np.maximum.at(vertex, estimator.edges[:, 1], difference[n:])
+    cell = vertex[mesh.cells].max(axis=1)
+    leaf = np.asarray(mesh.cell_data["leaf"])
+    per_leaf = np.zeros(int(leaf.max()) + 1)
+    np.maximum.at(per_leaf, leaf, np.where(cell > threshold, cell, 0.0))
+    budget = vertex_budget(labels)
+    if not per_leaf.any():
+        return None, "no element over the threshold"
+    if n >= (1 - 0.05) * budget:
+        return None, f"the vertex budget of {int(budget)}, {VERTEX_FACTOR:g} times the voxels'"
+    new, tree = refine_within(labels, mesh, per_leaf, budget, tree)
+    if len(new.points) <= n:
+        return None, f"the vertex budget of {int(budget)}, {VERTEX_FACTOR:g} times the voxels'"
+    return (new, tree), ""
+
+
+def _edge_count(mesh: Mesh) -> int:
+    """Edges of the mesh (P2's extra unknowns)."""
+    cells = mesh.cells
+    k = cells.shape[1]
+    pairs = np.concatenate([np.sort(cells[:, [a, b]], axis=1)
+                            for a in range(k) for b in range(a + 1, k)])
+    return int(np.unique(pairs[:, 0].astype(np.int64) * (len(mesh.points) + 1)
+                         + pairs[:, 1]).size)
+
+
+def _estimate_indices(count: int) -> list[int]:
+    """Saved times (indices) the space error is estimated at: all of them up to
+    :data:`ESTIMATED_TIMES`, else the first, the last and geometrically spread others
+    (the error is largest early, where the front is steepest)."""
+    if count <= ESTIMATED_TIMES:
+        return list(range(count))
+    picks = np.unique(np.round(np.geomspace(1, count, ESTIMATED_TIMES)).astype(int) - 1)
+    return sorted(set(picks.tolist()) | {0, count - 1})
+
+
+def _front_plan(labels, conductivity, capacity, initial, fixed, *, spacing, exclude, names,
+                first: float, duration: float) -> dict:
+    """Diffusion lengths of the saved times and the initial value per voxel, from the
+    labels (before meshing: they choose the mesh)."""
+    lab = np.asarray(labels)
+    names = dict(names or {})
+    materials = np.setdiff1d(np.unique(lab), np.asarray(tuple(exclude), dtype=lab.dtype))
+    if materials.size == 0:
+        return {"start_labels": None, "first": 1.0, "last": 1.0}
+    tensors = conductivity_tensors(conductivity, materials, lab.ndim, names)
+    cap = _per_material(capacity, materials, names, "capacity", 1.0)
     if np.any(cap <= 0):
         raise ValueError("capacity must be positive for every material.")
-    start = _per_material(initial, materials, mesh.material_names, "initial value", 0.0)
-    yield 1, steps + 2, f"assembling P{order} on {mesh.n_cells} elements"
+    start = _per_material(initial, materials, names, "initial value", 0.0)
+    eig = np.linalg.eigvalsh(np.asarray(tensors, dtype=float))        # (m, d)
+    d_min = float(np.min(eig[:, 0] / cap))
+    d_max = float(np.max(eig[:, -1] / cap))
+    if d_min <= 0:
+        d_min = d_max
+    start_labels = None
+    if np.ptp(start) > 0:
+        table = np.full(int(lab.max()) + 1, np.nan)
+        table[materials] = start
+        start_labels = table[lab]
+    return {"start_labels": start_labels, "first": float(np.sqrt(d_min * first)),
+            "last": float(np.sqrt(d_max * duration))}
 
-    basis = fe_basis(mesh, order)                # mass and loads; same dof numbering
-    space = fe_space(mesh, order)
-    stiffness = stiffness_matrix(space, tensors, cell_material)
-    exact = mass_basis(basis)                  # mass, start and amounts share it
-    mass = mass_matrix(exact, cap[cell_material])
-    dt = duration / steps
-    # the mass term keeps the system definite: a part with no fixed face is well posed
-    system = (mass / dt + stiffness).tocsr()
-    lo, hi = mesh.image_box()
-    fixed_dofs = []
-    for face in fixed:
-        dofs_on_face = face_dofs(basis.doflocs, lo, hi, face)
-        if dofs_on_face.size == 0:
-            raise ValueError(f"no meshed material touches the {face} face, so a value fixed "
-                             "there acts on nothing; fix another face or mesh the material "
-                             "on it.")
-        fixed_dofs.append(dofs_on_face)
-    dofs = np.concatenate(fixed_dofs) if fixed_dofs else np.zeros(0, dtype=np.intp)
-    values = np.concatenate([np.full(d.size, float(fixed[f]))
-                             for f, d in zip(fixed, fixed_dofs)]) if fixed_dofs else np.zeros(0)
-    free, reduced, coupling = split_fixed(system, dofs)
-    coarse = p1_embedding(space)             # P2: the P1 functions, first coarse level
-    if coarse is not None:
-        coarse = coarse[free][:, free[:coarse.shape[1]]]
-    solver = SPDSolver(reduced, tol=tol, overwrite=True, coarse=coarse)
-    seconds = {"mesh_and_assembly": time.perf_counter() - t0}
 
-    u = _initial_field(exact, order, mass, (cap * start)[cell_material])
-    u[dofs] = values
-    fixed_values = u[~free].copy()
-    cell_amount = _amount_per_cell_fn(exact, cap[cell_material])
-
-    times, saved, amounts, iterations = [0.0], [vertex_values(u, len(mesh.points))], \
-        [cell_amount(u)], []
-    t0 = time.perf_counter()
-    for k in range(1, steps + 1):
-        yield k + 1, steps + 2, f"step {k} of {steps}"
-        b = (mass @ u)[free] / dt - coupling @ fixed_values
-        u_free, info = solver.solve(b, u[free])
-        u[free] = u_free
-        iterations.append(info.iterations)
-        if k % save_every == 0 or k == steps:
-            times.append(k * dt)
-            saved.append(vertex_values(u, len(mesh.points)))
-            amounts.append(cell_amount(u))
-    seconds["steps"] = time.perf_counter() - t0
-    yield steps + 2, steps + 2, "done"
-    per_cell = np.stack(amounts)                                      # (T, M)
-    amount = {int(m): per_cell[:, cell_material == i].sum(axis=1)
-              for i, m in enumerate(materials)}
-    return TransientResult(np.array(times), np.stack(saved), amount, mesh, order,
-                           int(system.shape[0]), np.array(iterations, dtype=int), seconds)
+def _error_warnings(estimate: ErrorEstimate, plan, record, order: int,
+                    from_mesh: bool) -> list[str]:
+    """One sentence per way the run may miss its asked error."""
+    out = []
+    if estimate.jump == 0:
+        return out
+    worst = estimate.relative()
+    asked = DEFAULT_ERROR if estimate.asked is None else estimate.asked
+    if np.isfinite(worst) and worst > asked:
+        if estimate.asked is None:
+            fix = ("leave error at its default (the mesh and the time steps are then "
+                   "chosen for it)")
+        elif from_mesh:
+            fix = ("the mesh file is too coarse for the earliest saved time: simulate the "
+                   "label image (it is then meshed for the diffusion length) or mesh it "
+                   "finer, or save later times (fewer --steps)")
+        elif plan is not None and not plan.get("met", True):
+            size = (f"; largest element {plan['max_ratio']:.2g} times the size the "
+                    "diffusion length asks" if plan.get("max_ratio", 0) > 1 else "")
+            fix = (f"the mesh could not be refined enough ({plan['reason']}{size}): save "
+                   "later times (fewer --steps) or a smaller image")
+        else:
+            fix = "ask a looser error or save later times (fewer --steps)"
+        out.append(f"the estimated error {100 * worst:.2g} % of the jump exceeds "
+                   f"{100 * asked:g} %; {fix}.")
+    if record is not None and record.capped:
+        out.append("the time steps reached their budget before the asked accuracy, so the "
+                   "time error may exceed its estimate; run a shorter duration or ask a "
+                   "looser error.")
+    return out
 
 
 def _initial_field(exact, order: int, mass, load_per_cell: np.ndarray) -> np.ndarray:
@@ -249,8 +549,9 @@ def simulate_transient(mesh_or_labels, conductivity: Mapping, *, duration: float
                        fixed: Mapping[str, float] | None = None, spacing=None,
                        order: int = 1, exclude=(), save_every: int = 1,
                        material_names: Mapping[int, str] | None = None,
-                       tol: float = DEFAULT_TOLERANCE) -> TransientResult:
-    """Transient diffusion on the mesh by implicit Euler.
+                       tol: float = DEFAULT_TOLERANCE,
+                       error: float | None = DEFAULT_ERROR) -> TransientResult:
+    """Transient diffusion with a mesh and time steps chosen for an asked error.
 
     Parameters
     ----------
@@ -260,7 +561,8 @@ def simulate_transient(mesh_or_labels, conductivity: Mapping, *, duration: float
     duration : float
         End time (the units of ``capacity * length^2 / conductivity``).
     steps : int
-        Implicit Euler steps of ``duration / steps`` each.
+        Saved times ``k * duration / steps``; the time steps adapt within them (with
+        ``error=None``: implicit Euler steps of ``duration / steps`` each).
     capacity : float or mapping of int or str to float
         ``c`` per material, by label or name (default 1; materials a mapping leaves out
         get 1).
@@ -275,7 +577,15 @@ def simulate_transient(mesh_or_labels, conductivity: Mapping, *, duration: float
     spacing, order, exclude, material_names, tol
         As for :func:`simulate`.
     save_every : int
-        Keep every k-th step (and the last).
+        Keep every k-th of those times (and the last).
+    error : float or None
+        Asked max error, as a share of the largest jump of the data (fixed values and
+        initial values; default 0.01). A label image is meshed so that elements near
+        fixed faces and jumps of the initial value resolve the earliest saved time's
+        diffusion length, and the time steps adapt (implicit Euler with step doubling
+        and extrapolation). The estimate is ``result.error``; a sentence in
+        ``result.warnings`` says when it exceeds `error`. None: the mesh as the labels
+        give it and fixed implicit Euler steps (estimated all the same).
 
     Returns
     -------
@@ -295,7 +605,7 @@ def simulate_transient(mesh_or_labels, conductivity: Mapping, *, duration: float
     gen = transient_steps(mesh_or_labels, conductivity, duration=duration, steps=steps,
                           capacity=capacity, initial=initial, fixed=fixed, spacing=spacing,
                           order=order, exclude=exclude, save_every=save_every,
-                          material_names=material_names, tol=tol)
+                          material_names=material_names, tol=tol, error=error)
     while True:
         try:
             next(gen)
