@@ -339,8 +339,9 @@ def atomic_write(paths: Sequence, *, force: bool = False) -> Iterator[list[Path]
                 folders[parent] = Path(tempfile.mkdtemp(prefix=prefix, dir=parent))
             temps.append(folders[parent] / t.name)
         yield temps
+        # a folder the caller made (a store, or a mesh's folder of pieces) is one output
         missing = [str(t) for t, tmp in zip(targets, temps)
-                   if not (tmp.is_dir() if is_store(t) else tmp.is_file())]
+                   if not (tmp.is_dir() if is_store(t) else tmp.is_file() or tmp.is_dir())]
         if missing:
             raise RuntimeError(f"internal error: {', '.join(missing)} not written.")
         mode = 0o666 & ~_umask()

@@ -261,13 +261,15 @@ def group_table(d: int, present, names: dict | None = None) -> dict[str, int]:
     return {name: i + 1 for i, name in enumerate(table)}
 
 
-def _frame_shift(lo: np.ndarray, block: int) -> np.ndarray:
-    """Lowest corner of the local frame: ``lo - block`` per axis, one more block down on
-    axis 0 when the blocks' sum is odd, so every leaf's parity is unchanged."""
-    shift = lo - block
-    if int((shift // block).sum()) & 1:
-        shift[0] -= block
-    return shift
+def _frame(origin: np.ndarray, level: np.ndarray, meshed: np.ndarray):
+    """(shift (d,), extent) of the local frame around the leaves: the lowest corner
+    rounded down to a multiple of ``2**(K+1)`` (K the largest meshed level), so
+    ``(origin - shift) >> k`` keeps its parity for every meshed leaf and the diagonal
+    rule is unchanged; the frame reaches the far side of the farthest leaf."""
+    step = np.int64(2) << int(level[meshed].max())
+    shift = (origin.min(axis=0) // step) * step
+    far = (origin + (np.int64(1) << level.astype(np.int64))[:, None]).max(axis=0)
+    return shift, tuple(int(n) for n in far - shift)
 
 
 def mesh_block(plan: BlockPlan, index, data: np.ndarray, grids: list, *,
@@ -296,7 +298,6 @@ def mesh_block(plan: BlockPlan, index, data: np.ndarray, grids: list, *,
     Piece
     """
     d = len(plan.shape)
-    B = plan.block
     lo, hi = plan.box(index)
     win = _window_labels(plan, index, data)
     origin, level = _leaves_near(plan, index, grids)
@@ -311,8 +312,7 @@ def mesh_block(plan: BlockPlan, index, data: np.ndarray, grids: list, *,
                   np.zeros(0, np.int8))
     if not meshed.any():
         return empty
-    shift = _frame_shift(lo.copy(), B)
-    extent = tuple(int(n) for n in (hi + B - shift))
+    shift, extent = _frame(origin, level, meshed)
     local = RegionTree(origin - shift, level, label, extent, extent, plan.top)
     pts, cells, leaf_of, template_id, _, _ = template_mesh(local, meshed, rule="parity")
     points = pts.astype(np.int64) + shift
