@@ -47,6 +47,10 @@ def read_mesh(path) -> Mesh:
         (Gmsh groups cells by material). A second-order file gives its corners only.
     """
     p = Path(path)
+    if p.suffix.lower() == ".pvtu":             # block-wise pieces (issue 27)
+        from ._blocks_files import read_pvtu
+
+        return read_pvtu(p)
     if not p.exists() and p.suffix.lower() not in (".node", ".ele"):
         raise FileNotFoundError(f"no mesh file at {p}; check the path.")
     suffix = p.suffix.lower()
