@@ -17,7 +17,6 @@ import numpy as np
 
 from .._cli_util import StepTimer, print_json
 from .._validation import normalize_spacing
-from ._blocks_cli import add_block_arguments, run_blocks, uses_blocks
 from ._checks import _check_mesh
 from ._export import MESH_SUFFIXES
 from ._subdivision import check_max_aspect
@@ -100,7 +99,6 @@ def add_commands(subparsers) -> None:
                         "this: auto (default: available now, cgroup, ulimit -v), a size "
                         "such as 8G, or off; --json reports it as memory_estimate_bytes")
     p.add_argument("--json", action="store_true", help="print one JSON object on stdout")
-    add_block_arguments(p)
     p.set_defaults(func=_run_mesh)
 
     p = subparsers.add_parser(
@@ -153,8 +151,6 @@ def _run_mesh(args: argparse.Namespace) -> int:
     from ._export import mesh_output_paths, write_mesh
     from ._imesh import _mesh_arguments
 
-    if uses_blocks(args):
-        return run_blocks(args)
     timer = StepTimer()
     # fail before the (possibly long) meshing on a bad option, suffix or existing file
     peek = _peek_shape_dtype(args.labels)

@@ -48,7 +48,7 @@ def read_mesh(path) -> Mesh:
     """
     p = Path(path)
     if p.suffix.lower() == ".pvtu":             # block-wise pieces (issue 27)
-        from ._blocks_files import read_pvtu
+        from .blocks import read_pvtu
 
         return read_pvtu(p)
     if not p.exists() and p.suffix.lower() not in (".node", ".ele"):

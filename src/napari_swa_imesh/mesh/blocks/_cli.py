@@ -1,16 +1,39 @@
 """The block-wise path of ``swa-imesh mesh``: ``-o OUT.pvtu`` (or ``--workers``,
 ``--scheduler``, ``--block``, ``--memory`` with ``.pvtu``/``.xdmf``) meshes the volume
-block by block on Dask (:func:`~._blocks_run.mesh_blocks`)."""
+block by block on Dask (:func:`~._run.mesh_blocks`).
+
+:func:`add_commands` registers ``mesh`` and ``bounds`` as ``mesh._cli`` does, then adds
+the block options to ``mesh`` and routes a block-wise run here, so ``mesh._cli`` is not
+edited (``cli.COMMAND_MODULES`` names this module for those commands)."""
 
 from __future__ import annotations
 
 import argparse
+import json
 import logging
 import sys
 from contextlib import contextmanager
 from pathlib import Path
 
-__all__ = ["add_block_arguments", "uses_blocks", "run_blocks"]
+__all__ = ["add_commands", "add_block_arguments", "uses_blocks", "run_blocks"]
+
+
+def add_commands(subparsers) -> None:
+    """``mesh._cli.add_commands``, with the block-wise options and path on ``mesh``."""
+    from .._cli import add_commands as add_mesh_commands
+    from .._cli import parse_material_names
+
+    add_mesh_commands(subparsers)
+    p = subparsers.choices["mesh"]
+    add_block_arguments(p)
+    in_memory = p.get_default("func")
+
+    def run(args: argparse.Namespace) -> int:
+        if uses_blocks(args):
+            return run_blocks(args, parse_material_names(args.material_names))
+        return in_memory(args)
+
+    p.set_defaults(func=run)
 
 #: options of the in-memory path the block path does not take, with their defaults
 _NOT_HERE = {"refine": 0, "max_size": None, "coarsen": 0, "periodic": False,
@@ -54,12 +77,11 @@ def _quiet_dask():
             lg.setLevel(level)
 
 
-def run_blocks(args: argparse.Namespace) -> int:
-    """Run the block-wise ``mesh``; exit status 0 (errors raise ValueError & co)."""
-    from .._cli_util import print_json
-    from ._blocks_run import BLOCK_SUFFIXES, mesh_blocks
-    from ._cli import parse_material_names
-    from ._memory import format_bytes, parse_memory_size
+def run_blocks(args: argparse.Namespace, names: dict[int, str]) -> int:
+    """Run the block-wise ``mesh`` (`names` parsed from ``--material-names``); exit
+    status 0 (errors raise ValueError & co)."""
+    from ._run import BLOCK_SUFFIXES, mesh_blocks
+    from .._memory import format_bytes, parse_memory_size
 
     if Path(args.output).suffix.lower() not in BLOCK_SUFFIXES:
         raise ValueError(f"block-wise meshing writes {' or '.join(BLOCK_SUFFIXES)}; got "
@@ -85,10 +107,10 @@ def run_blocks(args: argparse.Namespace) -> int:
         report = mesh_blocks(args.labels, args.output, block=args.block, memory=memory,
                              workers=workers, scheduler=args.scheduler,
                              exclude=tuple(args.exclude), spacing=args.spacing,
-                             material_names=parse_material_names(args.material_names),
+                             material_names=names,
                              force=args.force, progress=progress)
     if args.json:
-        print_json(report)
+        print(json.dumps(report))   # plain ints, floats, strings and lists
     else:
         vols = ", ".join(f"{m}: {v:g}" for m, v in report["volumes"].items())
         print(f"wrote {report['output']} ({report['pieces']} pieces in "

@@ -26,7 +26,7 @@ from xml.sax.saxutils import quoteattr
 
 import numpy as np
 
-from ._vtu import write_vtu
+from .._vtu import write_vtu
 
 __all__ = ["piece_names", "write_piece_vtu", "write_piece_h5", "write_pvtu", "write_xdmf_index",
            "read_pvtu", "read_pvtu_groups", "id_dtype"]
@@ -88,7 +88,7 @@ def write_piece_h5(folder: Path, output, number: int, piece, spacing, group_ids:
                    ids: np.dtype, mat: np.dtype) -> None:
     """Write piece `number` as one HDF5 file: points, cells, cell and point data, and each
     facet group as ``facets/<name>`` (vertex ids) and ``owners/<name>``."""
-    from .._atomic import hdf5_file
+    from ..._atomic import hdf5_file
 
     _, _, h5_name = piece_names(output, number)
     pts, cells, cell_data, point_data = _file_arrays(piece, spacing, ids, mat)
@@ -194,8 +194,8 @@ def read_pvtu(path):
     Mesh
         Points in numpy axis order, ``material`` and ``quality``/``level`` cell data.
     """
-    from ._common import orient_positive
-    from ._types import Mesh
+    from .._common import orient_positive
+    from .._types import Mesh
 
     path = Path(path)
     if not path.is_file():

@@ -25,10 +25,10 @@ from typing import Callable
 
 import numpy as np
 
-from . import _blocks as bk
-from . import _blocks_files as bf
+from . import _core as bk
+from . import _files as bf
 
-__all__ = ["mesh_blocks", "block_memory", "choose_block", "BLOCK_SUFFIXES"]
+__all__ = ["mesh_blocks", "block_memory", "choose_block", "BlockMeshError", "BLOCK_SUFFIXES"]
 
 BLOCK_SUFFIXES = (".pvtu", ".xdmf")
 
@@ -41,7 +41,7 @@ def block_memory(block: int, d: int = 3) -> int:
     """Peak bytes of one meshing task of a cube of `block` voxels (conservative): the
     in-memory mesher's estimate for the block at the worst case, plus the local corner
     lattice (up to ``4 * block + 1`` points per axis, 10 bytes each)."""
-    from ._memory import estimate_mesh_memory
+    from .._memory import estimate_mesh_memory
 
     return int(estimate_mesh_memory((block,) * d, np.int64, check=False)
                + 10 * (4 * block + 1) ** d)
@@ -80,7 +80,7 @@ def _read(source, plan: bk.BlockPlan, index) -> np.ndarray:
     slices, _ = plan.window(index)
     if isinstance(source, np.ndarray):
         return source
-    from .._zarr_io import open_lazy
+    from ..._zarr_io import open_lazy
 
     image, _ = open_lazy(source)
     return np.asarray(image[slices].compute(scheduler="sync"))
@@ -198,10 +198,10 @@ def _connect(scheduler, workers: int, memory):
 
 def _open_source(labels):
     """(source handed to tasks, shape, spacing, dtype): a path stays a path."""
-    from .._validation import as_labels
+    from ..._validation import as_labels
 
     if isinstance(labels, (str, Path)):
-        from .._zarr_io import open_lazy
+        from ..._zarr_io import open_lazy
 
         image, spacing = open_lazy(labels)
         if image.ndim not in (2, 3):
@@ -262,10 +262,10 @@ def mesh_blocks(labels, output, *, block: int | None = None, memory: int | None 
         Bad arguments (before any work), or a check of the assembled mesh failed (then
         nothing is written).
     """
-    from .._atomic import atomic_write, check_writable
-    from .._validation import normalize_spacing
-    from ._bounds import quality_bounds
-    from ._imesh import _exclude_array
+    from ..._atomic import atomic_write, check_writable
+    from ..._validation import normalize_spacing
+    from .._bounds import quality_bounds
+    from .._imesh import _exclude_array
 
     out = Path(output)
     kind = out.suffix.lower()
@@ -276,7 +276,7 @@ def mesh_blocks(labels, output, *, block: int | None = None, memory: int | None 
     check_writable(out, force=force)
     _check_folder(folder, out, force)
     if kind == ".xdmf":
-        from ._xdmf import require_h5py
+        from .._xdmf import require_h5py
 
         require_h5py("write")
     if int(workers) < 0:

@@ -35,11 +35,11 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from .._tree import PAD_LABEL, RegionTree, _fold_pairs
-from ._balance import _any_children, _dilate
-from ._common import material_names
-from ._facets import paired_facets
-from ._templates import template_mesh, template_quality
+from ..._tree import PAD_LABEL, RegionTree, _fold_pairs
+from .._balance import _any_children, _dilate
+from .._common import material_names
+from .._facets import paired_facets
+from .._templates import template_mesh, template_quality
 
 __all__ = ["BlockPlan", "plan_blocks", "mixed_grids", "balance_grids", "block_slices",
            "mesh_block", "Piece", "seam_mismatches", "group_table", "assemble"]
