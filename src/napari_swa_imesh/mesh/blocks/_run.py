@@ -325,7 +325,8 @@ def mesh_blocks(labels, output, *, block: int | None = None, memory: int | None 
         options = {"exclude": exclude_arr, "present": present, "names": material_names or {},
                    "spacing": sp, "kind": kind, "group_ids": group_ids, "ids": ids.str,
                    "mat": mat.str}
-        with atomic_write([out, folder], force=force) as (tmp_out, tmp_folder):
+        with atomic_write([out, folder], force=force, folders=[folder]) as (tmp_out,
+                                                                          tmp_folder):
             tmp_folder.mkdir()
             summaries = runner.map(
                 mesh_task, [(src(i), plan, i, bk.block_slices(plan, split, i), n,
