@@ -37,8 +37,7 @@ import numpy as np
 
 from ..._tree import PAD_LABEL, RegionTree, _fold_pairs
 from .._balance import _any_children, _dilate
-from .._common import material_names
-from .._facets import paired_facets
+from .._common import FACE_CORNERS, material_names
 from .._templates import template_mesh, template_quality
 
 __all__ = ["BlockPlan", "plan_blocks", "mixed_grids", "balance_grids", "block_slices",
@@ -322,7 +321,8 @@ def mesh_block(plan: BlockPlan, index, data: np.ndarray, grids: list, *,
                        np.int64)
     piece = Piece(tuple(index), points, points @ strides, cells.astype(np.intp, copy=False),
                   label[leaf_of], table["quality"][template_id], level[leaf_of])
-    _piece_facets(piece, plan, win, exclude, present, material_names_ or {})
+    _piece_facets(piece, plan, win, exclude, present, material_names_ or {},
+                  origin[leaf_of], level[leaf_of])
     _piece_volumes(piece)
     return piece
 
@@ -348,78 +348,82 @@ def _piece_volumes(piece: Piece) -> None:
     piece.volumes = {int(m): int(s) for m, s in zip(mats, sums)}
 
 
+def _leaf_face_facets(piece: Piece, leaf_origin: np.ndarray, leaf_level: np.ndarray):
+    """The element facets that lie on a face of their element's leaf (the only ones that
+    can bound a group or meet another leaf): (element, opposite corner, axis, outward
+    sign), each (F,). A facet inside its leaf is shared by two elements of that leaf."""
+    d = piece.points.shape[1]
+    cells = piece.cells
+    lo = leaf_origin                                               # (M, d)
+    hi = lo + (np.int64(1) << leaf_level.astype(np.int64))[:, None]
+    elem, corner, axis, sign = [], [], [], []
+    for a in range(d):
+        coord = piece.points[cells, a]                             # (M, d+1)
+        at_lo, at_hi = coord == lo[:, a, None], coord == hi[:, a, None]
+        n_lo, n_hi = at_lo.sum(axis=1), at_hi.sum(axis=1)
+        for on, count, out in ((at_lo, n_lo, -1), (at_hi, n_hi, 1)):
+            # d corners on the face: the facet is the one opposite the corner that is not
+            e = np.flatnonzero(count == d)
+            elem.append(e)
+            corner.append(np.argmin(on[e], axis=1))
+            axis.append(np.full(len(e), a))
+            sign.append(np.full(len(e), out))
+    return tuple(np.concatenate(x) for x in (elem, corner, axis, sign))
+
+
 def _piece_facets(piece: Piece, plan: BlockPlan, win: np.ndarray, exclude: np.ndarray,
-                  present, names: dict) -> None:
-    """The piece's facet groups and seams, and its conformity inside the block."""
+                  present, names: dict, leaf_origin: np.ndarray,
+                  leaf_level: np.ndarray) -> None:
+    """The piece's facet groups and seams, and its conformity at leaf faces inside the
+    block (every facet there is seen from both sides, or the piece has a hole or a
+    hanging vertex)."""
     d = len(plan.shape)
     lo, hi = plan.box(piece.index)
     cells, material, pts = piece.cells, piece.material, piece.points
-    facets, owners, opposite = paired_facets(cells)
     nm = material_names(names, np.asarray(sorted(int(m) for m in present), np.int64))
-    groups: dict[str, list] = {}
-
-    def add(name, f, o):
-        if len(o):
-            groups.setdefault(name, []).append((f, o))
-
-    shared = owners[:, 1] >= 0
-    # interfaces inside the piece, seen from the lower material (its side's orientation)
-    si = np.flatnonzero(shared)
-    ma, mb = material[owners[si, 0]], material[owners[si, 1]]
-    differ = ma != mb
-    si, ma, mb = si[differ], ma[differ], mb[differ]
-    second = mb < ma
-    f_int = facets[si].copy()
-    f_int[second] = f_int[second][:, ::-1] if d == 2 else f_int[second][:, [0, 2, 1]]
-    o_int = np.where(second, owners[si, 1], owners[si, 0])
-    lo_m, hi_m = np.minimum(ma, mb), np.maximum(ma, mb)
-    for a, b in set(zip(lo_m.tolist(), hi_m.tolist())):
-        sel = (lo_m == a) & (hi_m == b)
-        add(f"interface_{nm[a]}_{nm[b]}", f_int[sel], o_int[sel])
-
-    bi = np.flatnonzero(~shared)
-    fb, ob, qb = facets[bi], owners[bi, 0], opposite[bi, 0]
-    coords = pts[fb]                                          # (F, d, d)
-    flat = np.all(coords == coords[:, :1, :], axis=1)          # (F, d): the facet's axis
-    if not np.all(flat.sum(axis=1) == 1):
-        piece.problems.append("a boundary facet is not axis-aligned")
-        return
-    axis = np.argmax(flat, axis=1)
-    rows = np.arange(len(bi))
+    ob, qb, axis, out = _leaf_face_facets(piece, leaf_origin, leaf_level)
+    fb = cells[ob[:, None], FACE_CORNERS[d][qb]]                   # (F, d) outward of ob
+    coords = pts[fb]                                               # (F, d, d)
+    rows = np.arange(len(ob))
     plane = coords[rows, 0, axis]
-    far = pts[cells[ob, qb], axis]
-    out = np.where(plane > far, 1, -1)
-    across = coords.sum(axis=1) // d                           # floor of the centroid
-    across[rows, axis] = np.where(out > 0, plane, plane - 1)
+    across = coords.sum(axis=1) // d                # floor of the centroid: a voxel of the
+    across[rows, axis] = np.where(out > 0, plane, plane - 1)       # neighbour's face
+    del coords
     mine = material[ob]
     inside_image = np.all((across >= 0) & (across < np.asarray(plan.shape)), axis=1)
-    value = win[tuple((across - (lo - 1)).T)]
+    value = win[tuple((np.clip(across, lo - 1, hi) - (lo - 1)).T)]
     in_block = np.all((across >= lo) & (across < hi), axis=1)
-    # box sides
-    for a in range(d):
+    groups: dict[str, list] = {}
+
+    def add(name, sel):
+        if sel.any():
+            groups.setdefault(name, []).append((fb[sel], ob[sel]))
+
+    for a in range(d):                                             # box sides
         name = "xyz"[d - 1 - a]
         for end, sign in (("min", -1), ("max", 1)):
-            sel = ~inside_image & (axis == a) & (out == sign)
-            add(f"{name}{end}", fb[sel], ob[sel])
+            add(f"{name}{end}", ~inside_image & (axis == a) & (out == sign))
     ex = inside_image & np.isin(value, exclude)
     for m in np.unique(mine[ex]).tolist():
-        sel = ex & (mine == m)
-        add(f"exterior_{nm[m]}", fb[sel], ob[sel])
+        add(f"exterior_{nm[m]}", ex & (mine == m))
     meshed_across = inside_image & ~np.isin(value, exclude) & (value != PAD_LABEL)
-    bad = meshed_across & in_block
-    if bad.any():
-        piece.problems.append(f"{int(bad.sum())} facets inside the block have one element "
-                              "(a hanging vertex or a hole)")
-    seam = meshed_across & ~in_block
-    owns = seam & (value > mine)
+    owns = meshed_across & (value > mine)        # interfaces, from the lower material
     for a, b in set(zip(mine[owns].tolist(), value[owns].tolist())):
-        sel = owns & (mine == a) & (value == b)
-        add(f"interface_{nm[a]}_{nm[b]}", fb[sel], ob[sel])
+        add(f"interface_{nm[a]}_{nm[b]}", owns & (mine == a) & (value == b))
     gid = piece.gid
+    inner = np.sort(gid[fb[meshed_across & in_block]], axis=1)
+    if len(inner):
+        inner = inner[np.lexsort(inner.T[::-1])]
+        change = np.any(inner[1:] != inner[:-1], axis=1)
+        runs = np.diff(np.flatnonzero(np.concatenate([[True], change, [True]])))
+        if (runs != 2).any():
+            piece.problems.append(f"{int((runs != 2).sum())} facets inside the block are "
+                                  "not shared by exactly two elements (a hanging vertex or "
+                                  "a hole)")
+    seam = meshed_across & ~in_block
     for a in range(d):
         for sign in (-1, 1):
-            sel = seam & (axis == a) & (out == sign)
-            ids = np.sort(gid[fb[sel]], axis=1)
+            ids = np.sort(gid[fb[seam & (axis == a) & (out == sign)]], axis=1)
             piece.seams[(a, sign)] = ids[np.lexsort(ids.T[::-1])] if len(ids) else ids
     piece.groups = {name: (np.concatenate([f for f, _ in parts]),
                            np.concatenate([o for _, o in parts]))

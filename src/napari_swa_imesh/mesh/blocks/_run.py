@@ -264,7 +264,7 @@ def mesh_blocks(labels, output, *, block: int | None = None, memory: int | None 
     """
     from ..._atomic import atomic_write, check_writable
     from ..._validation import normalize_spacing
-    from .._bounds import quality_bounds
+    from .._templates import template_quality
     from .._imesh import _exclude_array
 
     out = Path(output)
@@ -333,7 +333,9 @@ def mesh_blocks(labels, output, *, block: int | None = None, memory: int | None 
                              str(tmp_folder), str(out), options)
                             for n, i in enumerate(blocks)], retries, progress, "mesh")
             report = _check_whole(plan, summaries, counts, present, sp,
-                                  quality_bounds(d, sp)["quality"][1])
+                                  # every element is a scaled template: the worst template
+                                  # is the proven bound (quality_bounds, cubic voxels)
+                                  float(template_quality(d, sp)["quality"].max()))
             written = [s for s in summaries if s["n_cells"]]
             if kind == ".pvtu":
                 bf.write_pvtu(tmp_out, folder.name, [bf.piece_names(out, s["number"])[0]
