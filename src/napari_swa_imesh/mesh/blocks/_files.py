@@ -14,9 +14,12 @@ face has one id in every piece that holds it (Int32 when the lattice has fewer t
 points, else Float64, exact to 2**53, so every piece declares one type). Blocks with no
 meshed element have no piece.
 
-Distributed solvers read the pieces as they are: ParaView/VTK's ``XMLPUnstructuredGrid``
-reader (pyvista) reads the ``.pvtu``; FEniCSx/dolfinx and other MPI codes read the XDMF
-grids one per rank and join vertices by ``global_id``.
+Who reads the pieces: VTK's ``XMLPUnstructuredGridReader`` reads the ``.pvtu`` (pyvista,
+ParaView; under MPI, ``pvbatch`` gives each rank its pieces); an MPI solver reads its
+rank's pieces with any ``.vtu``/HDF5 reader and joins shared vertices by ``global_id``,
+no renumbering or halo exchange needed to assemble. FEniCSx/dolfinx partitions a mesh it
+reads from one XDMF grid itself: for it, merge (``read_mesh`` then ``write_mesh``) while
+the mesh fits one process. Only the reading by pyvista and meshio is tested here.
 """
 
 from __future__ import annotations
