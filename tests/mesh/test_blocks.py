@@ -11,8 +11,11 @@ from hypothesis import strategies as st
 from napari_swa_imesh import build_tree
 from napari_swa_imesh.cli import main
 from napari_swa_imesh.mesh import facet_groups, mesh_labels, mesh_tree, read_mesh
-from napari_swa_imesh.mesh.blocks import (BlockMeshError, mesh_blocks, read_pvtu,
-                                          read_pvtu_groups)
+from napari_swa_imesh.mesh.blocks import (
+    BlockMeshError,
+    mesh_blocks,
+    read_pvtu_groups,
+)
 from napari_swa_imesh.mesh.blocks import _core as bk
 
 

@@ -13,7 +13,20 @@
 """
 
 from ._files import read_pvtu, read_pvtu_groups
-from ._run import BLOCK_SUFFIXES, BlockMeshError, block_memory, choose_block, mesh_blocks
+from ._run import (
+    BLOCK_SUFFIXES,
+    BlockMeshError,
+    block_memory,
+    choose_block,
+    mesh_blocks,
+)
 
-__all__ = ["mesh_blocks", "read_pvtu", "read_pvtu_groups", "choose_block", "block_memory",
-           "BlockMeshError", "BLOCK_SUFFIXES"]
+__all__ = [
+    "BLOCK_SUFFIXES",
+    "BlockMeshError",
+    "block_memory",
+    "choose_block",
+    "mesh_blocks",
+    "read_pvtu",
+    "read_pvtu_groups",
+]

@@ -15,7 +15,7 @@ import sys
 from contextlib import contextmanager
 from pathlib import Path
 
-__all__ = ["add_commands", "add_block_arguments", "uses_blocks", "run_blocks"]
+__all__ = ["add_block_arguments", "add_commands", "run_blocks", "uses_blocks"]
 
 
 def add_commands(subparsers) -> None:
@@ -80,8 +80,8 @@ def _quiet_dask():
 def run_blocks(args: argparse.Namespace, names: dict[int, str]) -> int:
     """Run the block-wise ``mesh`` (`names` parsed from ``--material-names``); exit
     status 0 (errors raise ValueError & co)."""
-    from ._run import BLOCK_SUFFIXES, mesh_blocks
     from .._memory import format_bytes, parse_memory_size
+    from ._run import BLOCK_SUFFIXES, mesh_blocks
 
     if Path(args.output).suffix.lower() not in BLOCK_SUFFIXES:
         raise ValueError(f"block-wise meshing writes {' or '.join(BLOCK_SUFFIXES)}; got "

@@ -40,8 +40,18 @@ from .._balance import _any_children, _dilate
 from .._common import FACE_CORNERS, material_names
 from .._templates import template_mesh, template_quality
 
-__all__ = ["BlockPlan", "plan_blocks", "mixed_grids", "balance_grids", "block_slices",
-           "mesh_block", "Piece", "seam_mismatches", "group_table", "assemble"]
+__all__ = [
+    "BlockPlan",
+    "Piece",
+    "assemble",
+    "balance_grids",
+    "block_slices",
+    "group_table",
+    "mesh_block",
+    "mixed_grids",
+    "plan_blocks",
+    "seam_mismatches",
+]
 
 
 @dataclass(frozen=True)
@@ -180,7 +190,7 @@ def _leaves_near(plan: BlockPlan, index, grids: list):
     d = len(plan.shape)
     top = plan.top
     origins, levels = [], []
-    for k in range(0, top + 1):
+    for k in range(top + 1):
         if k == 0:
             off1, g1 = grids[1] if top >= 1 else (None, None)
             if g1 is None:

@@ -31,8 +31,16 @@ import numpy as np
 
 from .._vtu import write_vtu
 
-__all__ = ["piece_names", "write_piece_vtu", "write_piece_h5", "write_pvtu", "write_xdmf_index",
-           "read_pvtu", "read_pvtu_groups", "id_dtype"]
+__all__ = [
+    "id_dtype",
+    "piece_names",
+    "read_pvtu",
+    "read_pvtu_groups",
+    "write_piece_h5",
+    "write_piece_vtu",
+    "write_pvtu",
+    "write_xdmf_index",
+]
 
 _VTK_NAME = {np.dtype(np.int32): "Int32", np.dtype(np.float64): "Float64",
              np.dtype(np.int8): "Int8"}
@@ -215,12 +223,12 @@ def read_pvtu(path):
         cells.append(c + offset)
         offset += len(m.points)
         mats.append(np.concatenate(m.cell_data["material"]))
-        for k in data:
-            data[k].append(np.concatenate(m.cell_data[k]))
+        for k, values in data.items():
+            values.append(np.concatenate(m.cell_data[k]))
     if not gids:
         raise ValueError(f"{path} names no piece; the mesh is empty.")
     gid = np.concatenate(gids)
-    uniq, first, inverse = np.unique(gid, return_index=True, return_inverse=True)
+    _, first, inverse = np.unique(gid, return_index=True, return_inverse=True)
     points = np.concatenate(pts)[first]
     d = 3 if np.any(points[:, 2] != 0) or np.concatenate(cells).shape[1] == 4 else 2
     points = np.ascontiguousarray(points[:, :d][:, ::-1], dtype=np.float64)

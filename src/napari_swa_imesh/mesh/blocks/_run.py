@@ -20,15 +20,15 @@ from __future__ import annotations
 
 import math
 import uuid
+from collections.abc import Callable
 from pathlib import Path
-from typing import Callable
 
 import numpy as np
 
 from . import _core as bk
 from . import _files as bf
 
-__all__ = ["mesh_blocks", "block_memory", "choose_block", "BlockMeshError", "BLOCK_SUFFIXES"]
+__all__ = ["BLOCK_SUFFIXES", "BlockMeshError", "block_memory", "choose_block", "mesh_blocks"]
 
 BLOCK_SUFFIXES = (".pvtu", ".xdmf")
 
@@ -264,8 +264,8 @@ def mesh_blocks(labels, output, *, block: int | None = None, memory: int | None 
     """
     from ..._atomic import atomic_write, check_writable
     from ..._validation import normalize_spacing
-    from .._templates import template_quality
     from .._imesh import _exclude_array
+    from .._templates import template_quality
 
     out = Path(output)
     kind = out.suffix.lower()
