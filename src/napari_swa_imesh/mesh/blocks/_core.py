@@ -421,7 +421,7 @@ def _piece_facets(piece: Piece, plan: BlockPlan, win: np.ndarray, exclude: np.nd
     for a, b in set(zip(mine[owns].tolist(), value[owns].tolist())):
         add(f"interface_{nm[a]}_{nm[b]}", owns & (mine == a) & (value == b))
     gid = piece.gid
-    inner = np.sort(gid[fb[meshed_across & in_block]], axis=1)
+    inner = np.sort(fb[meshed_across & in_block], axis=1)    # piece ids: as good, smaller
     if len(inner):
         inner = inner[np.lexsort(inner.T[::-1])]
         change = np.any(inner[1:] != inner[:-1], axis=1)
