@@ -12,7 +12,7 @@ from numbers import Real
 import numpy as np
 
 from ..mesh import Mesh, mesh_labels
-from ..mesh._adapt import _refine_marked
+from ..mesh.mesher._adapt import _refine_marked
 from ._adapt import (AUTO, auto_settings, check_adapt, doerfler, flux_jump_indicator,
                      refine_within, voxel_lattice_vertices)
 from ._assembly import cell_fluxes, fe_space, p1_embedding, stiffness_matrix
@@ -178,7 +178,7 @@ def _check_box_faces(mesh: Mesh, names, lo: np.ndarray, hi: np.ndarray) -> None:
     at a few points only: the potential would be fixed on almost nothing and k_eff would
     be wrong. Refuse when a face to fix carries under 1 % of its area in facets.
     """
-    from ..mesh._facets import facet_groups
+    from ..mesh.checks._facets import facet_groups
 
     groups = facet_groups(mesh)
     d = mesh.ndim

@@ -80,7 +80,7 @@ def _quiet_dask():
 def run_blocks(args: argparse.Namespace, names: dict[int, str]) -> int:
     """Run the block-wise ``mesh`` (`names` parsed from ``--material-names``); exit
     status 0 (errors raise ValueError & co)."""
-    from .._memory import format_bytes, parse_memory_size
+    from ..model._memory import format_bytes, parse_memory_size
     from ._run import BLOCK_SUFFIXES, mesh_blocks
 
     if Path(args.output).suffix.lower() not in BLOCK_SUFFIXES:

@@ -29,7 +29,7 @@ from xml.sax.saxutils import quoteattr
 
 import numpy as np
 
-from .._vtu import write_vtu
+from ..formats._vtu import write_vtu
 
 __all__ = [
     "id_dtype",
@@ -205,8 +205,8 @@ def read_pvtu(path):
     Mesh
         Points in numpy axis order, ``material`` and ``quality``/``level`` cell data.
     """
-    from .._common import orient_positive
-    from .._types import Mesh
+    from ..formats._common import orient_positive
+    from ..model._types import Mesh
 
     path = Path(path)
     if not path.is_file():

@@ -41,7 +41,7 @@ def block_memory(block: int, d: int = 3) -> int:
     """Peak bytes of one meshing task of a cube of `block` voxels (conservative): the
     in-memory mesher's estimate for the block at the worst case, plus the local corner
     lattice (up to ``4 * block + 1`` points per axis, 10 bytes each)."""
-    from .._memory import estimate_mesh_memory
+    from ..model._memory import estimate_mesh_memory
 
     return int(estimate_mesh_memory((block,) * d, np.int64, check=False)
                + 10 * (4 * block + 1) ** d)
@@ -264,8 +264,8 @@ def mesh_blocks(labels, output, *, block: int | None = None, memory: int | None 
     """
     from ..._atomic import atomic_write, check_writable
     from ..._validation import normalize_spacing
-    from .._imesh import _exclude_array
-    from .._templates import template_quality
+    from ..mesher._imesh import _exclude_array
+    from ..mesher._templates import template_quality
 
     out = Path(output)
     kind = out.suffix.lower()
@@ -276,7 +276,7 @@ def mesh_blocks(labels, output, *, block: int | None = None, memory: int | None 
     check_writable(out, force=force)
     _check_folder(folder, out, force)
     if kind == ".xdmf":
-        from .._xdmf import require_h5py
+        from ..formats._xdmf import require_h5py
 
         require_h5py("write")
     if int(workers) < 0:
