@@ -264,3 +264,17 @@ def test_command_line(tmp_path, capsys):
                  "--workers", "0", "--force"]) == 2
     assert "not pieces of u.pvtu" in capsys.readouterr().err
     assert (tmp_path / "u" / "notes.txt").read_text() == "mine"
+
+
+def test_the_block_side_follows_the_memory_per_worker():
+    from napari_swa_imesh.mesh.blocks import block_memory, choose_block
+
+    assert choose_block((256,) * 3, 4 << 30) == 128         # 256 would need ~27 GB
+    assert block_memory(128) <= 4 << 30 < block_memory(256)
+    assert choose_block((20, 24, 28), None) == 16           # never above mesh's root
+    with pytest.raises(ValueError, match="give more --memory"):
+        choose_block((256,) * 3, 1 << 20)
+    with pytest.raises(ValueError, match="above --memory"):
+        choose_block((256,) * 3, 1 << 30, block=256)
+    with pytest.raises(ValueError, match="power of two"):
+        bk.plan_blocks((20, 24, 28), 12)
