@@ -232,11 +232,17 @@ def test_on_a_dask_client(tmp_path):
     distributed = pytest.importorskip("distributed")
     lab = _volume()
     np.save(tmp_path / "l.npy", lab)
-    with distributed.Client(processes=False, n_workers=1, threads_per_worker=2,
-                            dashboard_address=None) as client:
-        report = mesh_blocks(tmp_path / "l.npy", tmp_path / "m.pvtu", block=8,
-                             client=client, exclude=(0,))
-    assert report["n_elements"] == mesh_labels(lab, exclude=(0,)).n_cells
+    ref = mesh_labels(lab, exclude=(0,)).n_cells
+    with distributed.LocalCluster(processes=False, n_workers=1, threads_per_worker=2,
+                                  dashboard_address=None) as cluster:
+        with distributed.Client(cluster) as client:
+            report = mesh_blocks(tmp_path / "l.npy", tmp_path / "m.pvtu", block=8,
+                                 client=client, exclude=(0,))
+        assert report["n_elements"] == ref
+        # the same through the scheduler's address (as --scheduler gives it)
+        report = mesh_blocks(tmp_path / "l.npy", tmp_path / "s.pvtu", block=8,
+                             scheduler=cluster.scheduler_address, exclude=(0,))
+        assert report["n_elements"] == ref
 
 
 def test_command_line(tmp_path, capsys):
