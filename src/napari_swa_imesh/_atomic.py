@@ -65,7 +65,7 @@ def _temp_prefix() -> str:
     return f"{TEMP_PREFIX}{os.getpid()}@{_host()}-"
 
 
-def check_writable(path, *, force: bool = False) -> Path:
+def check_writable(path, *, force: bool = False, folder: bool = False) -> Path:
     """Check that `path` may be written (before any work); return it as a Path.
 
     A symbolic link counts as existing even when it points nowhere.
@@ -75,12 +75,13 @@ def check_writable(path, *, force: bool = False) -> Path:
     FileExistsError
         `path` exists and `force` is false.
     IsADirectoryError
-        `path` is a folder, other than a store (:func:`is_store`).
+        `path` is a folder, other than a store (:func:`is_store`) or a `folder` output
+        (one the caller writes as a whole, such as a mesh's folder of pieces).
     FileNotFoundError
         Its folder does not exist.
     """
     p = Path(path)
-    if p.is_dir() and not is_store(p):
+    if p.is_dir() and not (is_store(p) or folder):
         raise IsADirectoryError(f"{p} is a folder; give a file name to write.")
     if os.path.lexists(p) and not force:
         what = "already exists" if p.exists() else "already exists (a link to nothing)"
@@ -280,7 +281,8 @@ def _full_error(parent: Path, folder: Path | None) -> OSError:
 
 
 @contextmanager
-def atomic_write(paths: Sequence, *, force: bool = False) -> Iterator[list[Path]]:
+def atomic_write(paths: Sequence, *, force: bool = False,
+                 folders: Sequence = ()) -> Iterator[list[Path]]:
     """Write several files all or nothing: yield temporary paths, then move them in place.
 
     The temporary files lie in a hidden folder beside each target and carry the target's
@@ -300,6 +302,9 @@ def atomic_write(paths: Sequence, *, force: bool = False) -> Iterator[list[Path]
         The files to write (checked with :func:`check_writable` first).
     force : bool
         Replace existing files.
+    folders : sequence of str or Path
+        Those of `paths` that are folders the caller makes and fills (published like a
+        store).
 
     Yields
     ------
@@ -323,7 +328,8 @@ def atomic_write(paths: Sequence, *, force: bool = False) -> Iterator[list[Path]
     >>> (folder / "a.txt").read_text()
     'hello'
     """
-    targets = [check_writable(p, force=force) for p in paths]
+    as_folder = {Path(f) for f in folders}
+    targets = [check_writable(p, force=force, folder=Path(p) in as_folder) for p in paths]
     if len({t.resolve() for t in targets}) != len(targets):
         raise ValueError(f"two outputs name the same file ({', '.join(map(str, targets))}); "
                          "give each output its own name.")
@@ -340,7 +346,7 @@ def atomic_write(paths: Sequence, *, force: bool = False) -> Iterator[list[Path]
             temps.append(folders[parent] / t.name)
         yield temps
         missing = [str(t) for t, tmp in zip(targets, temps)
-                   if not (tmp.is_dir() if is_store(t) else tmp.is_file())]
+                   if not (tmp.is_dir() if is_store(t) or t in as_folder else tmp.is_file())]
         if missing:
             raise RuntimeError(f"internal error: {', '.join(missing)} not written.")
         mode = 0o666 & ~_umask()

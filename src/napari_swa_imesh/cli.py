@@ -23,7 +23,7 @@ __all__ = ["main", "build_parser"]
 #: segmentation package and scipy.ndimage cost ``swa-imesh mesh`` a second or more)
 COMMAND_MODULES = {
     ".segmentation._cli": ("res", "segment", "samples-from-truth", "evaluate"),
-    ".mesh._cli": ("mesh", "bounds"),
+    ".mesh.blocks._cli": ("mesh", "bounds"),   # mesh._cli with the block-wise path
     ".simulate._cli": ("simulate",),
     ".pipeline._cli": ("batch",),
     "._demo": ("demo",),

@@ -38,6 +38,10 @@ def read_mesh(path) -> Mesh:
         (Gmsh groups cells by material). A second-order file gives its corners only.
     """
     p = Path(path)
+    if p.suffix.lower() == ".pvtu":             # block-wise pieces (issue 27)
+        from ..blocks import read_pvtu
+
+        return read_pvtu(p)
     try:
         fmt, unknown = mesh_format(p, action="read"), None
     except UnknownSuffixError as exc:

@@ -1,0 +1,492 @@
+"""Block-wise template meshing: one piece per block, conforming across blocks.
+
+The template mesher is local: a leaf's elements depend only on the leaf and on which of
+its edge midpoints and face centres are vertices (corners of the leaves touching it),
+every vertex is a lattice point and every face diagonal follows a parity rule of the
+leaf's absolute position. So a block can be meshed alone if it knows the balanced tree
+around it. Steps:
+
+1. per block (a task): the "mixed" grids of the region tree, ``mixed[k]`` (shape
+   ``block >> k``) says whether each level-k cell holds more than one label. Blocks are
+   cubes of ``B = 2**top`` voxels (the tree's roots), so a cell never spans two blocks;
+2. once, on the coarse grids only (``N / 7`` booleans in all): the global 2:1 balance
+   ``split[k] = mixed[k] | any_children(dilate(split[k-1]))`` (``_balance``'s recurrence);
+3. per block (a task): the balanced leaves touching the block from the split grids, their
+   labels from the block's voxels and a one-voxel halo, and the template mesh of the
+   leaves the block owns, in a local frame shifted by a multiple of ``B`` whose parity
+   sum is even (the diagonal rule is unchanged). Global vertex ids are lattice keys of
+   the image's corner lattice: no communication.
+
+The pieces are exactly the in-memory mesh of the same tree cut by blocks: same points,
+same elements, same facet groups (``tests/mesh/test_blocks.py``). The tree's roots are
+the blocks, so when ``B`` is smaller than ``mesh_labels``'s default root (``2**floor(log2
+(min(shape)))``) a leaf larger than a block is cut into blocks: the mesh is then that of
+``build_tree(labels, top_level=log2(B))``.
+
+Grid conventions: ``split[k]`` covers the padded grid (``padded_shape >> k``); a block's
+slice of it is one level-k cell wider on every side (clipped at the grid), with its
+offset.
+"""
+
+from __future__ import annotations
+
+import itertools
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from ..formats._common import FACE_CORNERS, material_names
+from ..mesher._balance import _any_children, _dilate
+from ..mesher._templates import template_mesh, template_quality
+from ..mesher._tree import PAD_LABEL, RegionTree, _fold_pairs
+
+__all__ = [
+    "BlockPlan",
+    "Piece",
+    "assemble",
+    "balance_grids",
+    "block_slices",
+    "group_table",
+    "mesh_block",
+    "mixed_grids",
+    "plan_blocks",
+    "seam_mismatches",
+]
+
+
+@dataclass(frozen=True)
+class BlockPlan:
+    """How a volume is cut: blocks of ``block`` voxels per axis, the tree's roots.
+
+    Attributes
+    ----------
+    shape : tuple of int
+        The label volume's shape.
+    block : int
+        Block side in voxels, ``2**top``.
+    """
+
+    shape: tuple[int, ...]
+    block: int
+
+    @property
+    def top(self) -> int:
+        return int(self.block).bit_length() - 1
+
+    @property
+    def grid(self) -> tuple[int, ...]:
+        """Blocks per axis."""
+        return tuple(-(-n // self.block) for n in self.shape)
+
+    @property
+    def padded_shape(self) -> tuple[int, ...]:
+        return tuple(g * self.block for g in self.grid)
+
+    @property
+    def n_blocks(self) -> int:
+        return int(np.prod(self.grid))
+
+    def blocks(self) -> list[tuple[int, ...]]:
+        """Block indices in C order."""
+        return list(itertools.product(*(range(g) for g in self.grid)))
+
+    def box(self, index) -> tuple[np.ndarray, np.ndarray]:
+        """(lo, hi) voxel corners of block `index` in the padded grid."""
+        lo = np.asarray(index, np.int64) * self.block
+        return lo, lo + self.block
+
+    def window(self, index) -> tuple[tuple[slice, ...], tuple[tuple[int, int], ...]]:
+        """Slices of the image to read for block `index` (its box and a one-voxel halo,
+        clipped to the image) and the padding that completes them to ``block + 2``."""
+        lo, hi = self.box(index)
+        slices, pads = [], []
+        for a, n in enumerate(self.shape):
+            start, stop = max(0, lo[a] - 1), min(n, hi[a] + 1)
+            stop = max(stop, start)
+            slices.append(slice(int(start), int(stop)))
+            pads.append((int(start - (lo[a] - 1)), int(hi[a] + 1 - max(stop, start))))
+        return tuple(slices), tuple(pads)
+
+
+def default_top(shape) -> int:
+    """``mesh_labels``'s root level for `shape` (``_tree.default_top_level``)."""
+    return max(0, int(np.floor(np.log2(max(1, min(shape))))))
+
+
+def plan_blocks(shape, block: int | None = None) -> BlockPlan:
+    """The block plan of a volume: `block` a power of two, at most the default root.
+
+    Raises ValueError for a block that is not a power of two of at least 2 voxels.
+    """
+    shape = tuple(int(n) for n in shape)
+    cap = 1 << default_top(shape)
+    if block is None:
+        block = cap
+    block = int(block)
+    if block < 2 or block & (block - 1):
+        raise ValueError(f"block must be a power of two of at least 2 voxels; got {block}.")
+    return BlockPlan(shape, min(block, max(2, cap)))
+
+
+def _window_labels(plan: BlockPlan, index, data: np.ndarray) -> np.ndarray:
+    """The block's window (box plus one voxel each side) as int64, PAD_LABEL outside."""
+    _, pads = plan.window(index)
+    return np.pad(np.asarray(data).astype(np.int64, copy=False), pads, mode="constant",
+                  constant_values=PAD_LABEL)
+
+
+def mixed_grids(window: np.ndarray, top: int) -> list[np.ndarray]:
+    """``mixed[k]`` for k = 1..top of one block (its window from :func:`_window_labels`):
+    (block >> k,)*d bool, the level-k cell holds two labels (padding counts as one)."""
+    d = window.ndim
+    cur = window[(slice(1, -1),) * d]
+    mixed_marker = np.iinfo(np.int64).min
+    out = []
+    for _ in range(top):
+        coarse = tuple(n // 2 for n in cur.shape)
+        blocks = cur.reshape(sum(((c, 2) for c in coarse), ()))
+        lo = _fold_pairs(np.minimum, blocks, d)
+        hi = _fold_pairs(np.maximum, blocks, d)
+        homog = (lo == hi) & (lo != mixed_marker)
+        out.append(~homog)
+        cur = np.where(homog, lo, mixed_marker)
+    return out
+
+
+def balance_grids(plan: BlockPlan, mixed_of: dict) -> list[np.ndarray | None]:
+    """The global split grids (index k = level; ``[0]`` is None) from every block's
+    :func:`mixed_grids` (``mixed_of[index]``), balanced across faces and edges."""
+    d = len(plan.shape)
+    split: list[np.ndarray | None] = [None]
+    for k in range(1, plan.top + 1):
+        grid = np.zeros(tuple(n >> k for n in plan.padded_shape), dtype=bool)
+        side = plan.block >> k
+        for index, mixed in mixed_of.items():
+            grid[tuple(slice(i * side, (i + 1) * side) for i in index)] = mixed[k - 1]
+        below = split[k - 1]
+        if below is not None and below.any():
+            grid |= _any_children(_dilate(below, max(1, d - 1)))
+        split.append(grid)
+    return split
+
+
+def block_slices(plan: BlockPlan, split: list, index) -> list:
+    """Each level's split grid around block `index`: ``[(offset, grid), ...]`` for levels
+    1..top (``[0]`` None), one cell wider than the block on every side, clipped."""
+    lo, hi = plan.box(index)
+    out: list = [None]
+    for k in range(1, plan.top + 1):
+        g = split[k]
+        start = np.maximum((lo >> k) - 1, 0)
+        stop = np.minimum((hi >> k) + 1, g.shape)
+        out.append((start, g[tuple(slice(int(a), int(b)) for a, b in zip(start, stop))].copy()))
+    return out
+
+
+def _leaves_near(plan: BlockPlan, index, grids: list):
+    """(origin (L, d) int64, level (L,) int8) of the balanced leaves whose closed box
+    meets the block's closed box, from the block's split slices."""
+    lo, hi = plan.box(index)
+    d = len(plan.shape)
+    top = plan.top
+    origins, levels = [], []
+    for k in range(top + 1):
+        if k == 0:
+            off1, g1 = grids[1] if top >= 1 else (None, None)
+            if g1 is None:
+                continue
+            # voxels in split level-1 cells: the 2^d children of each split cell
+            cells = np.argwhere(g1) + off1
+            kids = np.array(list(itertools.product((0, 1), repeat=d)), np.int64)
+            org = ((cells << 1)[:, None, :] + kids[None]).reshape(-1, d)
+        else:
+            off, g = grids[k]
+            leaf = ~g
+            if k < top:
+                offp, gp = grids[k + 1]
+                cells = np.argwhere(leaf) + off
+                parent = (cells >> 1) - offp
+                ok = np.all((parent >= 0) & (parent < gp.shape), axis=1)
+                keep = np.zeros(len(cells), bool)
+                keep[ok] = gp[tuple(parent[ok].T)]
+                cells = cells[keep]
+            else:
+                cells = np.argwhere(leaf) + off
+            org = cells << k
+        s = 1 << k
+        touch = np.all((org <= hi) & (org + s >= lo), axis=1)
+        origins.append(org[touch])
+        levels.append(np.full(int(touch.sum()), k, np.int8))
+    return np.concatenate(origins), np.concatenate(levels)
+
+
+@dataclass
+class Piece:
+    """One block's mesh: global lattice points and ids, elements, data, groups, seams.
+
+    Attributes
+    ----------
+    index : tuple of int
+    points : (N, d) ndarray of int64
+        Lattice (voxel-corner) coordinates.
+    gid : (N,) ndarray of int64
+        Global vertex id: the point's key in the image's corner lattice (C order).
+    cells : (M, d+1) ndarray of intp
+        Positively oriented in index space.
+    material, quality, level : (M,) ndarray
+    groups : dict of str to (facets (F, d) intp, owner (F,) intp)
+        The piece's own facet groups: box sides, interfaces it owns (material A side),
+        exteriors.
+    seams : dict of (axis, side) to (S, d) ndarray of int64
+        Sorted global ids of the boundary facets facing the neighbour block, rows sorted.
+    problems : list of str
+        What the piece's own checks found (empty: conforming inside, positive volumes).
+    volumes : dict of int to int
+        Volume per material in voxels, times ``d!`` (exact integers).
+    """
+
+    index: tuple
+    points: np.ndarray
+    gid: np.ndarray
+    cells: np.ndarray
+    material: np.ndarray
+    quality: np.ndarray
+    level: np.ndarray
+    groups: dict = field(default_factory=dict)
+    seams: dict = field(default_factory=dict)
+    problems: list = field(default_factory=list)
+    volumes: dict = field(default_factory=dict)
+
+
+def group_table(d: int, present, names: dict | None = None) -> dict[str, int]:
+    """Group name -> id (1..K) for a mesh whose meshed materials are `present`: box sides,
+    interfaces ``A < B``, exteriors; the same in every piece."""
+    present = np.asarray(sorted(int(m) for m in present), np.int64)
+    nm = material_names(names or {}, present)
+    table = [f"{ax}{end}" for ax in "xyz"[:d] for end in ("min", "max")]
+    table += [f"interface_{nm[int(a)]}_{nm[int(b)]}" for i, a in enumerate(present)
+              for b in present[i + 1:]]
+    table += [f"exterior_{nm[int(a)]}" for a in present]
+    return {name: i + 1 for i, name in enumerate(table)}
+
+
+def _frame(origin: np.ndarray, level: np.ndarray, meshed: np.ndarray):
+    """(shift (d,), extent) of the local frame around the leaves: the lowest corner
+    rounded down to a multiple of ``2**(K+1)`` (K the largest meshed level), so
+    ``(origin - shift) >> k`` keeps its parity for every meshed leaf and the diagonal
+    rule is unchanged; the frame reaches the far side of the farthest leaf."""
+    step = np.int64(2) << int(level[meshed].max())
+    shift = (origin.min(axis=0) // step) * step
+    far = (origin + (np.int64(1) << level.astype(np.int64))[:, None]).max(axis=0)
+    return shift, tuple(int(n) for n in far - shift)
+
+
+def mesh_block(plan: BlockPlan, index, data: np.ndarray, grids: list, *,
+               exclude=(), present=(), material_names_: dict | None = None,
+               spacing=None) -> Piece:
+    """Mesh the leaves block `index` owns.
+
+    Parameters
+    ----------
+    plan : BlockPlan
+    index : tuple of int
+    data : ndarray of int
+        The image read over ``plan.window(index)[0]``.
+    grids : list
+        :func:`block_slices` of the global split grids.
+    exclude : sequence of int
+        Materials not meshed.
+    present : sequence of int
+        Every meshed material of the whole volume (names the groups alike everywhere).
+    material_names_ : dict, optional
+    spacing : sequence of float, optional
+        Voxel spacing (the elements' quality is measured in physical units).
+
+    Returns
+    -------
+    Piece
+    """
+    d = len(plan.shape)
+    lo, hi = plan.box(index)
+    win = _window_labels(plan, index, data)
+    origin, level = _leaves_near(plan, index, grids)
+    # a voxel of each leaf inside the window (leaves meet the closed box)
+    probe = np.clip(origin, lo - 1, hi) - (lo - 1)
+    label = win[tuple(probe.T)]
+    owned = np.all((origin >= lo) & (origin < hi), axis=1)
+    exclude = np.asarray(list(exclude), np.int64)
+    meshed = owned & (label != PAD_LABEL) & ~np.isin(label, exclude)
+    empty = Piece(tuple(index), np.zeros((0, d), np.int64), np.zeros(0, np.int64),
+                  np.zeros((0, d + 1), np.intp), np.zeros(0, np.int64), np.zeros(0),
+                  np.zeros(0, np.int8))
+    if not meshed.any():
+        return empty
+    shift, extent = _frame(origin, level, meshed)
+    local = RegionTree(origin - shift, level, label, extent, extent, plan.top)
+    pts, cells, leaf_of, template_id, _, _ = template_mesh(local, meshed, rule="parity")
+    points = pts.astype(np.int64) + shift
+    del pts
+    table = template_quality(d, tuple(spacing) if spacing is not None else (1.0,) * d)
+    strides = np.array([int(np.prod([n + 1 for n in plan.shape[a + 1:]])) for a in range(d)],
+                       np.int64)
+    piece = Piece(tuple(index), points, points @ strides, cells.astype(np.intp, copy=False),
+                  label[leaf_of], table["quality"][template_id], level[leaf_of])
+    _piece_facets(piece, plan, win, exclude, present, material_names_ or {},
+                  origin[leaf_of], level[leaf_of])
+    _piece_volumes(piece)
+    return piece
+
+
+def _signed6(points: np.ndarray, cells: np.ndarray) -> np.ndarray:
+    """d! times the signed volume of each simplex (exact integers)."""
+    p0 = points[cells[:, 0]]
+    m = np.stack([points[cells[:, j]] - p0 for j in range(1, cells.shape[1])], axis=1)
+    if m.shape[1] == 2:
+        return m[:, 0, 0] * m[:, 1, 1] - m[:, 0, 1] * m[:, 1, 0]
+    return (m[:, 0, 0] * (m[:, 1, 1] * m[:, 2, 2] - m[:, 1, 2] * m[:, 2, 1])
+            - m[:, 0, 1] * (m[:, 1, 0] * m[:, 2, 2] - m[:, 1, 2] * m[:, 2, 0])
+            + m[:, 0, 2] * (m[:, 1, 0] * m[:, 2, 1] - m[:, 1, 1] * m[:, 2, 0]))
+
+
+def _piece_volumes(piece: Piece) -> None:
+    vol = _signed6(piece.points, piece.cells)
+    if (vol <= 0).any():
+        piece.problems.append(f"{int((vol <= 0).sum())} elements without positive volume")
+    mats, inv = np.unique(piece.material, return_inverse=True)
+    sums = np.zeros(len(mats), np.int64)
+    np.add.at(sums, inv, vol.astype(np.int64))
+    piece.volumes = {int(m): int(s) for m, s in zip(mats, sums)}
+
+
+def _leaf_face_facets(piece: Piece, leaf_origin: np.ndarray, leaf_level: np.ndarray):
+    """The element facets that lie on a face of their element's leaf (the only ones that
+    can bound a group or meet another leaf): (element, opposite corner, axis, outward
+    sign), each (F,). A facet inside its leaf is shared by two elements of that leaf."""
+    d = piece.points.shape[1]
+    cells = piece.cells
+    lo = leaf_origin                                               # (M, d)
+    hi = lo + (np.int64(1) << leaf_level.astype(np.int64))[:, None]
+    elem, corner, axis, sign = [], [], [], []
+    for a in range(d):
+        coord = piece.points[cells, a]                             # (M, d+1)
+        at_lo, at_hi = coord == lo[:, a, None], coord == hi[:, a, None]
+        n_lo, n_hi = at_lo.sum(axis=1), at_hi.sum(axis=1)
+        for on, count, out in ((at_lo, n_lo, -1), (at_hi, n_hi, 1)):
+            # d corners on the face: the facet is the one opposite the corner that is not
+            e = np.flatnonzero(count == d)
+            elem.append(e)
+            corner.append(np.argmin(on[e], axis=1))
+            axis.append(np.full(len(e), a))
+            sign.append(np.full(len(e), out))
+    return tuple(np.concatenate(x) for x in (elem, corner, axis, sign))
+
+
+def _piece_facets(piece: Piece, plan: BlockPlan, win: np.ndarray, exclude: np.ndarray,
+                  present, names: dict, leaf_origin: np.ndarray,
+                  leaf_level: np.ndarray) -> None:
+    """The piece's facet groups and seams, and its conformity at leaf faces inside the
+    block (every facet there is seen from both sides, or the piece has a hole or a
+    hanging vertex)."""
+    d = len(plan.shape)
+    lo, hi = plan.box(piece.index)
+    cells, material, pts = piece.cells, piece.material, piece.points
+    nm = material_names(names, np.asarray(sorted(int(m) for m in present), np.int64))
+    ob, qb, axis, out = _leaf_face_facets(piece, leaf_origin, leaf_level)
+    fb = cells[ob[:, None], FACE_CORNERS[d][qb]]                   # (F, d) outward of ob
+    coords = pts[fb]                                               # (F, d, d)
+    rows = np.arange(len(ob))
+    plane = coords[rows, 0, axis]
+    across = coords.sum(axis=1) // d                # floor of the centroid: a voxel of the
+    across[rows, axis] = np.where(out > 0, plane, plane - 1)       # neighbour's face
+    del coords
+    mine = material[ob]
+    inside_image = np.all((across >= 0) & (across < np.asarray(plan.shape)), axis=1)
+    value = win[tuple((np.clip(across, lo - 1, hi) - (lo - 1)).T)]
+    in_block = np.all((across >= lo) & (across < hi), axis=1)
+    groups: dict[str, list] = {}
+
+    def add(name, sel):
+        if sel.any():
+            groups.setdefault(name, []).append((fb[sel], ob[sel]))
+
+    for a in range(d):                                             # box sides
+        name = "xyz"[d - 1 - a]
+        for end, sign in (("min", -1), ("max", 1)):
+            add(f"{name}{end}", ~inside_image & (axis == a) & (out == sign))
+    ex = inside_image & np.isin(value, exclude)
+    for m in np.unique(mine[ex]).tolist():
+        add(f"exterior_{nm[m]}", ex & (mine == m))
+    meshed_across = inside_image & ~np.isin(value, exclude) & (value != PAD_LABEL)
+    owns = meshed_across & (value > mine)        # interfaces, from the lower material
+    for a, b in set(zip(mine[owns].tolist(), value[owns].tolist())):
+        add(f"interface_{nm[a]}_{nm[b]}", owns & (mine == a) & (value == b))
+    gid = piece.gid
+    inner = np.sort(fb[meshed_across & in_block], axis=1)    # piece ids: as good, smaller
+    if len(inner):
+        inner = inner[np.lexsort(inner.T[::-1])]
+        change = np.any(inner[1:] != inner[:-1], axis=1)
+        runs = np.diff(np.flatnonzero(np.concatenate([[True], change, [True]])))
+        if (runs != 2).any():
+            piece.problems.append(f"{int((runs != 2).sum())} facets inside the block are "
+                                  "not shared by exactly two elements (a hanging vertex or "
+                                  "a hole)")
+    seam = meshed_across & ~in_block
+    for a in range(d):
+        for sign in (-1, 1):
+            ids = np.sort(gid[fb[seam & (axis == a) & (out == sign)]], axis=1)
+            piece.seams[(a, sign)] = ids[np.lexsort(ids.T[::-1])] if len(ids) else ids
+    piece.groups = {name: (np.concatenate([f for f, _ in parts]),
+                           np.concatenate([o for _, o in parts]))
+                    for name, parts in groups.items()}
+
+
+def seam_mismatches(plan: BlockPlan, seams: dict) -> list[str]:
+    """Compare the facets each pair of face-neighbour blocks puts on their shared face.
+
+    `seams` maps a block index to its :attr:`Piece.seams` (missing: an empty piece).
+    Returns one sentence per face where the two sides differ (empty: no seam).
+    """
+    d = len(plan.shape)
+    out = []
+    empty = np.zeros((0, d), np.int64)
+    for index in plan.blocks():
+        for a in range(d):
+            nb = list(index)
+            nb[a] += 1
+            if nb[a] >= plan.grid[a]:
+                continue
+            mine = seams.get(tuple(index), {}).get((a, 1), empty)
+            theirs = seams.get(tuple(nb), {}).get((a, -1), empty)
+            if mine.shape != theirs.shape or not np.array_equal(mine, theirs):
+                out.append(f"blocks {tuple(index)} and {tuple(nb)} disagree on their shared "
+                           f"face ({len(mine)} vs {len(theirs)} facets)")
+    return out
+
+
+def assemble(pieces: list[Piece], plan: BlockPlan, spacing=None):
+    """The pieces as one mesh: (points (N, d) float64 physical, cells, material, quality,
+    groups {name: (facets, owner)}); points in global-id order."""
+    d = len(plan.shape)
+    spacing = np.ones(d) if spacing is None else np.asarray(spacing, float)
+    pieces = [p for p in pieces if len(p.cells)]
+    gids = np.concatenate([p.gid for p in pieces]) if pieces else np.zeros(0, np.int64)
+    uniq, inverse = np.unique(gids, return_inverse=True)
+    pts = np.zeros((len(uniq), d), np.int64)
+    starts = np.cumsum([0] + [len(p.gid) for p in pieces])
+    cells, mats, qual, offsets = [], [], [], [0]
+    groups: dict[str, list] = {}
+    for p, s in zip(pieces, starts[:-1]):
+        local = inverse[s:s + len(p.gid)]
+        pts[local] = p.points
+        cells.append(local[p.cells])
+        mats.append(p.material)
+        qual.append(p.quality)
+        for name, (f, o) in p.groups.items():
+            groups.setdefault(name, []).append((local[f], o + offsets[-1]))
+        offsets.append(offsets[-1] + len(p.cells))
+    merged = {n: (np.concatenate([f for f, _ in v]), np.concatenate([o for _, o in v]))
+              for n, v in groups.items()}
+    cat = (lambda xs, w: np.concatenate(xs) if xs else np.zeros((0,) * w))
+    return (pts * spacing, cat(cells, 2).astype(np.intp) if cells else np.zeros((0, d + 1), np.intp),
+            cat(mats, 1).astype(np.int64) if mats else np.zeros(0, np.int64),
+            cat(qual, 1) if qual else np.zeros(0), merged)

@@ -1,0 +1,257 @@
+"""Files of a block-wise mesh: one piece per block, and the index that names them.
+
+Layout of ``OUT.pvtu`` (partitioned VTK, ParaView's convention): the index ``OUT.pvtu``
+and a folder ``OUT/`` beside it holding ``OUT_<i>.vtu`` (the piece of block ``i``) and
+``OUT_<i>_facets.vtu`` (its facet groups, the ``_facet_vtu`` layout: same points, one
+triangle per facet, cell data ``group`` and ``owner``, names in ``<FieldData>``). For
+``OUT.xdmf`` the folder holds ``OUT_<i>.h5`` instead and the index is an XDMF spatial
+collection of one grid per piece.
+
+Every piece carries: points in the files' frame (x = column, y = row, z = plane, times the
+spacing); cell data ``material``, ``quality`` (radius-to-edge) and ``level``; point data
+``global_id``, the vertex's key in the image's corner lattice, so a vertex on a shared
+face has one id in every piece that holds it (Int32 when the lattice has fewer than 2**31
+points, else Float64, exact to 2**53, so every piece declares one type). Blocks with no
+meshed element have no piece.
+
+Who reads the pieces: VTK's ``XMLPUnstructuredGridReader`` reads the ``.pvtu`` (pyvista,
+ParaView; under MPI, ``pvbatch`` gives each rank its pieces); an MPI solver reads its
+rank's pieces with any ``.vtu``/HDF5 reader and joins shared vertices by ``global_id``,
+no renumbering or halo exchange needed to assemble. FEniCSx/dolfinx partitions a mesh it
+reads from one XDMF grid itself: for it, merge (``read_mesh`` then ``write_mesh``) while
+the mesh fits one process. Only the reading by pyvista and meshio is tested here.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+from xml.sax.saxutils import quoteattr
+
+import numpy as np
+
+from ..formats._vtu import write_vtu
+
+__all__ = [
+    "id_dtype",
+    "piece_names",
+    "read_pvtu",
+    "read_pvtu_groups",
+    "write_piece_h5",
+    "write_piece_vtu",
+    "write_pvtu",
+    "write_xdmf_index",
+]
+
+_VTK_NAME = {np.dtype(np.int32): "Int32", np.dtype(np.float64): "Float64",
+             np.dtype(np.int8): "Int8"}
+
+
+def id_dtype(n_lattice: int) -> np.dtype:
+    """The dtype global ids are written in: int32 below 2**31 lattice points, else float64."""
+    return np.dtype(np.int32) if n_lattice < 2**31 else np.dtype(np.float64)
+
+
+def piece_names(output, number: int) -> tuple[str, str, str]:
+    """(piece, facets companion, h5) file names of piece `number` of `output`.
+
+    Examples
+    --------
+    >>> piece_names("run/brain.pvtu", 3)
+    ('brain_3.vtu', 'brain_3_facets.vtu', 'brain_3.h5')
+    """
+    stem = Path(output).stem
+    return f"{stem}_{number}.vtu", f"{stem}_{number}_facets.vtu", f"{stem}_{number}.h5"
+
+
+def _file_arrays(piece, spacing, ids: np.dtype, mat: np.dtype):
+    """Points (x, y(, z)) and cells in the files' frame; reversing the axes is an odd
+    permutation (2-D and 3-D), so two corners of every cell are swapped to keep it
+    positively oriented."""
+    d = piece.points.shape[1]
+    pts = (piece.points * np.asarray(spacing, float))[:, ::-1]
+    swap = [1, 0] + list(range(2, d + 1))
+    return pts, piece.cells[:, swap], {
+        "material": piece.material.astype(mat), "quality": piece.quality.astype(np.float64),
+        "level": piece.level.astype(np.int8)}, {"global_id": piece.gid.astype(ids)}
+
+
+def write_piece_vtu(folder: Path, output, number: int, piece, spacing, group_ids: dict,
+                    ids: np.dtype, mat: np.dtype) -> None:
+    """Write piece `number` and its facet companion into `folder`."""
+    name, facets_name, _ = piece_names(output, number)
+    pts, cells, cell_data, point_data = _file_arrays(piece, spacing, ids, mat)
+    write_vtu(folder / name, pts, cells, cell_data=cell_data, point_data=point_data)
+    d = pts.shape[1]
+    names = [n for n in group_ids if n in piece.groups]
+    flip = [1, 0] + list(range(2, d))
+    facets = np.concatenate([np.zeros((0, d), np.intp)]
+                            + [piece.groups[n][0][:, flip] for n in names])
+    group = np.concatenate([np.zeros(0, np.int32)]
+                           + [np.full(len(piece.groups[n][1]), group_ids[n], np.int32)
+                              for n in names])
+    owner = np.concatenate([np.zeros(0, np.int64)] + [piece.groups[n][1] for n in names])
+    write_vtu(folder / facets_name, pts, facets, cell_data={"group": group, "owner": owner},
+              field_data={n: [group_ids[n]] for n in group_ids},
+              cell_type=5 if d == 3 else 3)
+
+
+def write_piece_h5(folder: Path, output, number: int, piece, spacing, group_ids: dict,
+                   ids: np.dtype, mat: np.dtype) -> None:
+    """Write piece `number` as one HDF5 file: points, cells, cell and point data, and each
+    facet group as ``facets/<name>`` (vertex ids) and ``owners/<name>``."""
+    from ..._atomic import hdf5_file
+
+    _, _, h5_name = piece_names(output, number)
+    pts, cells, cell_data, point_data = _file_arrays(piece, spacing, ids, mat)
+    d = pts.shape[1]
+    flip = [1, 0] + list(range(2, d))
+    with hdf5_file(folder / h5_name) as h5:
+        h5["points"] = pts
+        h5["cells"] = cells.astype(np.int64)
+        for name, values in {**cell_data, **point_data}.items():
+            h5[name] = values
+        for name, (f, o) in piece.groups.items():
+            h5[f"facets/{name}"] = f[:, flip].astype(np.int64)
+            h5[f"owners/{name}"] = o.astype(np.int64)
+            h5[f"facets/{name}"].attrs["group_id"] = group_ids[name]
+
+
+def _pdata(section: str, arrays: dict) -> str:
+    tags = "".join(f'<PDataArray type="{_VTK_NAME[np.dtype(t)]}" Name={quoteattr(n)}/>'
+                   for n, t in arrays.items())
+    return f"<{section}>{tags}</{section}>"
+
+
+def write_pvtu(path, folder_name: str, sources: list[str], ids: np.dtype, mat: np.dtype) -> None:
+    """Write the ``.pvtu`` index naming the pieces ``folder_name/<source>``."""
+    pieces = "".join(f"<Piece Source={quoteattr(f'{folder_name}/{s}')}/>" for s in sources)
+    text = ('<?xml version="1.0"?>\n<VTKFile type="PUnstructuredGrid" version="1.0" '
+            f'byte_order="{"LittleEndian" if np.little_endian else "BigEndian"}" '
+            'header_type="UInt64"><PUnstructuredGrid GhostLevel="0">'
+            + _pdata("PCellData", {"material": mat, "quality": np.float64, "level": np.int8})
+            + _pdata("PPointData", {"global_id": ids})
+            + '<PPoints><PDataArray type="Float64" NumberOfComponents="3"/></PPoints>'
+            + pieces + "</PUnstructuredGrid></VTKFile>\n")
+    Path(path).write_text(text)
+
+
+def write_xdmf_index(path, folder_name: str, pieces: list[tuple[str, int, int]], d: int,
+                     ids: np.dtype, mat: np.dtype) -> None:
+    """Write the XDMF index: a spatial collection of one grid per (h5 name, n_points,
+    n_cells)."""
+    topo = "Tetrahedron" if d == 3 else "Triangle"
+    geo = "XYZ" if d == 3 else "XY"
+    num = {np.dtype(np.int32): ('Int', 4), np.dtype(np.float64): ('Float', 8),
+           np.dtype(np.int8): ('Char', 1)}
+
+    def item(h5, name, dims, dtype):
+        kind, prec = num[np.dtype(dtype)]
+        return (f'<DataItem Dimensions="{dims}" NumberType="{kind}" Precision="{prec}" '
+                f'Format="HDF">{folder_name}/{h5}:/{name}</DataItem>')
+
+    grids = []
+    for h5, n_pts, n_cells in pieces:
+        attrs = "".join(
+            f'<Attribute Name="{n}" AttributeType="Scalar" Center="{c}">'
+            f'{item(h5, n, m, t)}</Attribute>'
+            for n, c, m, t in (("material", "Cell", n_cells, mat),
+                               ("quality", "Cell", n_cells, np.float64),
+                               ("level", "Cell", n_cells, np.int8),
+                               ("global_id", "Node", n_pts, ids)))
+        cells_item = (f'<DataItem Dimensions="{n_cells} {d + 1}" NumberType="Int" '
+                      f'Precision="8" Format="HDF">{folder_name}/{h5}:/cells</DataItem>')
+        grids.append(f'<Grid Name="{Path(h5).stem}" GridType="Uniform">'
+                     f'<Topology TopologyType="{topo}" NumberOfElements="{n_cells}">'
+                     f'{cells_item}</Topology><Geometry GeometryType="{geo}">'
+                     f'{item(h5, "points", f"{n_pts} {d}", np.float64)}</Geometry>'
+                     f'{attrs}</Grid>')
+    Path(path).write_text('<?xml version="1.0"?>\n<Xdmf Version="3.0"><Domain>'
+                          '<Grid Name="pieces" GridType="Collection" CollectionType="Spatial">'
+                          + "".join(grids) + "</Grid></Domain></Xdmf>\n")
+
+
+def _sources(path: Path) -> list[Path]:
+    import xml.etree.ElementTree as ET
+
+    try:
+        root = ET.parse(path).getroot()
+    except ET.ParseError as exc:
+        raise ValueError(f"cannot read {path} as a .pvtu index: {exc}; write it again "
+                         "with swa-imesh mesh.") from exc
+    return [path.parent / p.attrib["Source"] for p in root.iter("Piece")]
+
+
+def _read_piece(p: Path):
+    import meshio
+
+    if not p.is_file():
+        raise FileNotFoundError(f"the piece {p} named by the .pvtu index is missing; "
+                                "copy the whole folder with the index.")
+    m = meshio.read(p, file_format="vtu")
+    cells = np.concatenate([c.data for c in m.cells])
+    return m, cells
+
+
+def read_pvtu(path):
+    """Read a ``.pvtu`` of this package's pieces as one :class:`Mesh` (vertices joined
+    by ``global_id``, in id order; elements piece by piece).
+
+    Parameters
+    ----------
+    path : str or Path
+
+    Returns
+    -------
+    Mesh
+        Points in numpy axis order, ``material`` and ``quality``/``level`` cell data.
+    """
+    from ..formats._common import orient_positive
+    from ..model._types import Mesh
+
+    path = Path(path)
+    if not path.is_file():
+        raise FileNotFoundError(f"no mesh file at {path}; check the path.")
+    gids, pts, cells, mats, data = [], [], [], [], {"quality": [], "level": []}
+    offset = 0
+    for src in _sources(path):
+        m, c = _read_piece(src)
+        if "global_id" not in m.point_data:
+            raise ValueError(f"{src} has no global_id point data; it is not a piece of a "
+                             "block-wise mesh.")
+        gids.append(np.asarray(m.point_data["global_id"]).astype(np.int64).ravel())
+        pts.append(m.points)
+        cells.append(c + offset)
+        offset += len(m.points)
+        mats.append(np.concatenate(m.cell_data["material"]))
+        for k, values in data.items():
+            values.append(np.concatenate(m.cell_data[k]))
+    if not gids:
+        raise ValueError(f"{path} names no piece; the mesh is empty.")
+    gid = np.concatenate(gids)
+    _, first, inverse = np.unique(gid, return_index=True, return_inverse=True)
+    points = np.concatenate(pts)[first]
+    d = 3 if np.any(points[:, 2] != 0) or np.concatenate(cells).shape[1] == 4 else 2
+    points = np.ascontiguousarray(points[:, :d][:, ::-1], dtype=np.float64)
+    cells = orient_positive(points, inverse[np.concatenate(cells)])
+    return Mesh(points, cells, np.concatenate(mats).astype(np.int64),
+                cell_data={k: np.concatenate(v) for k, v in data.items()},
+                info={"source": str(path), "has_material": True, "pieces": len(gids)})
+
+
+def read_pvtu_groups(path) -> dict[str, np.ndarray]:
+    """The facet groups of a ``.pvtu`` mesh: name -> (F, d) global vertex ids, each row
+    sorted (orientation dropped), from the pieces' facet companions."""
+    import meshio
+
+    out: dict[str, list] = {}
+    for src in _sources(Path(path)):
+        comp = src.with_name(src.stem + "_facets.vtu")
+        m = meshio.read(comp, file_format="vtu")
+        gid = np.asarray(meshio.read(src, file_format="vtu").point_data["global_id"]
+                         ).astype(np.int64).ravel()
+        facets = np.concatenate([c.data for c in m.cells]) if m.cells else np.zeros((0, 3), int)
+        group = np.concatenate(m.cell_data["group"]) if m.cells else np.zeros(0, int)
+        names = {int(np.ravel(v)[0]): k for k, v in m.field_data.items()}
+        for g in np.unique(group).tolist():
+            out.setdefault(names[g], []).append(np.sort(gid[facets[group == g]], axis=1))
+    return {k: np.concatenate(v) for k, v in out.items()}
