@@ -172,7 +172,7 @@ def resolve_fronts(labels, *, spacing, exclude, material_names, faces: list[str]
 
     reason = ""
     while ratio.max(initial=0.0) > 1:
-        if rounds >= SIZE_ROUNDS or int(mesh.info["lattice"]["refine"]) >= MAX_REFINE:
+        if rounds >= SIZE_ROUNDS or _refine_level(mesh) >= MAX_REFINE:
             reason = f"{rounds} levels of splitting, the most"
             break
         leaf = np.asarray(mesh.cell_data["leaf"])
@@ -267,3 +267,9 @@ class SpaceEstimator:
             w = w - shift
         diff = w - u2
         return float(np.abs(diff).max(initial=0.0)), diff
+
+
+def _refine_level(mesh: Mesh) -> int:
+    """Interface refinement level K of the lattice `mesh` was made on (0 if unrecorded)."""
+    lattice = None if mesh.recipe is None else mesh.recipe.lattice
+    return 0 if lattice is None else int(lattice.refine)

@@ -12,6 +12,7 @@ import argparse
 import json
 import logging
 import sys
+from ..formats._registry import PVTU
 from contextlib import contextmanager
 from pathlib import Path
 
@@ -57,7 +58,7 @@ def add_block_arguments(p: argparse.ArgumentParser) -> None:
 
 def uses_blocks(args: argparse.Namespace) -> bool:
     """Whether the command asks for the block-wise path."""
-    return (Path(args.output).suffix.lower() == ".pvtu"
+    return (Path(args.output).suffix.lower() == PVTU
             or any(getattr(args, k, None) is not None
                    for k in ("workers", "scheduler", "memory", "block")))
 

@@ -323,7 +323,7 @@ def mesh_block(plan: BlockPlan, index, data: np.ndarray, grids: list, *,
         return empty
     shift, extent = _frame(origin, level, meshed)
     local = RegionTree(origin - shift, level, label, extent, extent, plan.top)
-    pts, cells, leaf_of, template_id, _, _ = template_mesh(local, meshed, rule="parity")
+    pts, cells, leaf_of, template_id, _, _, _ = template_mesh(local, meshed, rule="parity")
     points = pts.astype(np.int64) + shift
     del pts
     table = template_quality(d, tuple(spacing) if spacing is not None else (1.0,) * d)

@@ -24,6 +24,7 @@ the mesh fits one process. Only the reading by pyvista and meshio is tested here
 
 from __future__ import annotations
 
+from ..formats._registry import PARTITIONED, PVTU, XDMF_INDEX, facets_companion
 from pathlib import Path
 from xml.sax.saxutils import quoteattr
 
@@ -60,7 +61,9 @@ def piece_names(output, number: int) -> tuple[str, str, str]:
     ('brain_3.vtu', 'brain_3_facets.vtu', 'brain_3.h5')
     """
     stem = Path(output).stem
-    return f"{stem}_{number}.vtu", f"{stem}_{number}_facets.vtu", f"{stem}_{number}.h5"
+    piece = Path(f"{stem}_{number}").with_suffix(PARTITIONED[PVTU])
+    return (piece.name, facets_companion(piece).name,
+            piece.with_suffix(PARTITIONED[XDMF_INDEX]).name)
 
 
 def _file_arrays(piece, spacing, ids: np.dtype, mat: np.dtype):
@@ -245,7 +248,7 @@ def read_pvtu_groups(path) -> dict[str, np.ndarray]:
 
     out: dict[str, list] = {}
     for src in _sources(Path(path)):
-        comp = src.with_name(src.stem + "_facets.vtu")
+        comp = facets_companion(src)
         m = meshio.read(comp, file_format="vtu")
         gid = np.asarray(meshio.read(src, file_format="vtu").point_data["global_id"]
                          ).astype(np.int64).ravel()

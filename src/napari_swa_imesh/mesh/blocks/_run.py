@@ -20,6 +20,7 @@ from __future__ import annotations
 
 import math
 import uuid
+from ..formats._registry import PARTITIONED, PVTU, XDMF_INDEX
 from collections.abc import Callable
 from pathlib import Path
 
@@ -30,7 +31,7 @@ from . import _files as bf
 
 __all__ = ["BLOCK_SUFFIXES", "BlockMeshError", "block_memory", "choose_block", "mesh_blocks"]
 
-BLOCK_SUFFIXES = (".pvtu", ".xdmf")
+BLOCK_SUFFIXES = tuple(PARTITIONED)
 
 
 class BlockMeshError(ValueError):
@@ -120,7 +121,7 @@ def mesh_task(source, plan: bk.BlockPlan, index, grids, number: int, folder: str
                "problems": piece.problems,
                "groups": {n: len(o) for n, (_, o) in piece.groups.items()}}
     if len(piece.cells):
-        write = bf.write_piece_h5 if options["kind"] == ".xdmf" else bf.write_piece_vtu
+        write = bf.write_piece_h5 if options["kind"] == XDMF_INDEX else bf.write_piece_vtu
         write(Path(folder), output, number, piece, options["spacing"], options["group_ids"],
               np.dtype(options["ids"]), np.dtype(options["mat"]))
     return summary
@@ -275,7 +276,7 @@ def mesh_blocks(labels, output, *, block: int | None = None, memory: int | None 
     folder = out.with_suffix("")
     check_writable(out, force=force)
     _check_folder(folder, out, force)
-    if kind == ".xdmf":
+    if kind == XDMF_INDEX:
         from ..formats._xdmf import require_h5py
 
         require_h5py("write")
@@ -337,7 +338,7 @@ def mesh_blocks(labels, output, *, block: int | None = None, memory: int | None 
                                   # is the proven bound (quality_bounds, cubic voxels)
                                   float(template_quality(d, sp)["quality"].max()))
             written = [s for s in summaries if s["n_cells"]]
-            if kind == ".pvtu":
+            if kind == PVTU:
                 bf.write_pvtu(tmp_out, folder.name, [bf.piece_names(out, s["number"])[0]
                                                      for s in written], ids, mat)
             else:
@@ -367,7 +368,7 @@ def _check_folder(folder: Path, out: Path, force: bool) -> None:
                               "it (--force on the command line).")
     stem = out.stem
     foreign = [p.name for p in folder.iterdir() if not folder.is_dir() or not (
-        p.name.startswith(f"{stem}_") and p.suffix in (".vtu", ".h5"))] \
+        p.name.startswith(f"{stem}_") and p.suffix in PARTITIONED.values())] \
         if folder.is_dir() else [folder.name]
     if foreign:
         raise FileExistsError(f"{folder} exists and holds files that are not pieces of "

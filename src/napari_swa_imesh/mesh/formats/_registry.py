@@ -291,3 +291,10 @@ del _fmt
 
 #: Suffix -> short description, in the order shown to users (every suffix, .ele too).
 MESH_SUFFIXES = {suffix: fmt.description for suffix, fmt in _FORMATS.items()}
+
+#: Partitioned (block-wise, issue 27) outputs: the index file's suffix -> its pieces'
+#: suffix (``mesh.blocks`` writes them; ``.pvtu`` is read by ``read_mesh``, which joins
+#: the pieces). Kept here so the registry stays the one place that knows suffixes.
+PARTITIONED = {".pvtu": ".vtu", ".xdmf": ".h5"}
+PVTU = ".pvtu"
+XDMF_INDEX = ".xdmf"
