@@ -13,19 +13,25 @@ import numpy as np
 
 from ..mesh import Mesh, mesh_labels
 from ..mesh._adapt import _refine_marked
+from ..mesh._lattice import MAX_REFINE
 from ._adapt import (AUTO, auto_settings, check_adapt, doerfler, flux_jump_indicator,
                      refine_within, voxel_lattice_vertices)
 from ._assembly import cell_fluxes, fe_space, p1_embedding, stiffness_matrix
+from ._budget import DEFAULT_MEMORY, check_memory, estimate_memory, format_bytes
 from ._conductivity import axis_names, conductivity_tensors
+from ._dual import dual_bound, facet_table, hypercircle
 from ._fe import vertex_values
 from ._periodic import PeriodicProblem
 from ._hashin import HashinShtrikman, two_isotropic_phases
-from ._protocols import check_within_bounds, mixed_boundary, voigt_reuss
+from ._protocols import BOUND_SLACK, check_within_bounds, mixed_boundary, voigt_reuss
 from ._solve import DEFAULT_TOLERANCE, SolverInfo, connected_parts
 
 __all__ = ["SimulationResult", "simulate", "simulate_steps"]
 
 ORDERS = (1, 2)
+#: Default relative width ``(upper - lower) / lower`` of the certified interval: wider, the
+#: run refines where the gap is (while the refine levels and the memory budget allow).
+GAP_TARGET = 0.02
 PROTOCOLS = ("mixed", "periodic")
 
 
@@ -70,6 +76,17 @@ class SimulationResult:
         Adaptive refinement steps taken before the final solve (:mod:`._adapt`).
     choice : str
         The elements and steps used, and why when the default chose them.
+    interval : dict of str to (float, float)
+        Mixed protocol: per axis (lower, upper) bounds of the exact k_eff of the meshed
+        geometry (the dual and primal energies; upper = ``k_eff``); empty otherwise.
+    gap_target : float
+        The relative width asked; :attr:`gap` gives the reached one.
+    certify : int
+        Refinement steps taken to narrow the interval.
+    dual_solver : dict of str to SolverInfo
+        The dual (Crouzeix-Raviart) solves.
+    warnings : list of str
+        Sentences about the result (an interval left wider than the target).
     """
 
     k_eff: dict[str, float]
@@ -87,6 +104,16 @@ class SimulationResult:
     hashin_shtrikman: HashinShtrikman | None = None
     adapt: int = 0
     choice: str = ""
+    interval: dict[str, tuple[float, float]] = field(default_factory=dict)
+    gap_target: float = GAP_TARGET
+    certify: int = 0
+    dual_solver: dict[str, SolverInfo] = field(default_factory=dict)
+    warnings: list[str] = field(default_factory=list)
+
+    @property
+    def gap(self) -> dict[str, float]:
+        """Per axis, the interval's relative width ``(upper - lower) / lower``."""
+        return relative_gaps(self.interval)
 
     def summary(self) -> dict:
         """Plain-JSON summary (what ``swa-imesh simulate --json`` prints)."""
@@ -107,6 +134,11 @@ class SimulationResult:
                            for row in self.tensor]} if self.tensor is not None else {}),
             **({"hashin_shtrikman": self.hashin_shtrikman.to_dict()}
                if self.hashin_shtrikman is not None else {}),
+            **({"interval": {a: {"lower": lo, "upper": hi, "gap": self.gap[a]}
+                             for a, (lo, hi) in self.interval.items()},
+                "gap_target": self.gap_target, "certify": self.certify}
+               if self.interval else {}),
+            "warnings": list(self.warnings),
         }
 
     def describe(self) -> str:
@@ -119,6 +151,10 @@ class SimulationResult:
             s = self.solver[a]
             lines.append(f"k_eff {a} = {k:.6g}  (Reuss {lo:.4g} .. Voigt {hi:.4g}; "
                          f"{s.iterations} CG iterations, residual {s.residual:.1e})")
+        for a, (lo, hi) in self.interval.items():
+            lines.append(f"certified {a}: {lo:.6g} <= k_eff <= {hi:.6g}  (gap "
+                         f"{100 * self.gap[a]:.3g} %, target {100 * self.gap_target:g} %)")
+        lines += [f"warning: {w}" for w in self.warnings]
         fractions = ", ".join(f"{self.mesh.material_names.get(m, m)} {f:.3f}"
                               for m, f in self.volume_fractions.items())
         lines.append(f"volume fractions: {fractions}")
@@ -222,18 +258,56 @@ def check_tolerance(tol) -> None:
         raise ValueError(f"tol must be a relative residual between 0 and 1, not {tol!r}.")
 
 
+def check_gap(gap) -> float:
+    """The interval's target relative width, or ValueError."""
+    if isinstance(gap, bool) or not isinstance(gap, Real) or not gap > 0:
+        raise ValueError(f"gap must be a positive relative width (0.02 for 2 %; inf never "
+                         f"refines), not {gap!r}.")
+    return float(gap)
+
+
+def check_memory_budget(memory) -> None:
+    if isinstance(memory, bool) or not isinstance(memory, Real) or not memory > 0:
+        raise ValueError(f"memory must be a positive number of bytes, not {memory!r}.")
+
+
+def relative_gaps(interval: Mapping[str, tuple[float, float]]) -> dict[str, float]:
+    """Per axis ``(upper - lower) / lower`` (infinite for a zero lower bound)."""
+    return {a: (hi - lo) / lo if lo > 0 else float("inf") for a, (lo, hi) in interval.items()}
+
+
+def _flux_scale(lo: np.ndarray, hi: np.ndarray, axis: int) -> float:
+    """``A / L`` of the box along `axis`: the flux of a unit k_eff."""
+    return float(np.prod(np.delete(hi - lo, axis)) / (hi[axis] - lo[axis]))
+
+
+def _cannot_refine(mesh: Mesh, labels, level: int) -> str | None:
+    """Why the labels cannot be meshed again at interface refinement `level` for the
+    interval (None: they can)."""
+    if labels is None or isinstance(labels, Mesh):
+        return "a mesh is not meshed again (simulate the label image to refine it)"
+    info = mesh.info
+    if info.get("method") != "template" or "lattice" not in info or info.get("coarsen"):
+        return "this mesh cannot be refined (not a template mesh of the labels)"
+    if level > MAX_REFINE:
+        return f"the finest refine level ({MAX_REFINE}) is reached"
+    return None
+
+
 def simulate_steps(mesh_or_labels, conductivity: Mapping, *, spacing=None,
                    order: int | str = AUTO, axes=None, tol: float = DEFAULT_TOLERANCE,
                    exclude=(), material_names: Mapping[int, str] | None = None,
                    refine: int = 0, protocol: str = "mixed", adapt: int | str = AUTO,
-                   labels=None, max_aspect: float | None = None
+                   labels=None, max_aspect: float | None = None,
+                   interval: bool = True, gap: float = GAP_TARGET,
+                   memory: float = DEFAULT_MEMORY
                    ) -> Generator[tuple[int, int, str], None, SimulationResult]:
     """Run :func:`simulate` step by step, for a progress bar.
 
     Parameters
     ----------
     mesh_or_labels, conductivity, spacing, order, axes, tol, exclude, material_names, refine,
-    protocol, adapt, labels, max_aspect
+    protocol, adapt, labels, max_aspect, interval, gap, memory
         As for :func:`simulate`.
 
     Yields
@@ -249,7 +323,10 @@ def simulate_steps(mesh_or_labels, conductivity: Mapping, *, spacing=None,
     if order != AUTO and (isinstance(order, bool) or order not in ORDERS):
         raise ValueError(f"order must be 1 or 2 (P1 or P2 elements) or 'auto', not {order!r}.")
     adapt = check_adapt(adapt)
+    may_refine = adapt == AUTO          # an asked mesh (adapt given) is kept as asked
     check_tolerance(tol)
+    gap_target = check_gap(gap)
+    check_memory_budget(memory)
     if protocol not in PROTOCOLS:
         raise ValueError(f"protocol must be one of {', '.join(PROTOCOLS)}, not {protocol!r}.")
     seconds: dict[str, float] = {}
@@ -267,8 +344,16 @@ def simulate_steps(mesh_or_labels, conductivity: Mapping, *, spacing=None,
                  if order == 1 and adapt == AUTO and source is not None
                  and mesh.info.get("method") == "template" and "lattice" in mesh.info
                  and not mesh.info.get("coarsen") else None)
+    chosen = order
     order, adapt, growth, choice = auto_settings(mesh, order, adapt, source is not None,
                                                  reference)
+    interval_wanted = bool(interval) and protocol == "mixed"
+    if chosen == AUTO and order == 2 and check_memory(mesh, 2, interval_wanted, memory,
+                                                      asked=False):
+        order, adapt, growth, choice = auto_settings(mesh, 1, 0, source is not None)
+        choice = (f"P1 (P2 would need about "
+                  f"{format_bytes(estimate_memory(mesh, 2, interval_wanted))}, above the "
+                  f"memory budget of {format_bytes(memory)})")
     start = len(mesh.points)
     seconds["mesh"] = time.perf_counter() - t0
     total = 2 + len(names) + adapt
@@ -278,7 +363,7 @@ def simulate_steps(mesh_or_labels, conductivity: Mapping, *, spacing=None,
                                 "refining where the flux jumps most")
         t0 = time.perf_counter()
         first = simulate(mesh, conductivity, order=1, adapt=0, axes=names, tol=tol,
-                         protocol=protocol)
+                         protocol=protocol, interval=False)
         # mark whole leaves (the unit the mesher splits) by their summed indicator
         leaf = np.asarray(mesh.cell_data["leaf"])
         indicator = np.bincount(leaf, flux_jump_indicator(mesh, [first.flux[a] for a in names]))
@@ -290,66 +375,127 @@ def simulate_steps(mesh_or_labels, conductivity: Mapping, *, spacing=None,
             mesh, tree = refine_within(source, mesh, indicator, target, tree)
         materials, cell_material = np.unique(mesh.material, return_inverse=True)
         seconds[f"adapt {step + 1}"] = time.perf_counter() - t0
-    yield 1 + adapt, total, f"assembling P{order} on {mesh.n_cells} elements"
-
-    t0 = time.perf_counter()
-    space = fe_space(mesh, order)
-    volumes = np.empty(mesh.n_cells)
-    matrix = stiffness_matrix(space, tensors, cell_material, volumes)
-    doflocs = space.doflocs
-    coarse = p1_embedding(space)
-    seconds["assemble"] = time.perf_counter() - t0
-    lo, hi = mesh.image_box()
-    per_material = np.bincount(cell_material, weights=volumes, minlength=materials.size)
-    fractions = per_material / float(np.prod(hi - lo))
-    if not mesh.records_box:
-        _check_box_faces(mesh, names, lo, hi)
-    if not mesh.records_box and fractions.sum() < 1 - 1e-9:
-        warnings.warn("the mesh has voids and does not record the image box, so the box is "
-                      "the extent of its points; if an excluded material covered a whole "
-                      "face of the image, k_eff refers to a smaller box: simulate the label "
-                      "image instead.", stacklevel=2)
-    image_axes = {n: i for i, n in enumerate(axis_names(mesh.ndim))}
-    parts = connected_parts(matrix)
-
-    last: dict = {}           # the energy's pass over the elements also gives the flux
-
-    def energy(u: np.ndarray) -> float:
-        last["u"], (last["flux"], total) = u, cell_fluxes(space, u, tensors, cell_material)
-        return total
-
     k_eff, bounds, potential, flux, solver = {}, {}, {}, {}, {}
-    seconds["solve"] = 0.0
-    periodic = tensor = None
-    if protocol == "periodic":
+    interval: dict[str, tuple[float, float]] = {}
+    dual_info: dict[str, SolverInfo] = {}
+    notes: list[str] = []
+    certify = 0
+    done = 1 + adapt
+    check_memory(mesh, order, interval_wanted, memory, asked=True)
+    while True:
+        yield done, total, f"assembling P{order} on {mesh.n_cells} elements"
         t0 = time.perf_counter()
-        periodic = PeriodicProblem(matrix, doflocs, lo, hi, tol=tol,
-                                   cell_vertices=space.element_dofs[:, :mesh.ndim + 1].T)
-        tensor = np.full((mesh.ndim, mesh.ndim), np.nan)
-        seconds["solve"] += time.perf_counter() - t0
-    for step, name in enumerate(names, start=2 + adapt):
-        yield step, total, f"solving along {name} ({matrix.shape[0]} unknowns)"
-        t0 = time.perf_counter()
-        axis = image_axes[name]
-        if periodic is None:
-            result = mixed_boundary(matrix, doflocs, name, lo, hi, energy, tol=tol,
-                                    parts=parts, cell_dofs=space.element_dofs,
-                                    cell_material=mesh.material, coarse=coarse)
-            value, values, info = result.k_eff, result.values, result.info
-        else:
-            tensor[:, axis], values, info = periodic.solve(axis)
-            value = float(tensor[axis, axis])
-        voigt, reuss = voigt_reuss(tensors, fractions, axis)
-        check_within_bounds(value, voigt, reuss, name)
-        k_eff[name] = value
-        bounds[name] = (reuss, voigt)
-        solver[name] = info
-        potential[name] = vertex_values(values, len(mesh.points))
-        cells_flux = last["flux"] if last.get("u") is values else cell_fluxes(
-            space, values, tensors, cell_material)[0]                   # (M, d) axis order
-        flux[name] = np.ascontiguousarray(cells_flux[:, ::-1])
-        last.clear()
-        seconds["solve"] += time.perf_counter() - t0
+        space = fe_space(mesh, order)
+        volumes = np.empty(mesh.n_cells)
+        matrix = stiffness_matrix(space, tensors, cell_material, volumes)
+        doflocs = space.doflocs
+        coarse = p1_embedding(space)
+        seconds["assemble"] = seconds.get("assemble", 0.0) + time.perf_counter() - t0
+        lo, hi = mesh.image_box()
+        per_material = np.bincount(cell_material, weights=volumes, minlength=materials.size)
+        fractions = per_material / float(np.prod(hi - lo))
+        if not mesh.records_box:
+            _check_box_faces(mesh, names, lo, hi)
+        if not mesh.records_box and fractions.sum() < 1 - 1e-9:
+            warnings.warn("the mesh has voids and does not record the image box, so the box "
+                          "is the extent of its points; if an excluded material covered a "
+                          "whole face of the image, k_eff refers to a smaller box: simulate "
+                          "the label image instead.", stacklevel=2)
+        image_axes = {n: i for i, n in enumerate(axis_names(mesh.ndim))}
+        parts = connected_parts(matrix)
+
+        last: dict = {}           # the energy's pass over the elements also gives the flux
+
+        def energy(u: np.ndarray) -> float:
+            last["u"], (last["flux"], total) = u, cell_fluxes(space, u, tensors, cell_material)
+            return total
+
+        seconds.setdefault("solve", 0.0)
+        periodic = tensor = None
+        if protocol == "periodic":
+            t0 = time.perf_counter()
+            periodic = PeriodicProblem(matrix, doflocs, lo, hi, tol=tol,
+                                       cell_vertices=space.element_dofs[:, :mesh.ndim + 1].T)
+            tensor = np.full((mesh.ndim, mesh.ndim), np.nan)
+            seconds["solve"] += time.perf_counter() - t0
+        dual_space = facets = None
+        gap_indicator = np.zeros(mesh.n_cells) if interval_wanted else None
+        for step, name in enumerate(names, start=done + 1):
+            yield step, total, f"solving along {name} ({matrix.shape[0]} unknowns)"
+            t0 = time.perf_counter()
+            axis = image_axes[name]
+            if periodic is None:
+                result = mixed_boundary(matrix, doflocs, name, lo, hi, energy, tol=tol,
+                                        parts=parts, cell_dofs=space.element_dofs,
+                                        cell_material=mesh.material, coarse=coarse)
+                value, values, info = result.k_eff, result.values, result.info
+            else:
+                tensor[:, axis], values, info = periodic.solve(axis)
+                value = float(tensor[axis, axis])
+            voigt, reuss = voigt_reuss(tensors, fractions, axis)
+            check_within_bounds(value, voigt, reuss, name)
+            k_eff[name] = value
+            bounds[name] = (reuss, voigt)
+            solver[name] = info
+            potential[name] = vertex_values(values, len(mesh.points))
+            cells_flux = last["flux"] if last.get("u") is values else cell_fluxes(
+                space, values, tensors, cell_material)[0]                   # (M, d) axis order
+            flux[name] = np.ascontiguousarray(cells_flux[:, ::-1])
+            last.clear()
+            del cells_flux
+            seconds["solve"] += time.perf_counter() - t0
+            if interval_wanted:
+                t0 = time.perf_counter()
+                dual_space = fe_space(mesh, 1) if dual_space is None else dual_space
+                facets = facet_table(mesh.cells) if facets is None else facets
+                dual = dual_bound(mesh, dual_space, tensors, cell_material, axis, lo, hi,
+                                  tol=tol, facets=facets)
+                if dual.k_lower > value * (1 + BOUND_SLACK):
+                    raise ValueError(f"along {name} the dual bound {dual.k_lower:.9g} lies "
+                                     f"above the primal {value:.9g}: one of the solves is "
+                                     "wrong; please report this with the input.")
+                interval[name] = (min(dual.k_lower, value), value)
+                dual_info[name] = dual.info
+                # the gap per element, relative to this axis' flux: axes weigh the same
+                gap_indicator += hypercircle(space, values, dual.flux, tensors,
+                                             cell_material) / (value * _flux_scale(lo, hi, axis))
+                del dual
+                seconds["dual"] = seconds.get("dual", 0.0) + time.perf_counter() - t0
+        done += 1 + len(names)
+        wide = {a: g for a, g in relative_gaps(interval).items() if g > gap_target}
+        if not wide:
+            break
+        level = refine + certify + 1
+        why = (_cannot_refine(mesh, mesh_or_labels, level) if may_refine else
+               "adapt was given, so the mesh is kept as asked (leave adapt to auto to "
+               "refine for the interval)")
+        if why is None:
+            yield done, total + 2 + len(names), (
+                f"interval wider than {100 * gap_target:g} %: meshing the labels again with "
+                f"interface elements of 2^-{level} voxels")
+            t0 = time.perf_counter()
+            # one split per adaptive step cannot grade a large flat leaf down to a corner
+            # within the refine levels (a 256^2 checkerboard stayed at a 37 % gap after
+            # three): interface refinement reaches every corner at once (1.7 % there)
+            finer = prepare_mesh(source, spacing=spacing, exclude=exclude,
+                                 material_names=material_names, refine=level,
+                                 max_aspect=max_aspect)
+            seconds[f"certify {certify + 1}"] = time.perf_counter() - t0
+            why = check_memory(finer, order, interval_wanted, memory, asked=False)
+            if why is None:
+                del matrix, space, coarse, parts, periodic, dual_space, facets
+                mesh, tree = finer, None
+                materials, cell_material = np.unique(mesh.material, return_inverse=True)
+                certify += 1
+                total += 2 + len(names)
+                continue
+        widest = max(wide, key=wide.get)
+        lo_k, hi_k = interval[widest]
+        notes.append(f"the interval along {widest} is {lo_k:.6g} .. {hi_k:.6g} (gap "
+                     f"{100 * wide[widest]:.3g} %), wider than the target "
+                     f"{100 * gap_target:g} %, and {why}: k_eff is certain only to within "
+                     "that interval.")
+        break
     seconds["setup"] = sum(info.setup for info in solver.values())
     if tensor is not None:
         check_symmetric(tensor)
@@ -358,20 +504,26 @@ def simulate_steps(mesh_or_labels, conductivity: Mapping, *, spacing=None,
     if phases is not None:
         full = tensor is not None and not np.isnan(tensor).any()
         hashin = HashinShtrikman.of(*phases, mesh.ndim, tensor if full else None)
+    for note in notes:
+        warnings.warn(note, stacklevel=2)
+    if certify:
+        choice += f", {certify} step{'s' * (certify > 1)} refined for the interval"
     yield total, total, "done"
     return SimulationResult(
         k_eff=k_eff, bounds=bounds, potential=potential, flux=flux, solver=solver,
         volume_fractions={int(m): float(f) for m, f in zip(materials, fractions)},
         mesh=mesh, order=order, dofs=int(matrix.shape[0]), seconds=seconds,
         protocol=protocol, tensor=None if tensor is None else tensor[::-1, ::-1].copy(),
-        hashin_shtrikman=hashin, adapt=adapt, choice=choice)
+        hashin_shtrikman=hashin, adapt=adapt, choice=choice, interval=interval,
+        gap_target=gap_target, certify=certify, dual_solver=dual_info, warnings=notes)
 
 
 def simulate(mesh_or_labels, conductivity: Mapping, *, spacing=None,
              order: int | str = AUTO, axes=None, tol: float = DEFAULT_TOLERANCE, exclude=(),
              material_names: Mapping[int, str] | None = None,
              refine: int = 0, protocol: str = "mixed", adapt: int | str = AUTO,
-             labels=None, max_aspect: float | None = None) -> SimulationResult:
+             labels=None, max_aspect: float | None = None, interval: bool = True,
+             gap: float = GAP_TARGET, memory: float = DEFAULT_MEMORY) -> SimulationResult:
     """Steady diffusion on an IMESH mesh: effective conductivity of the image box.
 
     For each axis asked, the mixed-boundary protocol: potential 0 and 1 on the two faces
@@ -422,6 +574,23 @@ def simulate(mesh_or_labels, conductivity: Mapping, *, spacing=None,
     max_aspect : float, optional
         Labels only: largest residual aspect of the lattice cells anisotropic voxels are
         cut into (``mesh_labels(max_aspect=...)``; default 1.25).
+    interval : bool
+        Mixed protocol: also bound k_eff from below (:mod:`._dual`), so that
+        ``result.interval[axis] = (lower, upper)`` contains the exact k_eff of the meshed
+        geometry. The upper bound is k_eff itself (the conforming solution's energy with
+        the potential exactly 0/1 on the two faces, the rest insulated); the lower is the
+        complementary energy of a divergence-free flux with no normal component on the
+        insulated boundary (sides and excluded materials). Both hold for these boundary
+        conditions only; the periodic protocol has no interval.
+    gap : float
+        Target ``(upper - lower) / lower`` (default 2 %): wider, and with `adapt` left
+        to ``"auto"``, the labels are meshed again with interface elements one level
+        finer (``refine + 1``, ...), while refine levels and `memory` allow; still wider
+        at the end, a warning gives the interval (also in ``result.warnings``).
+    memory : float
+        Budget in bytes (default 4 GiB), checked from the mesh before assembly
+        (:mod:`._budget`): the default order falls back to P1 beyond it, an asked order
+        is refused with a ValueError, a refinement for the interval is not made.
 
     Returns
     -------
@@ -440,7 +609,8 @@ def simulate(mesh_or_labels, conductivity: Mapping, *, spacing=None,
     steps = simulate_steps(mesh_or_labels, conductivity, spacing=spacing, order=order,
                            axes=axes, tol=tol, exclude=exclude, material_names=material_names,
                            refine=refine, protocol=protocol, adapt=adapt, labels=labels,
-                           max_aspect=max_aspect)
+                           max_aspect=max_aspect, interval=interval, gap=gap,
+                           memory=memory)
     while True:
         try:
             next(steps)

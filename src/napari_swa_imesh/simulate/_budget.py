@@ -1,0 +1,86 @@
+"""The memory budget of a steady run, in bytes, estimated from the mesh before assembly.
+
+A budget in unknowns does not say whether a run fits: P2 at 128^3 was within its unknowns
+and killed at 8 GB. The estimate here is the peak of one solve, measured per unknown on
+IMESH meshes of three-phase blobs (P1, P2 and the Crouzeix-Raviart dual of
+:mod:`._dual`: matrix, multigrid hierarchy, vectors and the element passes), plus what
+the result keeps (the mesh, a flux and a potential per axis). The counts of unknowns come
+from the mesh's vertices and elements by Euler's relation (edges ~ vertices + elements,
+facets ~ (d + 1) / 2 elements), so nothing is assembled to know the cost.
+"""
+
+from __future__ import annotations
+
+from ..mesh import Mesh
+
+__all__ = ["DEFAULT_MEMORY", "check_memory", "estimate_memory", "format_bytes"]
+
+#: Default budget of a steady run (bytes): a sixth of this 24 GB machine.
+DEFAULT_MEMORY = 4 * 2 ** 30
+#: Peak bytes per unknown of one solve (measured on blobs; see the module docstring).
+BYTES_PER_UNKNOWN = {(2, 1): 900.0, (2, 2): 1100.0, (3, 1): 1400.0, (3, 2): 1300.0}
+#: The dual's CR solve, per facet.
+BYTES_PER_FACET = {2: 700.0, 3: 800.0}
+#: Bytes per element the result and the passes over the elements keep (cells, fluxes).
+BYTES_PER_CELL = {2: 120.0, 3: 200.0}
+
+
+def unknowns(mesh: Mesh, order: int) -> int:
+    """Degrees of freedom of a P1/P2 solve on `mesh` (P2: vertices + edges, by Euler)."""
+    n = len(mesh.points)
+    return n if order == 1 else n + n + mesh.n_cells
+
+
+def estimate_memory(mesh: Mesh, order: int, interval: bool) -> int:
+    """Estimated peak bytes of a steady run on `mesh`.
+
+    Parameters
+    ----------
+    mesh : Mesh
+    order : {1, 2}
+    interval : bool
+        With the dual solve of the certified interval (it runs after the primal one, so
+        the larger of the two counts, plus the primal potential kept for the gap).
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from napari_swa_imesh.mesh import mesh_labels
+    >>> estimate_memory(mesh_labels(np.ones((4, 4), np.uint8)), 1, False) > 0
+    True
+    """
+    d = mesh.ndim
+    primal = BYTES_PER_UNKNOWN[(d, order)] * unknowns(mesh, order)
+    peak = primal
+    if interval:
+        facets = (d + 1) * mesh.n_cells / 2
+        peak = max(primal, BYTES_PER_FACET[d] * facets + 8 * unknowns(mesh, order))
+    return int(peak + BYTES_PER_CELL[d] * mesh.n_cells)
+
+
+def format_bytes(n: float) -> str:
+    """``1.5 GB``, ``320 MB``: binary units, three figures."""
+    for unit, size in (("GB", 2 ** 30), ("MB", 2 ** 20), ("kB", 2 ** 10)):
+        if n >= size:
+            return f"{n / size:.3g} {unit}"
+    return f"{int(n)} B"
+
+
+def check_memory(mesh: Mesh, order: int, interval: bool, memory: float, *,
+                 asked: bool) -> str | None:
+    """None when a run on `mesh` fits `memory` bytes; else why not.
+
+    With `asked` (the run the caller asked for) a run that does not fit is refused with a
+    ValueError that says what to do; otherwise (a refinement the run would like) the
+    reason is returned as a clause for the warning.
+    """
+    need = estimate_memory(mesh, order, interval)
+    if need <= memory:
+        return None
+    if asked:
+        raise ValueError(
+            f"P{order} on {mesh.n_cells:,} elements needs about {format_bytes(need)}, above "
+            f"the memory budget of {format_bytes(memory)}: pass a larger --memory, "
+            "--order 1, or --no-interval (the dual solve is the larger).")
+    return (f"the next refinement would need about {format_bytes(need)}, above the memory "
+            f"budget of {format_bytes(memory)} (raise it with --memory)")
