@@ -87,6 +87,10 @@ class SimulationResult:
         The dual (Crouzeix-Raviart) solves.
     warnings : list of str
         Sentences about the result (an interval left wider than the target).
+    memory_estimate : int
+        Estimated peak bytes of the final solve (:mod:`._budget`), checked against
+    memory : float
+        the budget, before assembly.
     """
 
     k_eff: dict[str, float]
@@ -109,6 +113,8 @@ class SimulationResult:
     certify: int = 0
     dual_solver: dict[str, SolverInfo] = field(default_factory=dict)
     warnings: list[str] = field(default_factory=list)
+    memory_estimate: int = 0
+    memory: float = DEFAULT_MEMORY
 
     @property
     def gap(self) -> dict[str, float]:
@@ -139,6 +145,8 @@ class SimulationResult:
                 "gap_target": self.gap_target, "certify": self.certify}
                if self.interval else {}),
             "warnings": list(self.warnings),
+            "memory_estimate_bytes": self.memory_estimate,
+            "memory_budget_bytes": self.memory,
         }
 
     def describe(self) -> str:
@@ -155,6 +163,9 @@ class SimulationResult:
             lines.append(f"certified {a}: {lo:.6g} <= k_eff <= {hi:.6g}  (gap "
                          f"{100 * self.gap[a]:.3g} %, target {100 * self.gap_target:g} %)")
         lines += [f"warning: {w}" for w in self.warnings]
+        if self.memory_estimate:
+            lines.append(f"memory: estimated peak {format_bytes(self.memory_estimate)} "
+                         f"(budget {format_bytes(self.memory)}, checked before assembly)")
         fractions = ", ".join(f"{self.mesh.material_names.get(m, m)} {f:.3f}"
                               for m, f in self.volume_fractions.items())
         lines.append(f"volume fractions: {fractions}")
@@ -354,6 +365,7 @@ def simulate_steps(mesh_or_labels, conductivity: Mapping, *, spacing=None,
         choice = (f"P1 (P2 would need about "
                   f"{format_bytes(estimate_memory(mesh, 2, interval_wanted))}, above the "
                   f"memory budget of {format_bytes(memory)})")
+    check_memory(mesh, order, interval_wanted, memory, asked=True)   # before any solve
     start = len(mesh.points)
     seconds["mesh"] = time.perf_counter() - t0
     total = 2 + len(names) + adapt
@@ -515,7 +527,8 @@ def simulate_steps(mesh_or_labels, conductivity: Mapping, *, spacing=None,
         mesh=mesh, order=order, dofs=int(matrix.shape[0]), seconds=seconds,
         protocol=protocol, tensor=None if tensor is None else tensor[::-1, ::-1].copy(),
         hashin_shtrikman=hashin, adapt=adapt, choice=choice, interval=interval,
-        gap_target=gap_target, certify=certify, dual_solver=dual_info, warnings=notes)
+        gap_target=gap_target, certify=certify, dual_solver=dual_info, warnings=notes,
+        memory_estimate=estimate_memory(mesh, order, interval_wanted), memory=float(memory))
 
 
 def simulate(mesh_or_labels, conductivity: Mapping, *, spacing=None,
