@@ -19,8 +19,9 @@ __all__ = ["DEFAULT_MEMORY", "check_memory", "estimate_memory", "format_bytes",
 #: Default budget of a steady run (bytes): a sixth of this 24 GB machine.
 DEFAULT_MEMORY = 4 * 2 ** 30
 #: Peak bytes per unknown of one solve, measured at 40^3 (three-phase blobs, contrast
-#: 1e4, one axis; peak RSS less the interpreter's): P1 2260 (65k vertices, 140 MB), P2
-#: 1550 (451k unknowns, 666 MB); 2-D taken alike (its rows are shorter).
+#: 1e4, one axis; peak RSS less the interpreter's 78 MB): P1 2260 (65k vertices, 140 MB),
+#: P2 1550 (451k unknowns, 666 MB; the adapted 20^3 default: 1560 for 433k, issue 26's
+#: 64^3 default 1300); 2-D taken alike (its rows are shorter).
 BYTES_PER_UNKNOWN = {(2, 1): 2300.0, (2, 2): 1600.0, (3, 1): 2300.0, (3, 2): 1600.0}
 #: The dual's CR solve, per facet (measured 565 at 40^3: 625k facets, 353 MB with the
 #: primal matrix kept).
