@@ -15,15 +15,18 @@ import numpy as np
 import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
+from simulate_cases import blobs
 
 from napari_swa_imesh.mesh import mesh_labels
 from napari_swa_imesh.simulate import simulate
 from napari_swa_imesh.simulate._assembly import fe_space
 from napari_swa_imesh.simulate._conductivity import conductivity_tensors
-from napari_swa_imesh.simulate._dual import (dual_bound, facet_table, hypercircle,
-                                             _route_to_faces)
-
-from simulate_cases import blobs
+from napari_swa_imesh.simulate._dual import (
+    _route_to_faces,
+    dual_bound,
+    facet_table,
+    hypercircle,
+)
 
 
 def checkerboard(n: int, side: int) -> np.ndarray:

@@ -44,10 +44,19 @@ from scipy import sparse
 from scipy.sparse import csgraph
 
 from ..mesh import Mesh
-from ._assembly import (Space, _apply, _dot, _field_gradients, _gradient_products,
-                        _map, _quadrature, _tensor_rows, assemble_pairs,
-                        barycentric_gradients)
-from ._solve import SPDSolver, SolverInfo, connected_parts, split_fixed
+from ._assembly import (
+    Space,
+    _apply,
+    _dot,
+    _field_gradients,
+    _gradient_products,
+    _map,
+    _quadrature,
+    _tensor_rows,
+    assemble_pairs,
+    barycentric_gradients,
+)
+from ._solve import SolverInfo, SPDSolver, connected_parts, split_fixed
 
 __all__ = ["DualBound", "FacetTable", "dual_bound", "element_energies", "facet_table",
            "hypercircle"]
