@@ -45,10 +45,11 @@ ORDERS = (1, 2)
 #: Default relative width ``(upper - lower) / lower`` of the certified interval: wider, the
 #: run refines where the gap is (while the refine levels and the memory budget allow).
 GAP_TARGET = 0.02
-#: Most unknowns a mesh refined for the interval may take (besides the memory budget):
-#: time, not memory, is what a tiny 3-D image at refine 3-4 runs out of first (a 256^2
-#: checkerboard closes to 1.3 % at 0.99M P2 unknowns).
-CERTIFY_UNKNOWNS = 1_200_000
+#: Most unknowns a mesh refined for the interval may take, per dimension (besides the
+#: memory budget): time, not memory, is what a small 3-D image at refine 2-4 runs out of
+#: first (a 256^2 checkerboard closes to 1.3 % at 0.99M P2 unknowns; a 3-D P2 row is
+#: about three times as long).
+CERTIFY_UNKNOWNS = {2: 1_200_000, 3: 300_000}
 PROTOCOLS = ("mixed", "periodic")
 
 
@@ -409,6 +410,7 @@ def simulate_steps(mesh_or_labels, conductivity: Mapping, *, spacing=None,
     dual_info: dict[str, SolverInfo] = {}
     notes: list[str] = []
     certify = 0
+    growth_seen = 1.0
     done = 1 + adapt
     check_memory(mesh, order, interval_wanted, memory, asked=True)
     while True:
@@ -499,6 +501,19 @@ def simulate_steps(mesh_or_labels, conductivity: Mapping, *, spacing=None,
         why = (_cannot_refine(mesh, mesh_or_labels, level) if may_refine else
                "adapt was given, so the mesh is kept as asked (leave adapt to auto to "
                "refine for the interval)")
+        # predicted before meshing (a refine-4 mesh of a small 3-D image took minutes to
+        # make): the growth of the last level, at least 2^(d-1) (interfaces are d-1 dim.)
+        growth = max(growth_seen, 2.0 ** (mesh.ndim - 1))
+        cap = CERTIFY_UNKNOWNS[mesh.ndim]
+        if why is None and unknowns(mesh, order) * growth > cap:
+            why = (f"the next refinement would take about "
+                   f"{unknowns(mesh, order) * growth:,.0f} unknowns, above the {cap:,} the "
+                   "interval's refinement may take (pass --refine to go further)")
+        if why is None and estimate_memory(mesh, order, interval_wanted) * growth > memory:
+            why = (f"the next refinement would need about "
+                   f"{format_bytes(estimate_memory(mesh, order, interval_wanted) * growth)}"
+                   f", above the memory budget of {format_bytes(memory)} (raise it with "
+                   "--memory)")
         if why is None:
             yield done, total + 2 + len(names), (
                 f"interval wider than {100 * gap_target:g} %: meshing the labels again with "
@@ -512,12 +527,13 @@ def simulate_steps(mesh_or_labels, conductivity: Mapping, *, spacing=None,
                                  max_aspect=max_aspect)
             seconds[f"certify {certify + 1}"] = time.perf_counter() - t0
             why = check_memory(finer, order, interval_wanted, memory, asked=False)
-            if why is None and unknowns(finer, order) > CERTIFY_UNKNOWNS:
+            if why is None and unknowns(finer, order) > cap:
                 why = (f"the next refinement would take about {unknowns(finer, order):,} "
-                       f"unknowns, above the {CERTIFY_UNKNOWNS:,} the interval's refinement "
-                       "may take (mesh with --refine to go further)")
+                       f"unknowns, above the {cap:,} the interval's refinement may take "
+                       "(pass --refine to go further)")
             if why is None:
                 del matrix, space, coarse, parts, periodic, dual_space, facets
+                growth_seen = finer.n_cells / mesh.n_cells
                 mesh, tree = finer, None
                 materials, cell_material = np.unique(mesh.material, return_inverse=True)
                 certify += 1
