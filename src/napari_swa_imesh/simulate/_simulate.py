@@ -180,6 +180,8 @@ class SimulationResult:
         for a, (lo, hi) in self.interval.items():
             lines.append(f"certified {a}: {lo:.6g} <= k_eff <= {hi:.6g}  (gap "
                          f"{100 * self.gap[a]:.3g} %, target {100 * self.gap_target:g} %)")
+        if self.protocol == "periodic":
+            lines.append("no certified interval: the dual bound is for the mixed protocol")
         lines += [f"warning: {w}" for w in self.warnings]
         if self.memory_estimate:
             lines.append(f"memory: estimated peak {format_bytes(self.memory_estimate)} "
@@ -502,7 +504,8 @@ def simulate_steps(mesh_or_labels, conductivity: Mapping, *, spacing=None,
                "adapt was given, so the mesh is kept as asked (leave adapt to auto to "
                "refine for the interval)")
         # predicted before meshing (a refine-4 mesh of a small 3-D image took minutes to
-        # make): the growth of the last level, at least 2^(d-1) (interfaces are d-1 dim.)
+        # make): the growth of the last level, at least 2^(d-1) (interfaces are d-1 dim.);
+        # the first level is checked once meshed
         growth = max(growth_seen, 2.0 ** (mesh.ndim - 1))
         cap = CERTIFY_UNKNOWNS[mesh.ndim]
         if why is None and unknowns(mesh, order) * growth > cap:
@@ -533,7 +536,8 @@ def simulate_steps(mesh_or_labels, conductivity: Mapping, *, spacing=None,
                        "(pass --refine to go further)")
             if why is None:
                 del matrix, space, coarse, parts, periodic, dual_space, facets
-                growth_seen = finer.n_cells / mesh.n_cells
+                if certify:       # from one interface level to the next (the first
+                    growth_seen = finer.n_cells / mesh.n_cells   # step leaves adapt's mesh)
                 mesh, tree = finer, None
                 materials, cell_material = np.unique(mesh.material, return_inverse=True)
                 certify += 1
