@@ -47,7 +47,7 @@ MESH_CHILD = PEAK + """
 import json, sys, time
 import numpy as np
 from napari_swa_imesh.mesh import mesh_labels
-from napari_swa_imesh.mesh._quality import dihedral_angles, radius_edge_ratio
+from napari_swa_imesh.mesh.model._quality import dihedral_angles, radius_edge_ratio
 lab = np.load(sys.argv[1])
 spacing = tuple(json.loads(sys.argv[2]))
 max_aspect = json.loads(sys.argv[3])

@@ -59,8 +59,8 @@ def brain_like(n: int, dim: int, seed: int = 0) -> np.ndarray:
 def run_one(spec: dict) -> dict:
     """Mesh one case in this process and return its figures."""
     from napari_swa_imesh import build_tree
-    from napari_swa_imesh.mesh._checks import check_mesh
-    from napari_swa_imesh.mesh._imesh import mesh_tree
+    from napari_swa_imesh.mesh.checks._checks import check_mesh
+    from napari_swa_imesh.mesh.mesher._imesh import mesh_tree
 
     labels = brain_like(spec["n"], spec["dim"], seed=spec.get("seed", 0))
     base_rss = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
@@ -101,7 +101,7 @@ PIPELINE_FORMATS = (".vtu", ".inp", ".msh", ".xdmf")
 
 def pipeline_step(spec: dict) -> dict:
     """One step of the path to a file in this process: seconds of the step, peak RSS."""
-    from napari_swa_imesh.mesh._imesh import _mesh_labels
+    from napari_swa_imesh.mesh.mesher._imesh import _mesh_labels
 
     labels = np.load(spec["labels"])
     step, extra = spec["step"], {}
@@ -117,7 +117,7 @@ def pipeline_step(spec: dict) -> dict:
         if step != "mesher":  # the mesher row times tree + mesh; the others their step
             t, cpu = time.perf_counter(), time.process_time()
         if step == "checks":
-            from napari_swa_imesh.mesh._checks import check_mesh
+            from napari_swa_imesh.mesh.checks._checks import check_mesh
 
             extra["passed"] = check_mesh(mesh, labels, tree=tree).all_passed
         elif step == "facet groups":
@@ -125,7 +125,7 @@ def pipeline_step(spec: dict) -> dict:
 
             extra["groups"] = len(facet_groups(mesh))
         elif step != "mesher":
-            from napari_swa_imesh.mesh._export import write_mesh
+            from napari_swa_imesh.mesh.formats._export import write_mesh
 
             del tree
             write_mesh(mesh, spec["out"], force=True)

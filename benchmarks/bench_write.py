@@ -81,8 +81,8 @@ def _meshio_peer(mesh, folder: Path, suffix: str, kwargs: dict) -> list[Path]:
     and 13 the package wrote .vtu and .xdmf this way)."""
     import meshio
 
-    from napari_swa_imesh.mesh._export import _meshio_of
-    from napari_swa_imesh.mesh._prepare import ExportMesh
+    from napari_swa_imesh.mesh.formats._export import _meshio_of
+    from napari_swa_imesh.mesh.formats._prepare import ExportMesh
 
     ex = ExportMesh(mesh, order=kwargs.get("order", 1), groups="none")
     meshio.write(folder / f"m{suffix}", _meshio_of(ex), file_format=_MESHIO_FORMAT[suffix])

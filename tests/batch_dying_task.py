@@ -5,7 +5,7 @@ import os
 import signal
 from pathlib import Path
 
-from napari_swa_imesh.segmentation import _batch
+from napari_swa_imesh.pipeline import _batch
 
 
 def segment_then_die_once(image, model_path, output, **kwargs):

@@ -179,7 +179,7 @@ def test_the_cli_refuses_a_dangling_symlink_output(tmp_path, capsys):
 
 STOPPED_WRITER = textwrap.dedent("""
     import sys, time
-    import napari_swa_imesh.mesh._export as export
+    import napari_swa_imesh.mesh.formats._export as export
     from napari_swa_imesh.cli import main
 
     def slow_write(ex, temps, **options):

@@ -11,7 +11,7 @@ import pytest
 from napari_swa_imesh.cli import main
 from napari_swa_imesh.data import tissue_phantom
 from napari_swa_imesh.segmentation import RecommendedModel, samples_from_truth
-from napari_swa_imesh.segmentation import _batch
+from napari_swa_imesh.pipeline import _batch
 
 
 def run(capsys, *argv):

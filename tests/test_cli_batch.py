@@ -11,7 +11,7 @@ from napari_swa_imesh.cli import main
 from napari_swa_imesh.data import tissue_phantom
 from napari_swa_imesh.io import write_labels
 from napari_swa_imesh.segmentation import RecommendedModel, samples_from_truth
-from napari_swa_imesh.segmentation._batch import expand_inputs
+from napari_swa_imesh.pipeline._batch import expand_inputs
 
 
 def run(capsys, *argv):
@@ -157,7 +157,7 @@ def test_zarr_inputs_are_labelled_chunk_by_chunk_on_the_workers(cohort, capsys, 
 
 
 def test_summary_table_lists_file_seconds_and_volumes():
-    from napari_swa_imesh.segmentation._cli import _batch_table
+    from napari_swa_imesh.pipeline._cli import _batch_table
 
     rows = [{"image": "/d/a.npy", "output": "/o/a_labels.npy", "seconds": 1.234,
              "volumes": {1: {"voxels": 10, "volume": 20.0}, 3: {"voxels": 1, "volume": 2.0}}},
@@ -175,7 +175,7 @@ def test_summary_table_lists_file_seconds_and_volumes():
 def test_the_scheduler_retries_a_failed_image(cohort, tmp_path, monkeypatch):
     from distributed import Client, LocalCluster
 
-    from napari_swa_imesh.segmentation import _batch
+    from napari_swa_imesh.pipeline import _batch
 
     log = tmp_path / "tries.txt"           # the task is pickled: count on disk
     real = _batch.segment_one

@@ -11,7 +11,7 @@ import pytest
 
 from napari_swa_imesh.cli import main
 from napari_swa_imesh.io import write_labels
-from napari_swa_imesh.mesh._export import read_mesh
+from napari_swa_imesh.mesh.formats._export import read_mesh
 
 
 def three_materials_2d() -> np.ndarray:
@@ -280,7 +280,8 @@ def test_no_check_skips_the_checks(tmp_path, capsys):
 
 
 def test_too_large_for_memory_is_refused_before_meshing(tmp_path, capsys, monkeypatch):
-    from napari_swa_imesh.mesh import _cli, _imesh
+    from napari_swa_imesh.mesh.mesher import _imesh
+    from napari_swa_imesh.mesh import _cli
 
     np.save(tmp_path / "labels.npy", blob_3d())
     monkeypatch.setattr(_cli, "available_memory", lambda: 1000)
@@ -327,7 +328,7 @@ def test_a_1024_cube_is_refused_from_its_header_without_reading(tmp_path, capsys
 
 
 def test_memory_error_is_one_line_with_what_to_do(tmp_path, capsys, monkeypatch):
-    from napari_swa_imesh.mesh import _imesh
+    from napari_swa_imesh.mesh.mesher import _imesh
 
     def boom(*args, **kwargs):
         raise MemoryError("Unable to allocate 8.00 GiB for an array with shape "
@@ -353,12 +354,12 @@ def test_memory_limit_of_the_process_is_respected(tmp_path):
     rng = np.random.default_rng(0)
     np.save(tmp_path / "noise.npy", rng.integers(0, 4, (64, 64, 64)).astype(np.uint8))
     script = ("import resource, sys; from napari_swa_imesh.cli import main; "
-              "import napari_swa_imesh.mesh._imesh, napari_swa_imesh.io; "
+              "import napari_swa_imesh.mesh.mesher._imesh, napari_swa_imesh.io; "
               "resource.setrlimit(resource.RLIMIT_AS, (int(sys.argv[1]), int(sys.argv[1]))); "
               "sys.exit(main(sys.argv[2:]))")
     # the address space taken after importing, plus 300 MB: too little for 64^3 noise
     probe = subprocess.run([sys.executable, "-c",
-                            "import napari_swa_imesh.cli, napari_swa_imesh.mesh._imesh, "
+                            "import napari_swa_imesh.cli, napari_swa_imesh.mesh.mesher._imesh, "
                             "napari_swa_imesh.io; print(open('/proc/self/status').read())"],
                            capture_output=True, text=True, env=os.environ.copy())
     vm = next(int(line.split()[1]) * 1024 for line in probe.stdout.splitlines()
@@ -384,7 +385,8 @@ def test_spacing_that_overflows_or_underflows_exit_2(tmp_path, capsys):
 def test_mesh_command_builds_one_tree_and_one_balance(tmp_path, capsys, monkeypatch):
     # the checks reuse the mesher's region tree, and the face-only balance count (a
     # second balance pass) is not made just to fill a report field
-    from napari_swa_imesh.mesh import _checks, _imesh
+    from napari_swa_imesh.mesh.checks import _checks
+    from napari_swa_imesh.mesh.mesher import _imesh
 
     monkeypatch.setattr(_checks, "_build_tree", lambda *a, **k: pytest.fail("second tree"))
     monkeypatch.setattr(_imesh, "count_balanced_leaves",
@@ -431,7 +433,7 @@ def test_mesh_facet_groups_none_writes_the_vtu_alone(tmp_path, capsys):
     (["--msh-ascii"], "--msh-ascii applies to .msh output only"),
 ])
 def test_mesh_write_options_fail_before_meshing(tmp_path, capsys, monkeypatch, flags, match):
-    import napari_swa_imesh.mesh._imesh as imesh
+    import napari_swa_imesh.mesh.mesher._imesh as imesh
 
     def no_meshing(*args, **kwargs):
         raise AssertionError("meshed before checking the options")
@@ -446,9 +448,9 @@ def test_checks_beside_the_writer_give_the_files_and_verdict_of_one_after_the_ot
         tmp_path, capsys):
     """The command checks on a second thread while it writes: its files are byte for
     byte those the library writes alone, and its checks those check_mesh gives."""
-    from napari_swa_imesh.mesh._checks import check_mesh
-    from napari_swa_imesh.mesh._export import write_mesh
-    from napari_swa_imesh.mesh._imesh import mesh_labels
+    from napari_swa_imesh.mesh.checks._checks import check_mesh
+    from napari_swa_imesh.mesh.formats._export import write_mesh
+    from napari_swa_imesh.mesh.mesher._imesh import mesh_labels
 
     lab = (np.indices((12, 10, 9)).sum(0) // 6 + (np.arange(9) % 4 == 0)).astype(np.uint8)
     np.save(tmp_path / "lab.npy", lab)
@@ -467,7 +469,7 @@ def test_checks_beside_the_writer_give_the_files_and_verdict_of_one_after_the_ot
 def test_full_check_sorts_and_agrees_with_the_default(tmp_path, capsys, monkeypatch):
     """--full-check takes the sort of every facet (the one-pass check is never called)
     and reports what the default does."""
-    from napari_swa_imesh.mesh import _checks
+    from napari_swa_imesh.mesh.checks import _checks
 
     lab = (np.indices((9, 8, 7)).sum(0) // 5).astype(np.uint8)
     np.save(tmp_path / "lab.npy", lab)

@@ -8,8 +8,8 @@ import numpy as np
 import pytest
 
 from napari_swa_imesh.cli import main
-from napari_swa_imesh.mesh._export import read_mesh
-from napari_swa_imesh.mesh._quality import signed_volumes
+from napari_swa_imesh.mesh.formats._export import read_mesh
+from napari_swa_imesh.mesh.model._quality import signed_volumes
 
 
 def run(capsys, *argv) -> tuple[int, str, str]:

@@ -1,4 +1,4 @@
-"""Generate the sited-leaf tables of the template mesher (``mesh/leaf_tables.npz``).
+"""Generate the sited-leaf tables of the template mesher (``mesh/mesher/leaf_tables.npz``).
 
 Run:  python tools/leaf_tables.py [--time-limit SECONDS] [--out PATH]
 
@@ -42,9 +42,9 @@ import numpy as np
 from scipy.optimize import Bounds, LinearConstraint, milp
 from scipy.sparse import coo_matrix
 
-from napari_swa_imesh.mesh import _templates_luts as luts
-from napari_swa_imesh.mesh._bounds import leaf_configurations
-from napari_swa_imesh.mesh._quality import quality_data
+from napari_swa_imesh.mesh.mesher import _templates_luts as luts
+from napari_swa_imesh.mesh.model._bounds import leaf_configurations
+from napari_swa_imesh.mesh.model._quality import quality_data
 
 D = 3
 VARIANTS = (1, 2)

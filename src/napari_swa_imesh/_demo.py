@@ -88,8 +88,8 @@ def run_demo(args) -> int:
     }
     try:
         from .mesh import check_mesh
-        from .mesh._export import write_mesh
-        from .mesh._imesh import mesh_labels
+        from .mesh.formats._export import write_mesh
+        from .mesh.mesher._imesh import mesh_labels
     except ImportError:  # pragma: no cover - the mesher ships with the package
         mesh_labels = None
     if mesh_labels is not None:

@@ -22,9 +22,10 @@ __all__ = ["main", "build_parser"]
 #: the commands it registers: a command imports only its own group (importing the
 #: segmentation package and scipy.ndimage cost ``swa-imesh mesh`` a second or more)
 COMMAND_MODULES = {
-    ".segmentation._cli": ("res", "segment", "batch", "samples-from-truth", "evaluate"),
+    ".segmentation._cli": ("res", "segment", "samples-from-truth", "evaluate"),
     ".mesh._cli": ("mesh", "bounds"),
     ".simulate._cli": ("simulate",),
+    ".pipeline._cli": ("batch",),
     "._demo": ("demo",),
     "._glossary": ("glossary",),
 }

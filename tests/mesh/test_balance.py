@@ -4,8 +4,8 @@ import numpy as np
 import pytest
 
 from napari_swa_imesh import build_tree
-from napari_swa_imesh._tree import RegionTree
-from napari_swa_imesh.mesh._balance import balance_tree, balance_violations
+from napari_swa_imesh.mesh.mesher._tree import RegionTree
+from napari_swa_imesh.mesh.mesher._balance import balance_tree, balance_violations
 
 from imesh_cases import blobs, noise
 
@@ -91,7 +91,7 @@ def test_dilate_is_scipy_binary_dilation(d):
     """The numpy dilation the balance uses (no scipy.ndimage import) against scipy's."""
     from scipy import ndimage
 
-    from napari_swa_imesh.mesh._balance import _dilate
+    from napari_swa_imesh.mesh.mesher._balance import _dilate
 
     rng = np.random.default_rng(d)
     for _ in range(20):

@@ -7,9 +7,9 @@ import numpy as np
 import pytest
 
 from napari_swa_imesh import build_tree
-from napari_swa_imesh.mesh import _chain_check, _checks
-from napari_swa_imesh.mesh._checks import check_mesh
-from napari_swa_imesh.mesh._imesh import mesh_labels
+from napari_swa_imesh.mesh.checks import _chain_check, _checks
+from napari_swa_imesh.mesh.checks._checks import check_mesh
+from napari_swa_imesh.mesh.mesher._imesh import mesh_labels
 
 from imesh_cases import blobs, cases
 

@@ -5,8 +5,8 @@ import dataclasses
 import numpy as np
 import pytest
 
-from napari_swa_imesh.mesh._checks import check_mesh, rasterize_materials
-from napari_swa_imesh.mesh._imesh import mesh_labels
+from napari_swa_imesh.mesh.checks._checks import check_mesh, rasterize_materials
+from napari_swa_imesh.mesh.mesher._imesh import mesh_labels
 
 from imesh_cases import blobs
 
@@ -53,7 +53,7 @@ def test_flipped_element_fails(good):
 
 
 def test_overlapping_elements_fail():
-    from napari_swa_imesh.mesh._types import Mesh
+    from napari_swa_imesh.mesh.model._types import Mesh
 
     points = np.array([[0.0, 0], [1, 0], [0, 1], [1, 1]])
     good = Mesh(points, np.array([[0, 1, 3], [0, 3, 2]]), np.array([1, 1]), spacing=(1.0, 1.0), shape=(1, 1))
@@ -113,7 +113,7 @@ def test_dimension_mismatch():
 
 
 def test_chunked_passes_give_the_same_answer(monkeypatch):
-    from napari_swa_imesh.mesh import _checks, _facets
+    from napari_swa_imesh.mesh.checks import _checks, _facets
 
     lab = LABELS[3]
     mesh = mesh_labels(lab, exclude=(0,))
@@ -146,7 +146,7 @@ def test_nan_or_inf_quality_fails_the_checks(good, bad):
 
 
 def test_report_is_typed_and_reads_like_the_old_dict(good):
-    from napari_swa_imesh.mesh._checks import MeshChecks
+    from napari_swa_imesh.mesh.checks._checks import MeshChecks
 
     mesh, lab = good
     checks = check_mesh(mesh, lab)
@@ -175,7 +175,7 @@ def test_a_given_tree_is_used_and_must_match_the_labels(good):
 
 def test_overlapping_tetrahedra_fail():
     """Two tetrahedra on the same side of their shared face: caught by the side bits."""
-    from napari_swa_imesh.mesh._types import Mesh
+    from napari_swa_imesh.mesh.model._types import Mesh
 
     points = np.array([[0.0, 0, 0], [1, 0, 0], [0, 1, 0], [0.2, 0.2, 1], [0.3, 0.3, 0.5]])
     mesh = Mesh(points, np.array([[0, 1, 2, 3], [0, 1, 2, 4]]), np.array([1, 1]),
@@ -188,7 +188,7 @@ def test_overlapping_tetrahedra_fail():
 
 
 def _volumes(mesh):
-    from napari_swa_imesh.mesh._quality import signed_volumes
+    from napari_swa_imesh.mesh.model._quality import signed_volumes
 
     return signed_volumes(mesh.points, mesh.cells)
 

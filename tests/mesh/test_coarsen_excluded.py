@@ -9,7 +9,7 @@ from hypothesis import strategies as st
 
 from napari_swa_imesh.cli import main
 from napari_swa_imesh.mesh import mesh_labels
-from napari_swa_imesh.mesh._coarsen import coarsen_labels
+from napari_swa_imesh.mesh.mesher._coarsen import coarsen_labels
 
 
 @st.composite

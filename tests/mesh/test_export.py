@@ -12,9 +12,9 @@ import meshio
 import numpy as np
 import pytest
 
-from napari_swa_imesh.mesh._export import MESH_SUFFIXES, read_mesh, to_meshio, write_mesh
-from napari_swa_imesh.mesh._triangle_tetgen import read_node_ele
-from napari_swa_imesh.mesh._types import Mesh
+from napari_swa_imesh.mesh.formats._export import MESH_SUFFIXES, read_mesh, to_meshio, write_mesh
+from napari_swa_imesh.mesh.formats._triangle_tetgen import read_node_ele
+from napari_swa_imesh.mesh.model._types import Mesh
 
 ALL_FORMATS = [".vtu", ".vtk", ".msh", ".xdmf", ".inp", ".node"]
 HAVE_H5PY = importlib.util.find_spec("h5py") is not None
@@ -366,8 +366,8 @@ def test_mesher_output_passes_every_check_after_a_round_trip(tmp_path, shape, sp
     """Conforming, positive, volumes, labels recovered: from the file, not from memory."""
     import dataclasses
 
-    from napari_swa_imesh.mesh._checks import check_mesh
-    from napari_swa_imesh.mesh._imesh import mesh_labels
+    from napari_swa_imesh.mesh.checks._checks import check_mesh
+    from napari_swa_imesh.mesh.mesher._imesh import mesh_labels
 
     labels = np.random.default_rng(len(shape)).integers(0, 3, shape)
     mesh = mesh_labels(labels, spacing=spacing, exclude=(0,))

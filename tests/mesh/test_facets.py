@@ -79,8 +79,8 @@ def test_box_sides_cover_the_faces_of_the_image():
 def test_paired_facets_match_counting_in_every_pass_plan(monkeypatch, shape, passes):
     """One facet sort, whatever the passes: the pairs a dictionary of sorted ids gives,
     lowest element first, facets in the order of their sorted ids."""
-    from napari_swa_imesh.mesh import _facets
-    from napari_swa_imesh.mesh._facets import FACE_CORNERS, paired_facets
+    from napari_swa_imesh.mesh.checks import _facets
+    from napari_swa_imesh.mesh.checks._facets import FACE_CORNERS, paired_facets
 
     rng = np.random.default_rng(len(shape))
     mesh = mesh_labels(rng.integers(0, 4, shape), exclude=[0])

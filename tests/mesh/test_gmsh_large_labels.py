@@ -8,7 +8,7 @@ import pytest
 
 from napari_swa_imesh.cli import main
 from napari_swa_imesh.mesh import read_mesh, write_mesh
-from napari_swa_imesh.mesh._gmsh import gmsh_tags
+from napari_swa_imesh.mesh.formats._gmsh import gmsh_tags
 
 from test_export import grid_mesh
 

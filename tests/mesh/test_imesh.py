@@ -5,10 +5,10 @@ import math
 import numpy as np
 import pytest
 
-from napari_swa_imesh.mesh._checks import check_mesh, rasterize_materials
+from napari_swa_imesh.mesh.checks._checks import check_mesh, rasterize_materials
 from napari_swa_imesh import build_tree
-from napari_swa_imesh.mesh._imesh import mesh_labels, mesh_tree
-from napari_swa_imesh.mesh._quality import dihedral_angles, radius_edge_ratio, triangle_angles
+from napari_swa_imesh.mesh.mesher._imesh import mesh_labels, mesh_tree
+from napari_swa_imesh.mesh.model._quality import dihedral_angles, radius_edge_ratio, triangle_angles
 
 from imesh_cases import blobs, cases, noise
 
@@ -193,7 +193,7 @@ def test_labels_mesh_the_same_in_every_integer_dtype(dtype):
 
 
 def test_labels_are_not_copied_before_meshing():
-    from napari_swa_imesh._tree import _signed_labels, build_tree
+    from napari_swa_imesh.mesh.mesher._tree import _signed_labels, build_tree
 
     lab = blobs((8, 8, 8), 3, seed=2, sigma=1.0).astype(np.uint8)
     work = _signed_labels(lab)

@@ -17,9 +17,10 @@ import pytest
 from hypothesis import HealthCheck, assume, given, settings
 from hypothesis import strategies as st
 
-from napari_swa_imesh.mesh import _templates, mesh_labels
-from napari_swa_imesh.mesh._checks import check_mesh
-from napari_swa_imesh.mesh._lattice import (
+from napari_swa_imesh.mesh.mesher import _templates
+from napari_swa_imesh.mesh import mesh_labels
+from napari_swa_imesh.mesh.checks._checks import check_mesh
+from napari_swa_imesh.mesh.mesher._lattice import (
     ASPECT_LIMIT,
     MAX_FACTOR,
     aspect_bounds,
@@ -27,7 +28,7 @@ from napari_swa_imesh.mesh._lattice import (
     lattice_choices,
     subdivision_factors,
 )
-from napari_swa_imesh.mesh._quality import (
+from napari_swa_imesh.mesh.model._quality import (
     dihedral_angles,
     radius_edge_ratio,
     triangle_angles,

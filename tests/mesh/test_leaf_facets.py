@@ -8,8 +8,8 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from napari_swa_imesh.mesh import Mesh, facet_groups, mesh_labels
-from napari_swa_imesh.mesh._facets import _sorted_groups
-from napari_swa_imesh.mesh._leaf_facets import (_as_made, material_codes,
+from napari_swa_imesh.mesh.checks._facets import _sorted_groups
+from napari_swa_imesh.mesh.checks._leaf_facets import (_as_made, material_codes,
                                                  present_materials, template_group_rows)
 
 
@@ -88,7 +88,7 @@ def test_present_materials_are_the_materials_of_material_codes(values):
                                    np.array([[0.0, 1, 0, 3], [1, 0, 0, -1], [0, 0, 2, 0],
                                              [0, 0, 0, 1]])])
 def test_orientation_from_the_leaf_path_is_the_computed_one(world):
-    from napari_swa_imesh.mesh._prepare import ExportMesh
+    from napari_swa_imesh.mesh.formats._prepare import ExportMesh
 
     labels = np.random.default_rng(5).integers(0, 3, (6, 7, 5))
     mesh = mesh_labels(labels, exclude=[0], spacing=(2.5, 1.0, 1.0))
@@ -101,7 +101,7 @@ def test_orientation_from_the_leaf_path_is_the_computed_one(world):
 
 @pytest.mark.parametrize("big_leaf", [1, 64])
 def test_big_leaves_painted_one_by_one_give_the_same_groups(monkeypatch, big_leaf):
-    from napari_swa_imesh.mesh import _leaf_facets
+    from napari_swa_imesh.mesh.checks import _leaf_facets
 
     labels = np.zeros((40, 36, 30), np.uint8)                  # leaves up to 16^3
     labels[10:17, 20:23, 5:12] = 1
@@ -119,7 +119,7 @@ def test_lattice_det_is_exact_in_int32_and_int64(d, longest):
     """The orientation determinant of lattice corners, in int32 for short edges (no
     casts) and int64 beyond, equals the exact integer one; edges of exactly 2**9,
     all of one sign, are the int32 worst case."""
-    from napari_swa_imesh.mesh._leaf_facets import _lattice_det
+    from napari_swa_imesh.mesh.checks._leaf_facets import _lattice_det
 
     rng = np.random.default_rng(longest)
     base = rng.integers(1 << 21, 1 << 22, (500, 1, d))
@@ -140,7 +140,7 @@ def test_lattice_det_is_exact_in_int32_and_int64(d, longest):
 
 
 def _flips_as_computed(mesh):
-    from napari_swa_imesh.mesh._prepare import ExportMesh
+    from napari_swa_imesh.mesh.formats._prepare import ExportMesh
 
     leaf, computed = ExportMesh(mesh), ExportMesh(mesh, groups="none")
     assert np.array_equal(leaf.flip, computed.flip)
@@ -148,7 +148,7 @@ def _flips_as_computed(mesh):
 
 
 def test_an_unchanged_template_mesh_skips_the_sign_pass(monkeypatch):
-    from napari_swa_imesh.mesh import _leaf_facets
+    from napari_swa_imesh.mesh.checks import _leaf_facets
 
     labels = np.random.default_rng(8).integers(0, 3, (9, 8, 7))
     mesh = mesh_labels(labels)
@@ -164,7 +164,7 @@ def test_an_unchanged_template_mesh_skips_the_sign_pass(monkeypatch):
 @pytest.mark.parametrize("change", ["swap corners", "swap point axes", "new cells array",
                                     "mirror an axis"])
 def test_a_template_mesh_changed_after_meshing_gets_its_signs_computed(change):
-    from napari_swa_imesh.mesh._leaf_facets import template_group_rows
+    from napari_swa_imesh.mesh.checks._leaf_facets import template_group_rows
 
     labels = np.random.default_rng(9).integers(0, 3, (7, 8, 8))   # axes 1 and 2 alike
     mesh = mesh_labels(labels)

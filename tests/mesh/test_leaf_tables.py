@@ -1,4 +1,4 @@
-"""The sited-leaf table (``mesh/leaf_tables.npz``), checked entry by entry on its own.
+"""The sited-leaf table (``mesh/mesher/leaf_tables.npz``), checked entry by entry on its own.
 
 The table is made offline by ``tools/leaf_tables.py``; nothing here reuses that script.
 Every entry must tile its leaf face to face with positive tetrahedra whose boundary is
@@ -14,12 +14,12 @@ import math
 import numpy as np
 import pytest
 
-from napari_swa_imesh.mesh import _templates_luts as luts
+from napari_swa_imesh.mesh.mesher import _templates_luts as luts
 from napari_swa_imesh.mesh import mesh_labels, quality_bounds
-from napari_swa_imesh.mesh._bounds import leaf_configurations
-from napari_swa_imesh.mesh._lattice import aspect_table
-from napari_swa_imesh.mesh._checks import check_mesh
-from napari_swa_imesh.mesh._quality import quality_data, signed_volumes
+from napari_swa_imesh.mesh.model._bounds import leaf_configurations
+from napari_swa_imesh.mesh.mesher._lattice import aspect_table
+from napari_swa_imesh.mesh.checks._checks import check_mesh
+from napari_swa_imesh.mesh.model._quality import quality_data, signed_volumes
 
 TABLE = luts.LEAF_TABLE[3]
 CENTRE = (1, 1, 1)
@@ -49,7 +49,7 @@ def _face_triangles(v, code):
 
 
 def test_the_table_ships_with_the_package():
-    assert (importlib.resources.files("napari_swa_imesh.mesh") / "leaf_tables.npz").is_file()
+    assert (importlib.resources.files("napari_swa_imesh.mesh.mesher") / "leaf_tables.npz").is_file()
     assert len(TABLE.key) > 1000 and (np.diff(TABLE.key) > 0).all()
 
 

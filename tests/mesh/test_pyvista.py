@@ -7,7 +7,7 @@ import pytest
 from imesh_cases import blobs
 
 from napari_swa_imesh.mesh import mesh_labels, signed_volumes, write_mesh
-from napari_swa_imesh.mesh._common import export_points
+from napari_swa_imesh.mesh.formats._common import export_points
 
 pv = pytest.importorskip("pyvista")
 

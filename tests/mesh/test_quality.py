@@ -5,7 +5,7 @@ import math
 import numpy as np
 import pytest
 
-from napari_swa_imesh.mesh._quality import (QUALITY_METRICS, dihedral_angles, max_angle, min_angle,
+from napari_swa_imesh.mesh.model._quality import (QUALITY_METRICS, dihedral_angles, max_angle, min_angle,
                                             radius_edge_ratio, signed_volumes, triangle_angles)
 
 EQUILATERAL = np.array([[0.0, 0.0], [1.0, 0.0], [0.5, math.sqrt(3) / 2]])

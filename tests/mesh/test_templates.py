@@ -5,11 +5,11 @@ import math
 import numpy as np
 import pytest
 
-from napari_swa_imesh.mesh import _templates_luts as luts
-from napari_swa_imesh.mesh._bounds import (format_quality_table, leaf_configurations, quality_bounds,
+from napari_swa_imesh.mesh.mesher import _templates_luts as luts
+from napari_swa_imesh.mesh.model._bounds import (format_quality_table, leaf_configurations, quality_bounds,
                                            quality_table)
-from napari_swa_imesh.mesh._quality import QUALITY_METRICS
-from napari_swa_imesh.mesh._quality import signed_volumes
+from napari_swa_imesh.mesh.model._quality import QUALITY_METRICS
+from napari_swa_imesh.mesh.model._quality import signed_volumes
 
 
 def _facets_on(simplices: np.ndarray, axis: int, side: int) -> set:

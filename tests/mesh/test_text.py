@@ -1,4 +1,4 @@
-"""Numbers as text (``mesh._text``): every integer exact, every float to 13 digits, and
+"""Numbers as text (``mesh.formats._text``): every integer exact, every float to 13 digits, and
 the blocks it cannot write handed back to ``%`` formatting."""
 
 from __future__ import annotations
@@ -8,8 +8,8 @@ import io
 import numpy as np
 import pytest
 
-from napari_swa_imesh.mesh._text import _digits8, int_rows, sci_rows
-from napari_swa_imesh.mesh._triangle_tetgen import write_rows
+from napari_swa_imesh.mesh.formats._text import _digits8, int_rows, sci_rows
+from napari_swa_imesh.mesh.formats._triangle_tetgen import write_rows
 
 
 def _parse_ints(data: bytes, sep: bytes) -> np.ndarray:
@@ -97,7 +97,7 @@ def test_write_rows_keeps_the_order_of_text_and_bytes_in_a_file(tmp_path):
 
 @pytest.mark.parametrize("first", [0, 10 ** 8 - 20])
 def test_abaqus_id_lines_stay_within_256_characters(first):
-    from napari_swa_imesh.mesh._abaqus import _write_ids
+    from napari_swa_imesh.mesh.formats._abaqus import _write_ids
 
     ids = np.arange(first, first + 45)
     fh = io.StringIO()

@@ -5,8 +5,8 @@ import dataclasses
 import numpy as np
 import pytest
 
-from napari_swa_imesh.mesh._imesh import mesh_labels
-from napari_swa_imesh.mesh._types import Mesh
+from napari_swa_imesh.mesh.mesher._imesh import mesh_labels
+from napari_swa_imesh.mesh.model._types import Mesh
 
 POINTS = np.array([[0.0, 0], [1, 0], [0, 1]])
 

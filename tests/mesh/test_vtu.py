@@ -4,7 +4,7 @@ import meshio
 import numpy as np
 import pytest
 
-from napari_swa_imesh.mesh._vtu import write_vtu
+from napari_swa_imesh.mesh.formats._vtu import write_vtu
 
 
 @pytest.mark.parametrize("ndim", [2, 3])
@@ -38,8 +38,8 @@ def test_vtk_and_meshio_read_every_array_with_its_dtype(tmp_path, ndim):
 def test_chunks_join_and_orientation_is_fixed_chunk_by_chunk(tmp_path, monkeypatch, ndim):
     """Connectivity, offsets and types written in many chunks read back whole; with
     orient=True every cell comes back positively oriented, the input untouched."""
-    import napari_swa_imesh.mesh._vtu as vtu
-    from napari_swa_imesh.mesh._quality import signed_volumes
+    import napari_swa_imesh.mesh.formats._vtu as vtu
+    from napari_swa_imesh.mesh.model._quality import signed_volumes
 
     pv = pytest.importorskip("pyvista")
     monkeypatch.setattr(vtu, "_CHUNK", 3)
@@ -66,7 +66,7 @@ def test_meshio_reads_every_array_whatever_the_block_sizes(tmp_path):
     # 36 triangles with Int8 and Float64 arrays did): every size from 1 to 40 cells
     import meshio
 
-    from napari_swa_imesh.mesh._vtu import write_vtu
+    from napari_swa_imesh.mesh.formats._vtu import write_vtu
 
     rng = np.random.default_rng(0)
     for n in range(1, 41):

@@ -21,7 +21,7 @@ from napari_swa_imesh.mesh import (
     world_from_affine,
     write_mesh,
 )
-from napari_swa_imesh.mesh._common import export_points, export_vectors
+from napari_swa_imesh.mesh.formats._common import export_points, export_vectors
 
 apply_affine = pytest.importorskip("nibabel.affines").apply_affine
 
@@ -120,7 +120,7 @@ def test_every_format_holds_world_points_positively_oriented(tmp_path, suffix):
 
 
 def test_triangle_tetgen_files_hold_world_points(tmp_path):
-    from napari_swa_imesh.mesh._triangle_tetgen import read_node_ele
+    from napari_swa_imesh.mesh.formats._triangle_tetgen import read_node_ele
 
     affine = oblique_affine(3, flip=True)
     mesh = mesh_labels(labels_3d(), affine=affine)

@@ -6,9 +6,10 @@ import meshio
 import numpy as np
 import pytest
 
-from napari_swa_imesh.mesh import _xdmf, mesh_labels, write_mesh
-from napari_swa_imesh.mesh._export import _meshio_of
-from napari_swa_imesh.mesh._prepare import ExportMesh
+from napari_swa_imesh.mesh.formats import _xdmf
+from napari_swa_imesh.mesh import mesh_labels, write_mesh
+from napari_swa_imesh.mesh.formats._export import _meshio_of
+from napari_swa_imesh.mesh.formats._prepare import ExportMesh
 
 pytestmark = pytest.mark.skipif(importlib.util.find_spec("h5py") is None,
                                 reason="XDMF needs h5py, not installed")

@@ -78,7 +78,7 @@ def test_nifti_reader_keeps_the_voxel_spacing(make_napari_viewer, tmp_path):
 def test_writer_writes_every_format_of_the_mesh_engine(tmp_path, suffix, ndim):
     from napari_swa_imesh._napari._layers import MESH_KEY
     from napari_swa_imesh._napari._writer import write_mesh_layer
-    from napari_swa_imesh.mesh._export import read_mesh
+    from napari_swa_imesh.mesh.formats._export import read_mesh
 
     rng = np.random.default_rng(ndim)
     mesh = mesh_labels(rng.integers(1, 3, (4,) * ndim), spacing=(2.0,) + (1.0,) * (ndim - 1))

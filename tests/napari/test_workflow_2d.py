@@ -15,8 +15,8 @@ from napari_swa_imesh._napari._classify_widget import SEGMENTATION_KEY
 from napari_swa_imesh._napari._layers import MESH_KEY
 from napari_swa_imesh._napari._mesh_widget import COLOR_BY_MATERIAL, COLOR_BY_QUALITY
 from napari_swa_imesh._napari._workflow import WorkflowWidget
-from napari_swa_imesh.mesh._checks import check_mesh
-from napari_swa_imesh.mesh._export import read_mesh
+from napari_swa_imesh.mesh.checks._checks import check_mesh
+from napari_swa_imesh.mesh.formats._export import read_mesh
 from napari_swa_imesh.segmentation import dice_scores
 
 MIN_DICE = {1: 0.92, 2: 0.80}

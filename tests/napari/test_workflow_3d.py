@@ -13,7 +13,7 @@ from swa_napari_helpers import PHANTOM_SHAPE, wait_idle
 from napari_swa_imesh._napari._classify_widget import METHOD_REFERENCE, OUTPUT_TILES
 from napari_swa_imesh._napari._layers import EXTENT_KEY
 from napari_swa_imesh._napari._workflow import WorkflowWidget
-from napari_swa_imesh.mesh._export import read_mesh
+from napari_swa_imesh.mesh.formats._export import read_mesh
 from napari_swa_imesh.segmentation import dice_scores, upsample_tiles
 
 MIN_DICE = {1: 0.93, 2: 0.70, 3: 0.85}

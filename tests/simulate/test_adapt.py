@@ -14,7 +14,7 @@ from hypothesis import strategies as st
 
 from napari_swa_imesh.cli import main
 from napari_swa_imesh.mesh import check_mesh, mesh_labels, quality_bounds
-from napari_swa_imesh.mesh._adapt import refine_marked
+from napari_swa_imesh.mesh.mesher._adapt import refine_marked
 from napari_swa_imesh.simulate import simulate
 from napari_swa_imesh.simulate import _adapt
 from napari_swa_imesh.simulate._adapt import doerfler, flux_jump_indicator

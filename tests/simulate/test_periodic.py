@@ -16,7 +16,7 @@ import pytest
 
 from napari_swa_imesh.cli import main
 from napari_swa_imesh.mesh import mesh_labels
-from napari_swa_imesh.mesh._facets import facet_groups
+from napari_swa_imesh.mesh.checks._facets import facet_groups
 from napari_swa_imesh.simulate import simulate
 
 
@@ -125,7 +125,7 @@ def test_opposite_faces_cut_differently_are_refused_though_their_nodes_match(ord
     """Five-tetrahedra leaves (the parity rule) forced on an odd-size periodic box: every
     node, and at second order every mid-edge node (crossing face diagonals meet at the
     face centre), has its twin on the opposite face, but the facets there differ."""
-    from napari_swa_imesh.mesh import _imesh
+    from napari_swa_imesh.mesh.mesher import _imesh
 
     lab = np.random.default_rng(3).integers(1, 3, size=(5, 6, 7)).astype(np.uint8)
     real = _imesh.template_mesh

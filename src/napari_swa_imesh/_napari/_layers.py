@@ -81,7 +81,7 @@ def placed_by_affine(layer) -> np.ndarray | None:
     affine = layer.metadata.get(AFFINE_KEY)
     if affine is None:
         return None
-    from ..mesh._world import voxel_sizes
+    from ..mesh.model._world import voxel_sizes
 
     affine = np.asarray(affine, dtype=np.float64)
     if not np.allclose(voxel_sizes(affine, layer.ndim), layer.scale, rtol=1e-9):

@@ -17,8 +17,8 @@ from qtpy.QtWidgets import QFileDialog, QLabel, QListWidget, QListWidgetItem, QW
 
 from ..mesh import (MeshClipper, check_mesh, mesh_labels, mesh_surface, quality_bounds,
                     write_mesh)
-from ..mesh._export import MESH_SUFFIXES
-from ..mesh._lattice import ASPECT_LIMIT
+from ..mesh.formats._export import MESH_SUFFIXES
+from ..mesh.mesher._lattice import ASPECT_LIMIT
 from ._clip_panel import ClipPanel
 from ._dock import fit_dock, scroll_body, wrapped_label
 from ._help import explain_terms

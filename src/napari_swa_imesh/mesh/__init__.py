@@ -1,6 +1,7 @@
 """IMESH: conforming, quality-guaranteed simplex meshes of label images.
 
-* tree and balance: :func:`napari_swa_imesh.build_tree`, :func:`balance_tree`;
+* tree and balance: :func:`build_tree` (a :class:`RegionTree`; also
+  ``napari_swa_imesh.build_tree``), :func:`balance_tree`;
 * meshing: :func:`mesh_labels` (``method="template"`` by default, or the reference's
   ``"delaunay"``), returning a :class:`Mesh`;
 * checks: :func:`check_mesh` (a :class:`MeshChecks` report), :func:`rasterize_materials`;
@@ -21,15 +22,17 @@
   and the surface of that set); :meth:`Mesh.to_pyvista` for VTK's own filters.
 """
 
-from ._balance import balance_tree
-from ._bounds import format_quality_table, quality_bounds, quality_table
-from ._checks import MeshChecks, check_mesh, rasterize_materials
-from ._clip import MeshClipper, clip_cells
-from ._export import read_mesh, to_meshio, write_mesh, write_mesh_vtu
-from ._facets import FacetGroup, facet_groups
-from ._imesh import mesh_labels, mesh_tree
-from ._memory import count_boundary_voxels, estimate_mesh_memory
-from ._quality import (
+from .checks._checks import MeshChecks, check_mesh, rasterize_materials
+from .checks._clip import MeshClipper, clip_cells
+from .checks._facets import FacetGroup, facet_groups
+from .checks._surface import mesh_surface, shown_faces
+from .formats._export import read_mesh, to_meshio, write_mesh, write_mesh_vtu
+from .mesher._balance import balance_tree
+from .mesher._imesh import mesh_labels, mesh_tree
+from .mesher._tree import RegionTree, build_tree
+from .model._bounds import format_quality_table, quality_bounds, quality_table
+from .model._memory import count_boundary_voxels, estimate_mesh_memory
+from .model._quality import (
     QUALITY_METRICS,
     dihedral_angles,
     max_angle,
@@ -37,9 +40,8 @@ from ._quality import (
     radius_edge_ratio,
     signed_volumes,
 )
-from ._surface import mesh_surface, shown_faces
-from ._types import Mesh
-from ._world import world_from_affine
+from .model._types import Mesh
+from .model._world import world_from_affine
 
 __all__ = [
     "FacetGroup", "facet_groups", "write_mesh_vtu", "Mesh", "balance_tree", "mesh_labels", "mesh_tree", "check_mesh", "MeshChecks",
@@ -47,5 +49,5 @@ __all__ = [
     "radius_edge_ratio", "signed_volumes", "quality_bounds", "quality_table",
     "format_quality_table", "read_mesh", "to_meshio", "write_mesh", "estimate_mesh_memory",
     "count_boundary_voxels", "mesh_surface", "shown_faces", "world_from_affine",
-    "MeshClipper", "clip_cells",
+    "MeshClipper", "clip_cells", "RegionTree", "build_tree",
 ]

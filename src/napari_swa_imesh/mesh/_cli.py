@@ -17,10 +17,10 @@ import numpy as np
 
 from .._cli_util import StepTimer, print_json
 from .._validation import normalize_spacing
-from ._checks import _check_mesh
-from ._export import MESH_SUFFIXES
-from ._subdivision import check_max_aspect
-from ._memory import (available_memory, count_boundary_voxels, current_rss,
+from .checks._checks import _check_mesh
+from .formats._export import MESH_SUFFIXES
+from .mesher._subdivision import check_max_aspect
+from .model._memory import (available_memory, count_boundary_voxels, current_rss,
                       estimate_mesh_memory, format_bytes, parse_memory_size)
 
 __all__ = ["add_commands", "parse_material_names"]
@@ -148,8 +148,8 @@ def parse_material_names(items) -> dict[int, str]:
 
 def _run_mesh(args: argparse.Namespace) -> int:
     from ..io import image_suffix, read_image
-    from ._export import mesh_output_paths, write_mesh
-    from ._imesh import _mesh_arguments
+    from .formats._export import mesh_output_paths, write_mesh
+    from .mesher._imesh import _mesh_arguments
 
     timer = StepTimer()
     # fail before the (possibly long) meshing on a bad option, suffix or existing file
@@ -182,9 +182,9 @@ def _run_mesh(args: argparse.Namespace) -> int:
         name=f"labels in {Path(args.labels).name}")
     del image
     if Path(args.output).suffix.lower() == ".msh":
-        from ._gmsh import check_gmsh_labels
+        from .formats._gmsh import check_gmsh_labels
         check_gmsh_labels(labels, exclude)
-    from ._imesh import resolution_arguments
+    from .mesher._imesh import resolution_arguments
 
     lattice, max_size, coarsen = resolution_arguments(
         spacing, method=args.method, refine=args.refine, max_size=args.max_size,
@@ -201,8 +201,8 @@ def _run_mesh(args: argparse.Namespace) -> int:
     if limit != 0:
         _check_memory(args, estimate, limit, labels.shape, labels.dtype)
 
-    from ._coarsen import coarsen_labels
-    from ._imesh import _mesh_labels, warn_lost_materials
+    from .mesher._coarsen import coarsen_labels
+    from .mesher._imesh import _mesh_labels, warn_lost_materials
 
     with timer("mesh"):
         labels, coarse_report = coarsen_labels(labels, coarsen, exclude)
@@ -251,9 +251,9 @@ def _timed_check(timer, mesh, labels, exclude, tree, full) -> dict:
 def _check_resolution_args(args) -> None:
     """Refine and coarsen levels in range before any reading (the size cap needs the
     spacing, so it is checked with it)."""
-    from ._coarsen import check_coarsen
-    from ._imesh import check_periodic
-    from ._lattice import check_refine
+    from .mesher._coarsen import check_coarsen
+    from .mesher._imesh import check_periodic
+    from .mesher._lattice import check_refine
 
     check_refine(args.refine)
     if args.max_aspect is not None:
@@ -268,7 +268,7 @@ def _placement(args, peek) -> tuple | None:
     """(spacing, world) from a NIfTI file's affine (its header only, before any work), or
     None: the image's own frame (other formats, ``--index-space``)."""
     from ..io import is_nifti, read_affine
-    from ._world import world_from_affine
+    from .model._world import world_from_affine
 
     name = Path(args.labels).name
     if not is_nifti(args.labels):
@@ -292,7 +292,7 @@ def _placement(args, peek) -> tuple | None:
 def _write_options(args, ndim: int | None) -> dict:
     """The keyword arguments of ``write_mesh`` from the flags, checked (ValueError in the
     flags' words) before any meshing."""
-    from ._export import check_write_options
+    from .formats._export import check_write_options
 
     if args.order not in ("1", "2"):
         raise ValueError(f"--order must be 1 or 2, not {args.order!r}.")
@@ -472,8 +472,8 @@ def _mesh_text(r: dict) -> str:
 
 
 def _run_bounds(args: argparse.Namespace) -> int:
-    from ._bounds import format_lattice_bounds, format_quality_table, quality_table
-    from ._lattice import aspect_table, choose_lattice, lattice_choices
+    from .model._bounds import format_lattice_bounds, format_quality_table, quality_table
+    from .mesher._lattice import aspect_table, choose_lattice, lattice_choices
 
     if args.dim not in (2, 3):
         raise ValueError(f"--dim must be 2 or 3; got {args.dim}.")

@@ -10,7 +10,7 @@ pays for flat interfaces too. The default (``order="auto"``, ``adapt="auto"``) i
    solved, each axis normalised to weigh the same) and marks the fewest elements that
    carry ``THETA`` of its total (Doerfler marking);
 3. meshes the labels again one lattice level finer in the marked cells
-   (:func:`~napari_swa_imesh.mesh._adapt.refine_marked`) and solves P2 there.
+   (:func:`~napari_swa_imesh.mesh.mesher._adapt.refine_marked`) and solves P2 there.
 
 P1 asked with ``adapt="auto"`` takes :data:`P1_STEPS` steps instead, each splitting the
 leaves of largest indicator, as many as keep the vertices within their share of
@@ -39,11 +39,11 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..mesh._adapt import _refine_marked
-from ..mesh._facets import paired_facets
-from ..mesh._lattice import MAX_REFINE
-from ..mesh._quality import signed_volumes
-from ..mesh._types import Mesh
+from ..mesh.mesher._adapt import _refine_marked
+from ..mesh.checks._facets import paired_facets
+from ..mesh.mesher._lattice import MAX_REFINE
+from ..mesh.model._quality import signed_volumes
+from ..mesh.model._types import Mesh
 
 __all__ = ["AUTO", "P1_GROWTH", "P1_STEPS", "P2_BUDGET", "THETA", "auto_settings", "doerfler",
            "flux_jump_indicator", "refine_within", "voxel_lattice_vertices"]
@@ -163,8 +163,8 @@ def voxel_lattice_vertices(labels, mesh: Mesh) -> int:
     (every axis cut into at least ``2**j``) count toward it, so a lattice at refine
     ``r > 0`` was asked ``r + j``, and one at 0 is taken as asked 0.
     """
-    from ..mesh._imesh import _mesh_arguments, _mesh_labels
-    from ..mesh._lattice import Lattice
+    from ..mesh.mesher._imesh import _mesh_arguments, _mesh_labels
+    from ..mesh.mesher._lattice import Lattice
 
     described = mesh.info["lattice"]
     factors = tuple(int(f) for f in described["factors"])

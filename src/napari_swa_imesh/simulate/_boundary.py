@@ -168,7 +168,7 @@ def solve_boundary_value(mesh: Mesh, conductivity: Mapping, *, dirichlet=None,
     >>> round(float(r.potential.max()), 9)
     3.0
     """
-    from ..mesh._facets import facet_groups
+    from ..mesh.checks._facets import facet_groups
 
     skfem = _skfem()
     seconds: dict[str, float] = {}

@@ -191,11 +191,11 @@ def _run_simulate(args: argparse.Namespace) -> int:
     if not is_image and adapt not in ("auto", 0):
         raise ValueError("--adapt meshes the labels again: it needs a label image, not a mesh "
                          "file (simulate the labels, or leave --adapt out).")
-    from ..mesh._lattice import check_refine
+    from ..mesh.mesher._lattice import check_refine
 
     check_refine(args.refine)
     if args.max_aspect is not None:
-        from ..mesh._lattice import check_max_aspect
+        from ..mesh.mesher._lattice import check_max_aspect
 
         check_max_aspect(args.max_aspect, "--max-aspect")
     if transient is not None and args.protocol != "mixed":

@@ -9,7 +9,7 @@ import numpy as np
 from .._atomic import hdf5_file
 from ..io import atomic_write, check_writable
 from ..mesh import to_meshio, write_mesh_vtu
-from ..mesh._common import export_vectors
+from ..mesh.formats._common import export_vectors
 
 __all__ = ["FIELD_SUFFIXES", "check_field_path", "check_series_path", "write_field",
            "write_series"]

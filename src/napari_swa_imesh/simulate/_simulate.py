@@ -12,10 +12,10 @@ from numbers import Real
 import numpy as np
 
 from ..mesh import Mesh, mesh_labels
-from ..mesh._adapt import _refine_marked
-from ..mesh._lattice import MAX_REFINE
+from ..mesh.mesher._adapt import _refine_marked
 from ._adapt import (
     AUTO,
+    MAX_REFINE,
     auto_settings,
     check_adapt,
     doerfler,
@@ -245,7 +245,7 @@ def _check_box_faces(mesh: Mesh, names, lo: np.ndarray, hi: np.ndarray) -> None:
     at a few points only: the potential would be fixed on almost nothing and k_eff would
     be wrong. Refuse when a face to fix carries under 1 % of its area in facets.
     """
-    from ..mesh._facets import facet_groups
+    from ..mesh.checks._facets import facet_groups
 
     groups = facet_groups(mesh)
     d = mesh.ndim

@@ -18,7 +18,7 @@ from ._abaqus import abaqus_materials
 from ._common import MESH_SUFFIXES, orient_positive
 from ._gmsh import gmsh_materials
 from ._triangle_tetgen import read_node_ele
-from ._types import Mesh
+from ..model._types import Mesh
 from ._xdmf import require_h5py
 
 __all__ = ["read_mesh"]

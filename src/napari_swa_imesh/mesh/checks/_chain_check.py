@@ -36,9 +36,9 @@ import math
 
 import numpy as np
 
-from .._tree import RegionTree
-from ._packed import pack_points, unpack
-from ._quality import _edge_det
+from ..mesher._tree import RegionTree
+from ..mesher._packed import pack_points, unpack
+from ..model._quality import _edge_det
 
 __all__ = ["lattice_checks"]
 

@@ -40,7 +40,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ..io import atomic_write, check_writable
+from ...io import atomic_write, check_writable
 from ._abaqus import ABAQUS_ELEMENTS, write_abaqus
 from ._common import CELL_TYPE, CELL_TYPE_2, MESH_SUFFIXES, export_points
 from ._facet_vtu import facets_companion, write_facets_vtu
@@ -48,7 +48,7 @@ from ._gmsh import write_gmsh
 from ._prepare import ORDERS, ExportMesh, check_facet_selection
 from ._read import read_mesh
 from ._triangle_tetgen import FACET_SUFFIX, write_facet_markers, write_node_ele
-from ._types import Mesh
+from ..model._types import Mesh
 from ._vtu import write_vtu
 from ._xdmf import require_h5py, write_xdmf_blocks
 

@@ -164,7 +164,7 @@ class Mesh:
         >>> grid.n_cells, grid.cell_data["material"].tolist()
         (1, [7])
         """
-        from ._pyvista import to_pyvista
+        from ..formats._pyvista import to_pyvista
 
         return to_pyvista(self)
 

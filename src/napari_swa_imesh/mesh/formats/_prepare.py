@@ -20,11 +20,11 @@ from fnmatch import fnmatchcase
 import numpy as np
 
 from ._common import export_points, export_turns, material_names
-from ._facets import FACE_CORNERS, groups_and_signs
-from ._leaf_facets import present_materials
+from ..checks._facets import FACE_CORNERS, groups_and_signs
+from ..checks._leaf_facets import present_materials
 from ._order2 import MidEdges, with_mid_nodes
-from ._quality import _corner_det
-from ._types import Mesh
+from ..model._quality import _corner_det
+from ..model._types import Mesh
 from ._vtu import CellBlocks
 
 __all__ = ["ExportMesh", "FileFacets", "check_facet_selection", "select_facet_groups",

@@ -11,8 +11,8 @@ import time
 
 import numpy as np
 
-from .._tree import RegionTree
-from ._quality import quality_data, signed_volumes
+from ._tree import RegionTree
+from ..model._quality import quality_data, signed_volumes
 from ._templates import lattice, mark_corners
 
 __all__ = ["delaunay_mesh"]

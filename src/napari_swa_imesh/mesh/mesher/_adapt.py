@@ -14,12 +14,12 @@ import time
 
 import numpy as np
 
-from .._tree import RegionTree
+from ._tree import RegionTree
 from ._balance import balance_tree
 from ._imesh import _mesh_arguments, _mesh_tree, _names
 from ._lattice import (MAX_REFINE, Lattice, finer_tree, lattice_tree, split_box_faces,
                        split_leaves)
-from ._types import Mesh
+from ..model._types import Mesh
 
 __all__ = ["refine_marked"]
 

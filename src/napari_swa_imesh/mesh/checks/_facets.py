@@ -21,10 +21,10 @@ from __future__ import annotations
 
 import numpy as np
 
-from ._common import FACE_CORNERS
+from ..formats._common import FACE_CORNERS
 from ._groups import FacetGroup, named_groups
 from ._leaf_facets import template_group_rows
-from ._types import Mesh
+from ..model._types import Mesh
 
 __all__ = ["FacetGroup", "facet_groups", "paired_facets", "FACE_CORNERS"]
 

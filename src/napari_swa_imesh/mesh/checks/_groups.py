@@ -8,9 +8,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ._common import FACE_CORNERS, material_names
+from ..formats._common import FACE_CORNERS, material_names
 from ._leaf_facets import present_materials
-from ._types import Mesh
+from ..model._types import Mesh
 
 __all__ = ["FacetGroup", "named_groups"]
 

@@ -198,8 +198,8 @@ def connect(scheduler: str | None = None, *, workers: int = 2, memory: int | Non
 
 
 def _load_package() -> None:
-    from ._apply import apply_model  # noqa: F401
-    from ._model_io import load_model  # noqa: F401
+    from ..segmentation._apply import apply_model  # noqa: F401
+    from ..segmentation._model_io import load_model  # noqa: F401
 
 
 
@@ -237,8 +237,8 @@ def segment_one(image: str, model_path: str, output: str, *, force: bool = False
 
 def _segment_one(image, model_path, output, *, force, memory, mesh, exclude,
                  conductivity) -> dict:
-    from ._apply import apply_model, wants_chunks
-    from ._model_io import load_model
+    from ..segmentation._apply import apply_model, wants_chunks
+    from ..segmentation._model_io import load_model
 
     model = load_model(model_path)
     chunked = wants_chunks(image, output, model, budget=memory)

@@ -35,7 +35,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .._tree import PAD_LABEL, RegionTree, _build_tree
+from ._tree import PAD_LABEL, RegionTree, _build_tree
 from ._subdivision import (
     ASPECT_LIMIT,
     MAX_FACTOR,

@@ -33,7 +33,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from ._leaf_facets import material_codes
+from ..checks._leaf_facets import material_codes
 from ._triangle_tetgen import write_rows
 
 __all__ = ["write_gmsh", "gmsh_materials", "gmsh_tags", "check_gmsh_labels", "GMSH_TYPE"]

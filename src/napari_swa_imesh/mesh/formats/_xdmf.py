@@ -26,7 +26,7 @@ from xml.etree import ElementTree as ET
 
 import numpy as np
 
-from .._atomic import hdf5_file
+from ..._atomic import hdf5_file
 
 __all__ = ["require_h5py", "write_xdmf_blocks", "BLOCK"]
 

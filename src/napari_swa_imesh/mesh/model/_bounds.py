@@ -23,10 +23,10 @@ import math
 
 import numpy as np
 
-from .._validation import normalize_spacing
-from . import _templates_luts as luts
+from ..._validation import normalize_spacing
+from ..mesher import _templates_luts as luts
 from ._quality import dihedral_angles, radius_edge_ratio, signed_volumes, triangle_angles
-from ._templates import cut_leaves, template_quality
+from ..mesher._templates import cut_leaves, template_quality
 
 __all__ = ["format_lattice_bounds", "format_quality_table", "leaf_configurations",
            "quality_bounds", "quality_table"]
@@ -285,7 +285,7 @@ def quality_bounds(dim: int, spacing=None, *, subdivide: bool = True,
     d = _check_dim(dim)
     spacing = normalize_spacing(spacing, d)
     if subdivide:
-        from ._lattice import choose_lattice
+        from ..mesher._lattice import choose_lattice
 
         spacing = choose_lattice(spacing, max_aspect=max_aspect).step
     if all(abs(s / spacing[0] - 1) <= 1e-12 for s in spacing):
@@ -353,7 +353,7 @@ def format_lattice_bounds(dim: int, aspects: list[dict], lattice=None, choices=N
     choices : list of dict, optional
         :func:`~._lattice.lattice_choices` for that spacing.
     """
-    from ._lattice import ASPECT_LIMIT
+    from ..mesher._lattice import ASPECT_LIMIT
 
     angle = "dihedral angles" if dim == 3 else "angles"
     lines = ["\nbounds on lattice cells of residual aspect A (max/min cell size): anisotropic "

@@ -29,7 +29,7 @@ class QualityMetric:
     ``valid_range`` is what the metric can take on non-degenerate elements of dimension
     `dim`; ``optimal_range`` runs from the regular simplex's value to the bound the
     template mesher proves (isotropic spacing): every template element lies in it.
-    ``mesh._bounds.quality_bounds`` derives the same ranges from the quality table, and
+    ``mesh.model._bounds.quality_bounds`` derives the same ranges from the quality table, and
     a test holds the two equal.
     """
 

@@ -25,9 +25,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ._packed import array_fingerprint, corners, pack_points
-from ._quality import _edge_det
-from ._types import Mesh
+from ..mesher._packed import array_fingerprint, corners, pack_points
+from ..model._quality import _edge_det
+from ..model._types import Mesh
 
 __all__ = ["material_codes", "present_materials", "template_group_rows", "made_fingerprint",
            "MadeLattice"]

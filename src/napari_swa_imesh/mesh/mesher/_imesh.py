@@ -23,17 +23,17 @@ import warnings
 
 import numpy as np
 
-from .._tree import RegionTree, _build_tree
-from .._validation import as_labels, normalize_spacing
+from ._tree import RegionTree, _build_tree
+from ..._validation import as_labels, normalize_spacing
 from ._balance import balance_tree, count_balanced_leaves
-from ._checks import _check_mesh, count_excluded
+from ..checks._checks import _check_mesh, count_excluded
 from ._delaunay import delaunay_mesh
 from ._coarsen import check_coarsen, coarsen_labels
 from ._lattice import Lattice, choose_lattice, lattice_tree
-from ._leaf_facets import MadeLattice
+from ..checks._leaf_facets import MadeLattice
 from ._templates import template_mesh, template_quality
-from ._types import Mesh
-from ._world import world_from_affine
+from ..model._types import Mesh
+from ..model._world import world_from_affine
 
 __all__ = ["mesh_labels", "mesh_tree"]
 

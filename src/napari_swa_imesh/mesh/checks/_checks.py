@@ -14,13 +14,13 @@ from dataclasses import asdict, dataclass
 
 import numpy as np
 
-from .._tree import RegionTree, _build_tree
-from .._validation import as_labels
+from ..mesher._tree import RegionTree, _build_tree
+from ..._validation import as_labels
 from ._chain_check import lattice_checks
 from ._facets import _blocks, _runs, _side_passes
-from ._lattice import labels_on_lattice
-from ._quality import _corner_det, _det
-from ._types import Mesh
+from ..mesher._lattice import labels_on_lattice
+from ..model._quality import _corner_det, _det
+from ..model._types import Mesh
 
 __all__ = ["MeshChecks", "check_mesh", "rasterize_materials"]
 
@@ -208,7 +208,7 @@ def rasterize_materials(mesh: Mesh, *, fill: int = -1) -> np.ndarray:
 
     Examples
     --------
-    >>> from napari_swa_imesh.mesh._imesh import mesh_labels
+    >>> from napari_swa_imesh.mesh.mesher._imesh import mesh_labels
     >>> lab = np.array([[1, 0], [2, 2]])
     >>> rasterize_materials(mesh_labels(lab, exclude=[0])).tolist()
     [[1, -1], [2, 2]]
@@ -277,7 +277,7 @@ def check_mesh(mesh: Mesh, labels, *, exclude=(), tree: RegionTree | None = None
 
     Examples
     --------
-    >>> from napari_swa_imesh.mesh._imesh import mesh_labels
+    >>> from napari_swa_imesh.mesh.mesher._imesh import mesh_labels
     >>> lab = np.array([[1, 1], [1, 2]])
     >>> check_mesh(mesh_labels(lab), lab).all_passed
     True

@@ -20,7 +20,7 @@ from xml.sax.saxutils import quoteattr
 
 import numpy as np
 
-from ._quality import _corner_det
+from ..model._quality import _corner_det
 
 __all__ = ["CellBlocks", "write_vtu"]
 

@@ -18,10 +18,10 @@ import time
 
 import numpy as np
 
-from .._tree import RegionTree
+from ._tree import RegionTree
 from . import _templates_luts as luts
 from ._packed import pack_points
-from ._quality import quality_data
+from ..model._quality import quality_data
 
 __all__ = ["cut_leaves", "lattice", "mark_corners", "template_mesh", "template_quality"]
 

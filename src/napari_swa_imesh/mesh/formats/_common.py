@@ -19,7 +19,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from ._quality import signed_volumes
+from ..model._quality import signed_volumes
 
 __all__ = ["CELL_TYPE", "CELL_TYPE_2", "FACE_CORNERS", "MESH_SUFFIXES", "material_names",
            "export_points", "export_turns", "export_vectors", "orient_positive"]
