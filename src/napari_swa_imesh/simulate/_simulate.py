@@ -6,7 +6,6 @@ import dataclasses
 import time
 import warnings
 from collections.abc import Generator, Mapping
-from dataclasses import dataclass, field
 from numbers import Real
 
 import numpy as np
@@ -15,7 +14,6 @@ from ..mesh import Mesh, mesh_labels
 from ..mesh.mesher._adapt import _refine_marked
 from ._adapt import (
     AUTO,
-    MAX_REFINE,
     auto_settings,
     check_adapt,
     doerfler,
@@ -31,178 +29,28 @@ from ._budget import (
     format_bytes,
     unknowns,
 )
+from ._certify import (
+    CERTIFY_UNKNOWNS,
+    GAP_TARGET,
+    cannot_refine,
+    check_gap,
+    check_memory_budget,
+    flux_scale,
+    relative_gaps,
+)
 from ._conductivity import axis_names, conductivity_tensors
 from ._dual import dual_bound, facet_table, hypercircle
 from ._fe import vertex_values
 from ._hashin import HashinShtrikman, two_isotropic_phases
 from ._periodic import PeriodicProblem
 from ._protocols import BOUND_SLACK, check_within_bounds, mixed_boundary, voigt_reuss
+from ._result import SimulationResult
 from ._solve import DEFAULT_TOLERANCE, SolverInfo, connected_parts
 
 __all__ = ["SimulationResult", "simulate", "simulate_steps"]
 
 ORDERS = (1, 2)
-#: Default relative width ``(upper - lower) / lower`` of the certified interval: wider, the
-#: run refines where the gap is (while the refine levels and the memory budget allow).
-GAP_TARGET = 0.02
-#: Most unknowns a mesh refined for the interval may take, per dimension (besides the
-#: memory budget): time, not memory, is what a small 3-D image at refine 2-4 runs out of
-#: first (a 256^2 checkerboard closes to 1.3 % at 0.99M P2 unknowns; a 3-D P2 row is
-#: about three times as long).
-CERTIFY_UNKNOWNS = {2: 1_200_000, 3: 300_000}
 PROTOCOLS = ("mixed", "periodic")
-
-
-@dataclass
-class SimulationResult:
-    """Effective conductivity of the image box, with the fields that give it.
-
-    Axis names follow the mesh files: x = column, y = row, z = plane.
-
-    Attributes
-    ----------
-    k_eff : dict of str to float
-        Mixed-boundary effective conductivity per axis solved.
-    bounds : dict of str to (float, float)
-        Reuss (harmonic) and Voigt (arithmetic) means per axis; k_eff lies between them.
-    potential : dict of str to (N,) ndarray
-        The potential (0 on the ``min`` face, 1 on the ``max`` face) at the mesh vertices.
-    flux : dict of str to (M, d) ndarray
-        ``-C grad u`` per element, components in x, y(, z) order.
-    solver : dict of str to SolverInfo
-    volume_fractions : dict of int to float
-        Per material, of the box volume.
-    mesh : Mesh
-    order : int
-        Element degree (1 or 2).
-    dofs : int
-        Degrees of freedom of one solve.
-    seconds : dict of str to float
-        Per step: ``mesh``, ``assemble``, ``solve``; ``setup``: of ``solve``, the
-        multigrid set-up (``solve`` minus ``setup`` is the iterations and the fluxes).
-    protocol : {"mixed", "periodic"}
-        How k_eff was found (see :func:`simulate`).
-    tensor : (d, d) ndarray or None
-        Periodic protocol: the full effective tensor in x, y(, z) order (column i: the
-        mean flux, as a conductivity, under a unit mean gradient along axis i; NaN for
-        axes not solved).
-    hashin_shtrikman : HashinShtrikman or None
-        Two isotropic materials filling the box: their Hashin-Shtrikman bounds, and with
-        the periodic protocol on every axis the trace inequalities of ``tensor`` (the form
-        that holds for anisotropic microstructures; :mod:`._hashin`).
-    adapt : int
-        Adaptive refinement steps taken before the final solve (:mod:`._adapt`).
-    choice : str
-        The elements and steps used, and why when the default chose them.
-    interval : dict of str to (float, float)
-        Mixed protocol: per axis (lower, upper) bounds of the exact k_eff of the meshed
-        geometry (the dual and primal energies; upper = ``k_eff``); empty otherwise.
-    gap_target : float
-        The relative width asked; :attr:`gap` gives the reached one.
-    certify : int
-        Refinement steps taken to narrow the interval.
-    dual_solver : dict of str to SolverInfo
-        The dual (Crouzeix-Raviart) solves.
-    warnings : list of str
-        Sentences about the result (an interval left wider than the target).
-    memory_estimate : int
-        Estimated peak bytes of the final solve (:mod:`._budget`), checked against
-    memory : float
-        the budget, before assembly.
-    """
-
-    k_eff: dict[str, float]
-    bounds: dict[str, tuple[float, float]]
-    potential: dict[str, np.ndarray]
-    flux: dict[str, np.ndarray]
-    solver: dict[str, SolverInfo]
-    volume_fractions: dict[int, float]
-    mesh: Mesh
-    order: int
-    dofs: int
-    seconds: dict[str, float] = field(default_factory=dict)
-    protocol: str = "mixed"
-    tensor: np.ndarray | None = None
-    hashin_shtrikman: HashinShtrikman | None = None
-    adapt: int = 0
-    choice: str = ""
-    interval: dict[str, tuple[float, float]] = field(default_factory=dict)
-    gap_target: float = GAP_TARGET
-    certify: int = 0
-    dual_solver: dict[str, SolverInfo] = field(default_factory=dict)
-    warnings: list[str] = field(default_factory=list)
-    memory_estimate: int = 0
-    memory: float = DEFAULT_MEMORY
-
-    @property
-    def gap(self) -> dict[str, float]:
-        """Per axis, the interval's relative width ``(upper - lower) / lower``."""
-        return relative_gaps(self.interval)
-
-    def summary(self) -> dict:
-        """Plain-JSON summary (what ``swa-imesh simulate --json`` prints)."""
-        return {
-            "k_eff": dict(self.k_eff),
-            "bounds": {a: {"reuss": lo, "voigt": hi} for a, (lo, hi) in self.bounds.items()},
-            "volume_fractions": {str(k): v for k, v in self.volume_fractions.items()},
-            "order": self.order,
-            "adapt": self.adapt,
-            "choice": self.choice,
-            "dofs": self.dofs,
-            "elements": self.mesh.n_cells,
-            "iterations": {a: s.iterations for a, s in self.solver.items()},
-            "residual": max((s.residual for s in self.solver.values()), default=0.0),
-            "seconds": dict(self.seconds),
-            "protocol": self.protocol,
-            **({"tensor": [[None if np.isnan(v) else float(v) for v in row]
-                           for row in self.tensor]} if self.tensor is not None else {}),
-            **({"hashin_shtrikman": self.hashin_shtrikman.to_dict()}
-               if self.hashin_shtrikman is not None else {}),
-            **({"interval": {a: {"lower": lo, "upper": hi, "gap": self.gap[a]}
-                             for a, (lo, hi) in self.interval.items()},
-                "gap_target": self.gap_target, "certify": self.certify}
-               if self.interval else {}),
-            "warnings": list(self.warnings),
-            "memory_estimate_bytes": self.memory_estimate,
-            "memory_budget_bytes": self.memory,
-        }
-
-    def describe(self) -> str:
-        """A few lines for people: k_eff per axis within its bounds, the solve's cost."""
-        lines = [f"steady diffusion, P{self.order} on {self.mesh.n_cells} elements, "
-                 f"{self.dofs} unknowns, {self.protocol} protocol"
-                 + (f" ({self.choice})" if self.choice else "")]
-        for a, k in self.k_eff.items():
-            lo, hi = self.bounds[a]
-            s = self.solver[a]
-            lines.append(f"k_eff {a} = {k:.6g}  (Reuss {lo:.4g} .. Voigt {hi:.4g}; "
-                         f"{s.iterations} CG iterations, residual {s.residual:.1e})")
-        for a, (lo, hi) in self.interval.items():
-            lines.append(f"certified {a}: {lo:.6g} <= k_eff <= {hi:.6g}  (gap "
-                         f"{100 * self.gap[a]:.3g} %, target {100 * self.gap_target:g} %)")
-        if self.protocol == "periodic":
-            lines.append("no certified interval: the dual bound is for the mixed protocol")
-        lines += [f"warning: {w}" for w in self.warnings]
-        if self.memory_estimate:
-            lines.append(f"memory: estimated peak {format_bytes(self.memory_estimate)} "
-                         f"(budget {format_bytes(self.memory)}, checked before assembly)")
-        fractions = ", ".join(f"{self.mesh.material_names.get(m, m)} {f:.3f}"
-                              for m, f in self.volume_fractions.items())
-        lines.append(f"volume fractions: {fractions}")
-        if self.tensor is not None:
-            lines.append("tensor (x, y(, z)):")
-            lines += ["  " + "  ".join(f"{v:11.6g}" for v in row) for row in self.tensor]
-        hs = self.hashin_shtrikman
-        if hs is not None:
-            line = (f"Hashin-Shtrikman (two phases, for an isotropic microstructure): "
-                    f"{hs.lower:.4g} .. {hs.upper:.4g}")
-            if hs.trace_holds is not None:
-                line += ("; trace bounds of the tensor: lower "
-                         + ("holds" if hs.trace_holds[0] else "FAIL") + ", upper "
-                         + ("holds" if hs.trace_holds[1] else "crossed (discretisation "
-                            "error near an optimal microstructure)"))
-            lines.append(line)
-        return "\n".join(lines)
 
 
 def _check_axes(axes, ndim: int) -> tuple[str, ...]:
@@ -287,42 +135,6 @@ def check_symmetric(tensor: np.ndarray) -> None:
 def check_tolerance(tol) -> None:
     if isinstance(tol, bool) or not isinstance(tol, Real) or not 0 < tol < 1:
         raise ValueError(f"tol must be a relative residual between 0 and 1, not {tol!r}.")
-
-
-def check_gap(gap) -> float:
-    """The interval's target relative width, or ValueError."""
-    if isinstance(gap, bool) or not isinstance(gap, Real) or not gap > 0:
-        raise ValueError(f"gap must be a positive relative width (0.02 for 2 %; inf never "
-                         f"refines), not {gap!r}.")
-    return float(gap)
-
-
-def check_memory_budget(memory) -> None:
-    if isinstance(memory, bool) or not isinstance(memory, Real) or not memory > 0:
-        raise ValueError(f"memory must be a positive number of bytes, not {memory!r}.")
-
-
-def relative_gaps(interval: Mapping[str, tuple[float, float]]) -> dict[str, float]:
-    """Per axis ``(upper - lower) / lower`` (infinite for a zero lower bound)."""
-    return {a: (hi - lo) / lo if lo > 0 else float("inf") for a, (lo, hi) in interval.items()}
-
-
-def _flux_scale(lo: np.ndarray, hi: np.ndarray, axis: int) -> float:
-    """``A / L`` of the box along `axis`: the flux of a unit k_eff."""
-    return float(np.prod(np.delete(hi - lo, axis)) / (hi[axis] - lo[axis]))
-
-
-def _cannot_refine(mesh: Mesh, labels, level: int) -> str | None:
-    """Why the labels cannot be meshed again at interface refinement `level` for the
-    interval (None: they can)."""
-    if labels is None or isinstance(labels, Mesh):
-        return "a mesh is not meshed again (simulate the label image to refine it)"
-    info = mesh.info
-    if info.get("method") != "template" or "lattice" not in info or info.get("coarsen"):
-        return "this mesh cannot be refined (not a template mesh of the labels)"
-    if level > MAX_REFINE:
-        return f"the finest refine level ({MAX_REFINE}) is reached"
-    return None
 
 
 def simulate_steps(mesh_or_labels, conductivity: Mapping, *, spacing=None,
@@ -492,7 +304,7 @@ def simulate_steps(mesh_or_labels, conductivity: Mapping, *, spacing=None,
                 dual_info[name] = dual.info
                 # the gap per element, relative to this axis' flux: axes weigh the same
                 gap_indicator += hypercircle(space, values, dual.flux, tensors,
-                                             cell_material) / (value * _flux_scale(lo, hi, axis))
+                                             cell_material) / (value * flux_scale(lo, hi, axis))
                 del dual
                 seconds["dual"] = seconds.get("dual", 0.0) + time.perf_counter() - t0
         done += 1 + len(names)
@@ -500,7 +312,7 @@ def simulate_steps(mesh_or_labels, conductivity: Mapping, *, spacing=None,
         if not wide:
             break
         level = refine + certify + 1
-        why = (_cannot_refine(mesh, mesh_or_labels, level) if may_refine else
+        why = (cannot_refine(mesh, mesh_or_labels, level) if may_refine else
                "adapt was given, so the mesh is kept as asked (leave adapt to auto to "
                "refine for the interval)")
         # predicted before meshing (a refine-4 mesh of a small 3-D image took minutes to
