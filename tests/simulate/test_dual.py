@@ -189,3 +189,16 @@ def test_routing_removes_any_excess_exactly(seed):
     others = facets.boundary.copy()
     others[fixed] = False
     assert not route[others].any()
+
+
+def test_a_narrow_bridge_through_a_void_layer_is_bounded_from_both_sides():
+    """The insulated void surfaces are part of the dual's boundary: the interval holds the
+    flux through a two-voxel bridge (P2 on a finer mesh as the reference)."""
+    labels = np.ones((6, 9), dtype=np.uint8)
+    labels[:, 4] = 2
+    labels[2:4, 4] = 1
+    r = simulate(labels, {1: 1.0}, exclude=[2], axes="x", order=1, adapt=0, gap=np.inf)
+    fine = simulate(labels, {1: 1.0}, exclude=[2], axes="x", order=2, adapt=0, refine=3,
+                    interval=False)
+    lo, hi = r.interval["x"]
+    assert 0 < lo < fine.k_eff["x"] < hi

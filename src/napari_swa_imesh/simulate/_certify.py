@@ -38,7 +38,8 @@ def check_memory_budget(memory) -> None:
 
 def relative_gaps(interval: Mapping[str, tuple[float, float]]) -> dict[str, float]:
     """Per axis ``(upper - lower) / lower`` (infinite for a zero lower bound)."""
-    return {a: (hi - lo) / lo if lo > 0 else float("inf") for a, (lo, hi) in interval.items()}
+    return {a: 0.0 if hi <= lo else (hi - lo) / lo if lo > 0 else float("inf")
+            for a, (lo, hi) in interval.items()}
 
 
 def flux_scale(lo: np.ndarray, hi: np.ndarray, axis: int) -> float:
