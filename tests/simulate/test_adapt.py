@@ -1,6 +1,7 @@
 """The default's adaptive step: meshes refined where marked stay exact IMESH meshes, the
 indicator sees flux jumps and nothing else, marking is Doerfler's, and adapting moves
-k_eff towards a much finer solution."""
+k_eff towards a much finer solution. These pin the adaptive step itself (interval=False:
+the interval's own refinement, after it, is tested in test_dual.py)."""
 
 from __future__ import annotations
 
@@ -139,7 +140,7 @@ def test_adapting_moves_k_eff_towards_a_much_finer_solution():
     k = {1: 1.0, 2: 10.0, 3: 0.1}
     fine = simulate(labels, k, order=2, adapt=0, refine=3, axes="x").k_eff["x"]
     p2 = simulate(labels, k, order=2, adapt=0, axes="x")
-    default = simulate(labels, k, axes="x")
+    default = simulate(labels, k, axes="x", interval=False)
     assert default.choice == "P2, 1 adaptive step" and default.adapt == 1
     assert abs(default.k_eff["x"] - fine) < 0.7 * abs(p2.k_eff["x"] - fine)
     assert default.dofs < 2 * p2.dofs
@@ -156,11 +157,11 @@ def test_adapting_moves_k_eff_towards_a_much_finer_solution():
 def test_the_default_is_the_same_for_the_transposed_and_relabelled_image():
     labels = blobs((18, 22), seed=5)
     k = {1: 1.0, 2: 10.0, 3: 0.1}
-    a = simulate(labels, k)
-    b = simulate(np.ascontiguousarray(labels.T), k)
+    a = simulate(labels, k, interval=False)
+    b = simulate(np.ascontiguousarray(labels.T), k, interval=False)
     assert a.k_eff["x"] == pytest.approx(b.k_eff["y"], rel=1e-9)
     assert a.k_eff["y"] == pytest.approx(b.k_eff["x"], rel=1e-9)
-    c = simulate((4 - labels).astype(np.uint8), {3: 1.0, 2: 10.0, 1: 0.1})
+    c = simulate((4 - labels).astype(np.uint8), {3: 1.0, 2: 10.0, 1: 0.1}, interval=False)
     assert c.k_eff == pytest.approx(a.k_eff, rel=1e-9) and c.dofs == a.dofs
 
 
@@ -170,10 +171,10 @@ def test_the_default_falls_back_within_its_budget_and_says_why(monkeypatch, tmp_
     vertices = len(mesh_labels(labels).points)
     p2 = _adapt.P2_PER_VERTEX[2] * vertices
     monkeypatch.setattr(_adapt, "P2_BUDGET", int(p2 * 1.2))      # P2 fits, adapted not
-    r = simulate(labels, k, axes="x")
+    r = simulate(labels, k, axes="x", interval=False)
     assert r.order == 2 and r.adapt == 0 and "not adapted" in r.choice
     monkeypatch.setattr(_adapt, "P2_BUDGET", int(p2 * 0.5))      # not even P2
-    r = simulate(labels, k, axes="x")
+    r = simulate(labels, k, axes="x", interval=False)
     assert r.order == 1 and r.adapt == 0 and "above the default's budget" in r.choice
     np.save(tmp_path / "l.npy", labels)
     assert main(["simulate", str(tmp_path / "l.npy"), "-k", "1=1", "2=10", "3=0.1",

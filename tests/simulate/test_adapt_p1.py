@@ -58,7 +58,7 @@ def test_no_room_or_an_exact_field_splits_nothing():
     assert same.n_cells == mesh.n_cells
     # layers across the flux: the field is exact, nothing is refined, k_eff is harmonic
     layers = np.repeat(np.array([[1, 2, 2, 1, 1, 2]]), 5, axis=0)
-    r = simulate(layers, {1: 1.0, 2: 4.0}, axes="x", order=1)
+    r = simulate(layers, {1: 1.0, 2: 4.0}, axes="x", order=1, interval=False)
     assert r.adapt == 2 and r.mesh.n_cells == mesh_labels(layers).n_cells
     assert r.k_eff["x"] == pytest.approx(6 / (3 / 1.0 + 3 / 4.0), rel=1e-9)
 
@@ -68,7 +68,7 @@ def test_p1_asked_adapts_twice_within_3x_the_vertices_towards_a_finer_solution()
     vertices = len(mesh_labels(labels).points)
     fine = simulate(labels, K, order=2, adapt=0, refine=2, axes="x").k_eff["x"]
     plain = simulate(labels, K, order=1, adapt=0, axes="x")
-    auto = simulate(labels, K, order=1, axes="x")
+    auto = simulate(labels, K, order=1, axes="x", interval=False)
     assert auto.choice == f"P1 (asked), 2 adaptive steps within {_adapt.P1_GROWTH:g}x the vertices"
     assert auto.order == 1 and auto.adapt == 2 and auto.dofs == len(auto.mesh.points)
     assert vertices < auto.dofs <= _adapt.P1_GROWTH * vertices <= 3 * vertices
@@ -82,7 +82,7 @@ def test_p1_over_its_budget_is_not_adapted_and_says_why(monkeypatch, tmp_path, c
     labels = blobs((20, 20))
     vertices = len(mesh_labels(labels).points)
     monkeypatch.setattr(_adapt, "P1_BUDGET", 2 * vertices)
-    r = simulate(labels, K, axes="x", order=1)
+    r = simulate(labels, K, axes="x", order=1, interval=False)
     assert r.adapt == 0 and "above" not in r.choice and "P1 budget" in r.choice
     monkeypatch.setattr(_adapt, "P1_BUDGET", 3 * vertices)
     np.save(tmp_path / "l.npy", labels)
@@ -105,8 +105,8 @@ def test_p1_budget_counts_from_the_labels_on_voxel_cells_not_the_subdivided_mesh
     assert first.recipe.lattice.factors == (2, 2, 3)
     voxel = len(mesh_labels(labels, spacing=spacing, subdivide=False).points)
     assert _adapt.voxel_lattice_vertices(labels, first) == voxel
-    iso = simulate(labels, K, order=1, axes="x")
-    aniso = simulate(labels, K, order=1, axes="x", spacing=spacing)
+    iso = simulate(labels, K, order=1, axes="x", interval=False)
+    aniso = simulate(labels, K, order=1, axes="x", spacing=spacing, interval=False)
     assert iso.dofs <= _adapt.P1_GROWTH * voxel           # the isotropic rule, unchanged
     assert aniso.dofs <= max(len(first.points), _adapt.P1_GROWTH * voxel)
     assert aniso.dofs < 0.5 * _adapt.P1_GROWTH * len(first.points)

@@ -202,3 +202,36 @@ def test_a_grey_image_given_as_labels_is_named_as_such(tmp_path, capsys):
     np.save(tmp_path / "grey.npy", image)
     rc, _, err = _run(capsys, "simulate", tmp_path / "grey.npy", "-k", "1=1")
     assert rc == 2 and "is it an image rather than a label image?" in err
+
+
+def test_the_interval_and_the_memory_budget_on_the_command_line(tmp_path, capsys):
+    """Issue 26: k_eff as a certified interval, a wide one said, a budget in bytes."""
+    layers = np.ones((6, 9), dtype=np.uint8)
+    layers[:, 3:] = 2
+    np.save(tmp_path / "layers.npy", layers)
+    rc, out, err = _run(capsys, "simulate", tmp_path / "layers.npy", "-k", "1=1", "2=4",
+                        "--json")
+    assert rc == 0, err
+    report = json.loads(out)
+    exact = 1 / (1 / 3 + (2 / 3) / 4)
+    assert report["interval"]["x"]["lower"] == pytest.approx(exact, rel=1e-10)
+    assert report["interval"]["x"]["upper"] == pytest.approx(exact, rel=1e-10)
+    assert report["interval"]["x"]["gap"] < 1e-10 and report["warnings"] == []
+    assert 0 < report["memory_estimate_bytes"] <= report["memory_budget_bytes"]
+    rc, out, _ = _run(capsys, "simulate", tmp_path / "layers.npy", "-k", "1=1", "2=4",
+                      "--json", "--no-interval")
+    assert rc == 0 and "interval" not in json.loads(out)
+    # a checkerboard on a coarse mesh kept as asked: the wide interval is said
+    squares = np.arange(8) // 4
+    np.save(tmp_path / "board.npy", (np.add.outer(squares, squares) % 2 + 1).astype(np.uint8))
+    rc, out, _ = _run(capsys, "simulate", tmp_path / "board.npy", "-k", "1=1", "2=10",
+                      "--axes", "x", "--order", "1", "--adapt", "0")
+    assert rc == 0
+    assert "certified x:" in out and "warning: the interval along x is" in out
+    # the budget is checked before any solve, with the estimate in the sentence
+    rc, _, err = _run(capsys, "simulate", tmp_path / "board.npy", "-k", "1=1", "2=10",
+                      "--order", "2", "--memory", "1k")
+    assert rc == 2 and "above the memory budget of 1 kB" in err
+    rc, _, err = _run(capsys, "simulate", tmp_path / "board.npy", "-k", "1=1", "2=10",
+                      "--memory", "lots")
+    assert rc == 2 and "--memory takes a size" in err

@@ -26,7 +26,7 @@ def test_refinement_converges_to_the_exact_checkerboard_conductivity():
     exact = np.sqrt(10.0)
     errors, dofs = [], []
     for refine in (1, 2, 3):
-        r = simulate(lab, {1: 1.0, 2: 10.0}, axes="x", refine=refine)
+        r = simulate(lab, {1: 1.0, 2: 10.0}, axes="x", refine=refine, interval=False)
         errors.append(r.k_eff["x"] / exact - 1)
         dofs.append(r.dofs)
     assert all(e > 0 for e in errors)            # conforming P1: from above

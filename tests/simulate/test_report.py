@@ -87,9 +87,14 @@ def test_segment_signatures_round_trip_into_the_simulate_report(segmented, capsy
     assert k_row["quantity"] == "k_eff"
     assert float(k_row["x"]) == pytest.approx(expected.k_eff["x"], rel=1e-14)
     lo, hi = expected.bounds["y"]
-    assert [r[0] for r in effective[2:]] == ["reuss", "voigt"]
+    assert [r[0] for r in effective[2:]] == ["reuss", "voigt", "lower", "upper", "gap"]
     assert float(effective[2][2]) == pytest.approx(lo) and float(effective[3][2]) == \
         pytest.approx(hi)
+    # the certified interval: k_eff is its upper end, the dual bound its lower
+    lower, upper = expected.interval["x"]
+    assert float(effective[4][1]) == pytest.approx(lower, rel=1e-14)
+    assert float(effective[5][1]) == pytest.approx(upper, rel=1e-14) == expected.k_eff["x"]
+    assert float(effective[6][1]) == pytest.approx((upper - lower) / lower, rel=1e-9)
     # the report's material block is itself a signatures table
     back = read_signatures(tmp_path / "r.csv")
     assert [r["label"] for r in back] == [1, 2] and back[1]["tiles"] == int(written[1]["tiles"])

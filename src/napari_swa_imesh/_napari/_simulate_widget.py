@@ -5,7 +5,8 @@ Thin: the conductivity table is a view of a list of records, the computation is
 is drawn as a Surface coloured by the potential (on the mesh's boundary and interface
 faces, or on the surface of the whole elements on one side of a clipping plane, as the Mesh
 tab's clip: :class:`~napari_swa_imesh.mesh.MeshClipper`), with a figure holding the colour
-bar and each k_eff inside its Reuss-Voigt interval; the periodic tensor is a small table
+bar and each k_eff inside its Reuss-Voigt interval and its certified interval (the summary
+text gives both bounds and the gap); the periodic tensor is a small table
 and the signatures + k_eff report a box of its own (:mod:`._report_panel`).
 
 The tab simulates the Mesh tab's mesh as it is. Interface refinement and periodic faces
@@ -368,6 +369,11 @@ class SimulateWidget(QWidget):
         lows = np.array([result.bounds[a][0] for a in names])
         highs = np.array([result.bounds[a][1] for a in names])
         k_ax.hlines(y, lows, highs, color="0.6", lw=6, label="Reuss .. Voigt")
+        if result.interval:               # the certified interval (dual .. primal)
+            k_ax.hlines([names.index(a) for a in result.interval],
+                        [lo for lo, _ in result.interval.values()],
+                        [hi for _, hi in result.interval.values()], color="#1f77b4", lw=3,
+                        label="certified")
         k_ax.plot([result.k_eff[a] for a in names], y, "o", color="#d62728", label="k_eff")
         k_ax.set_yticks(y, names)
         k_ax.set_xscale("log" if highs.max() > 20 * max(lows.min(), 1e-300) else "linear")

@@ -5,7 +5,10 @@
   our vectorised code (:mod:`._assembly`, checked against scikit-fem), solved by
   conjugate gradients with smoothed-aggregation multigrid (:mod:`._amg`); the
   mixed-boundary effective conductivity per axis, or the full tensor by the periodic
-  protocol, checked against its Voigt-Reuss bounds;
+  protocol, checked against its Voigt-Reuss bounds; for the mixed protocol a certified
+  interval (:mod:`._dual`: the conforming energy above, the complementary energy of an
+  exactly divergence-free flux below), refined until within 2 % where the budget
+  (:mod:`._budget`, in bytes) allows;
 * :func:`solve_boundary_value`: one steady problem with Dirichlet, Neumann and Robin
   conditions on the mesh's named facet groups and volume sources;
 * :func:`simulate_transient` (and :func:`transient_steps`): a heat front from a face or a

@@ -3,6 +3,8 @@
 from __future__ import annotations
 
 import argparse
+import sys
+import warnings
 from pathlib import Path
 
 import numpy as np
@@ -59,6 +61,19 @@ def add_commands(subparsers) -> None:
                    help="mixed (potential 0/1 on two faces, others insulated; default) or "
                         "periodic (unit mean gradient, periodic fluctuation: the full "
                         "tensor, printed and in --json as \"tensor\")")
+    p.add_argument("--gap", type=float, default=2.0, metavar="PERCENT",
+                   help="k_eff is printed as a certified interval (mixed protocol: the "
+                        "conforming solution bounds it from above, an exactly divergence-"
+                        "free flux from below); wider than this (default 2 %%) and with "
+                        "--adapt auto, the labels are meshed again finer at the interfaces "
+                        "until it closes or the refine levels or --memory run out, else a "
+                        "warning gives the interval")
+    p.add_argument("--no-interval", action="store_true",
+                   help="skip the dual (lower-bound) solve: k_eff from above only")
+    p.add_argument("--memory", default="4G", metavar="BYTES",
+                   help="memory budget of a k_eff run (default 4G), checked from the mesh "
+                        "before assembly with the estimate printed: the default order falls "
+                        "back to P1 beyond it, an asked --order is refused")
     p.add_argument("--axes", nargs="+", choices=("x", "y", "z"), default=None,
                    help="axes to solve along (default: all)")
     p.add_argument("--tol", type=float, default=1e-10,
@@ -145,6 +160,11 @@ def _run_simulate(args: argparse.Namespace) -> int:
     adapt = {"auto": "auto", "0": 0, "1": 1, "2": 2}.get(str(args.adapt))
     if adapt is None:
         raise ValueError(f"--adapt must be auto, 0, 1 or 2, not {args.adapt}.")
+    from ._budget import parse_memory
+
+    memory = parse_memory(args.memory)
+    if not args.gap > 0:
+        raise ValueError(f"--gap must be a positive percentage such as 2, not {args.gap:g}.")
     fixed_order = 1 if order == "auto" else order      # boundary-value and transient runs
     if not 0 < args.tol < 1:
         raise ValueError(f"--tol must lie between 0 and 1, not {args.tol:g}.")
@@ -226,10 +246,17 @@ def _run_simulate(args: argparse.Namespace) -> int:
                                     exclude=tuple(args.exclude), material_names=names,
                                     **transient)
     else:
-        result = simulate(source, conductivity, spacing=spacing, order=order,
-                          axes=args.axes, tol=args.tol, exclude=tuple(args.exclude),
-                          material_names=names, refine=args.refine, protocol=args.protocol,
-                          adapt=adapt if is_image else 0, max_aspect=args.max_aspect)
+        with warnings.catch_warnings():   # said once, below, on stderr
+            warnings.filterwarnings("ignore", message="the interval along")
+            result = simulate(source, conductivity, spacing=spacing, order=order,
+                              axes=args.axes, tol=args.tol, exclude=tuple(args.exclude),
+                              material_names=names, refine=args.refine,
+                              protocol=args.protocol, adapt=adapt if is_image else 0,
+                              max_aspect=args.max_aspect, interval=not args.no_interval,
+                              gap=args.gap / 100, memory=memory)
+        if args.json:                     # the text output has them in its lines
+            for note in result.warnings:
+                print(f"warning: {note}", file=sys.stderr)
     table = None
     if signatures is not None or args.report:
         table = simulation_report(result, conductivity, signatures)

@@ -10,7 +10,8 @@ labelling), and a material on one side only is kept with empty cells and named i
 warning, never shifted onto another row.
 
 Files: ``.csv`` (the material table, a blank line, then the k_eff block: header
-``quantity,x,y(,z)``, rows ``k_eff``, ``reuss``, ``voigt`` and ``tensor_<axis>``),
+``quantity,x,y(,z)``, rows ``k_eff``, ``reuss``, ``voigt``, with the certified interval
+``lower``, ``upper`` and ``gap``, and ``tensor_<axis>``),
 ``.json`` (:meth:`SimulationReport.summary`, also in ``simulate --json``) and ``.md``.
 """
 
@@ -236,7 +237,10 @@ class SimulationReport:
     protocol : str
     order : int
     warnings : list of str
-        Materials on one side only (signatures or mesh), in words.
+        Materials on one side only (signatures or mesh), in words, and an interval left
+        wider than its target.
+    interval : dict of str to (float, float)
+        The certified (lower, upper) bounds of k_eff per axis (mixed protocol).
     """
 
     materials: list[dict]
@@ -248,6 +252,7 @@ class SimulationReport:
     protocol: str = "mixed"
     order: int = 1
     warnings: list[str] = field(default_factory=list)
+    interval: dict[str, tuple[float, float]] = field(default_factory=dict)
 
     def summary(self) -> dict:
         """Plain JSON (NaN as null): ``materials``, ``k_eff``, ``bounds``, ``tensor``,
@@ -258,6 +263,9 @@ class SimulationReport:
                "bounds": {a: {"reuss": lo, "voigt": hi} for a, (lo, hi) in self.bounds.items()},
                "protocol": self.protocol, "order": self.order,
                "warnings": list(self.warnings)}
+        if self.interval:
+            out["interval"] = {a: {"lower": lo, "upper": hi, "gap": (hi - lo) / lo}
+                               for a, (lo, hi) in self.interval.items()}
         if self.tensor is not None:
             out["tensor"] = _plain(self.tensor.tolist())
         return out
@@ -270,6 +278,11 @@ class SimulationReport:
                              ("reuss", {a: self.bounds[a][0] for a in self.bounds}),
                              ("voigt", {a: self.bounds[a][1] for a in self.bounds})):
             rows.append([name] + [_text(values.get(a), digits) for a in self.axes])
+        if self.interval:
+            for name, pick in (("lower", lambda lo, hi: lo), ("upper", lambda lo, hi: hi),
+                               ("gap", lambda lo, hi: (hi - lo) / lo)):
+                rows.append([name] + [_text(pick(*self.interval[a]), digits)
+                                      if a in self.interval else "" for a in self.axes])
         if self.tensor is not None:
             rows += [[f"tensor_{a}"] + [_text(float(v), digits) for v in row]
                      for a, row in zip(self.axes, self.tensor)]
@@ -358,6 +371,9 @@ def simulation_report(result, conductivity: Mapping,
     k_eff,1.5,
     reuss,1.5,
     voigt,2,
+    lower,1.5,
+    upper,1.5,
+    gap,0,
     <BLANKLINE>
     """
     mesh = result.mesh
@@ -396,12 +412,14 @@ def simulation_report(result, conductivity: Mapping,
                      "conductivity": None, **{k: sig.get(k, float("nan")) for k in extra}})
     for note in notes:
         warnings.warn(note, UserWarning, stacklevel=2)
+    notes = notes + list(getattr(result, "warnings", []))
     axes = ("x", "y", "z")[:mesh.ndim]
     tensor = None if result.tensor is None else np.asarray(result.tensor, dtype=np.float64)
     return SimulationReport(materials=rows, columns=[*_FIRST, *extra],
                             k_eff=dict(result.k_eff), bounds=dict(result.bounds),
                             tensor=tensor, axes=axes, protocol=result.protocol,
-                            order=result.order, warnings=notes)
+                            order=result.order, warnings=notes,
+                            interval=dict(getattr(result, "interval", {})))
 
 
 def check_report_path(path, *, force: bool = False) -> Path:

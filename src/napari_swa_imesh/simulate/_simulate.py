@@ -5,7 +5,6 @@ from __future__ import annotations
 import time
 import warnings
 from collections.abc import Generator, Mapping
-from dataclasses import dataclass, field
 from numbers import Real
 
 import numpy as np
@@ -15,126 +14,35 @@ from ..mesh import refine_marked_tree as _refine_marked
 from ._adapt import (AUTO, auto_settings, check_adapt, doerfler, flux_jump_indicator,
                      refine_within, voxel_lattice_vertices)
 from ._assembly import cell_fluxes, fe_space, p1_embedding, stiffness_matrix
+from ._budget import (
+    DEFAULT_MEMORY,
+    check_memory,
+    estimate_memory,
+    format_bytes,
+    unknowns,
+)
+from ._certify import (
+    CERTIFY_UNKNOWNS,
+    GAP_TARGET,
+    cannot_refine,
+    check_gap,
+    check_memory_budget,
+    flux_scale,
+    relative_gaps,
+)
 from ._conductivity import axis_names, conductivity_tensors
+from ._dual import dual_bound, facet_table, hypercircle
 from ._fe import vertex_values
-from ._periodic import PeriodicProblem
 from ._hashin import HashinShtrikman, two_isotropic_phases
-from ._protocols import check_within_bounds, mixed_boundary, voigt_reuss
+from ._periodic import PeriodicProblem
+from ._protocols import BOUND_SLACK, check_within_bounds, mixed_boundary, voigt_reuss
+from ._result import SimulationResult
 from ._solve import DEFAULT_TOLERANCE, SolverInfo, connected_parts
 
 __all__ = ["SimulationResult", "simulate", "simulate_steps"]
 
 ORDERS = (1, 2)
 PROTOCOLS = ("mixed", "periodic")
-
-
-@dataclass
-class SimulationResult:
-    """Effective conductivity of the image box, with the fields that give it.
-
-    Axis names follow the mesh files: x = column, y = row, z = plane.
-
-    Attributes
-    ----------
-    k_eff : dict of str to float
-        Mixed-boundary effective conductivity per axis solved.
-    bounds : dict of str to (float, float)
-        Reuss (harmonic) and Voigt (arithmetic) means per axis; k_eff lies between them.
-    potential : dict of str to (N,) ndarray
-        The potential (0 on the ``min`` face, 1 on the ``max`` face) at the mesh vertices.
-    flux : dict of str to (M, d) ndarray
-        ``-C grad u`` per element, components in x, y(, z) order.
-    solver : dict of str to SolverInfo
-    volume_fractions : dict of int to float
-        Per material, of the box volume.
-    mesh : Mesh
-    order : int
-        Element degree (1 or 2).
-    dofs : int
-        Degrees of freedom of one solve.
-    seconds : dict of str to float
-        Per step: ``mesh``, ``assemble``, ``solve``; ``setup``: of ``solve``, the
-        multigrid set-up (``solve`` minus ``setup`` is the iterations and the fluxes).
-    protocol : {"mixed", "periodic"}
-        How k_eff was found (see :func:`simulate`).
-    tensor : (d, d) ndarray or None
-        Periodic protocol: the full effective tensor in x, y(, z) order (column i: the
-        mean flux, as a conductivity, under a unit mean gradient along axis i; NaN for
-        axes not solved).
-    hashin_shtrikman : HashinShtrikman or None
-        Two isotropic materials filling the box: their Hashin-Shtrikman bounds, and with
-        the periodic protocol on every axis the trace inequalities of ``tensor`` (the form
-        that holds for anisotropic microstructures; :mod:`._hashin`).
-    adapt : int
-        Adaptive refinement steps taken before the final solve (:mod:`._adapt`).
-    choice : str
-        The elements and steps used, and why when the default chose them.
-    """
-
-    k_eff: dict[str, float]
-    bounds: dict[str, tuple[float, float]]
-    potential: dict[str, np.ndarray]
-    flux: dict[str, np.ndarray]
-    solver: dict[str, SolverInfo]
-    volume_fractions: dict[int, float]
-    mesh: Mesh
-    order: int
-    dofs: int
-    seconds: dict[str, float] = field(default_factory=dict)
-    protocol: str = "mixed"
-    tensor: np.ndarray | None = None
-    hashin_shtrikman: HashinShtrikman | None = None
-    adapt: int = 0
-    choice: str = ""
-
-    def summary(self) -> dict:
-        """Plain-JSON summary (what ``swa-imesh simulate --json`` prints)."""
-        return {
-            "k_eff": dict(self.k_eff),
-            "bounds": {a: {"reuss": lo, "voigt": hi} for a, (lo, hi) in self.bounds.items()},
-            "volume_fractions": {str(k): v for k, v in self.volume_fractions.items()},
-            "order": self.order,
-            "adapt": self.adapt,
-            "choice": self.choice,
-            "dofs": self.dofs,
-            "elements": self.mesh.n_cells,
-            "iterations": {a: s.iterations for a, s in self.solver.items()},
-            "residual": max((s.residual for s in self.solver.values()), default=0.0),
-            "seconds": dict(self.seconds),
-            "protocol": self.protocol,
-            **({"tensor": [[None if np.isnan(v) else float(v) for v in row]
-                           for row in self.tensor]} if self.tensor is not None else {}),
-            **({"hashin_shtrikman": self.hashin_shtrikman.to_dict()}
-               if self.hashin_shtrikman is not None else {}),
-        }
-
-    def describe(self) -> str:
-        """A few lines for people: k_eff per axis within its bounds, the solve's cost."""
-        lines = [f"steady diffusion, P{self.order} on {self.mesh.n_cells} elements, "
-                 f"{self.dofs} unknowns, {self.protocol} protocol"
-                 + (f" ({self.choice})" if self.choice else "")]
-        for a, k in self.k_eff.items():
-            lo, hi = self.bounds[a]
-            s = self.solver[a]
-            lines.append(f"k_eff {a} = {k:.6g}  (Reuss {lo:.4g} .. Voigt {hi:.4g}; "
-                         f"{s.iterations} CG iterations, residual {s.residual:.1e})")
-        fractions = ", ".join(f"{self.mesh.material_names.get(m, m)} {f:.3f}"
-                              for m, f in self.volume_fractions.items())
-        lines.append(f"volume fractions: {fractions}")
-        if self.tensor is not None:
-            lines.append("tensor (x, y(, z)):")
-            lines += ["  " + "  ".join(f"{v:11.6g}" for v in row) for row in self.tensor]
-        hs = self.hashin_shtrikman
-        if hs is not None:
-            line = (f"Hashin-Shtrikman (two phases, for an isotropic microstructure): "
-                    f"{hs.lower:.4g} .. {hs.upper:.4g}")
-            if hs.trace_holds is not None:
-                line += ("; trace bounds of the tensor: lower "
-                         + ("holds" if hs.trace_holds[0] else "FAIL") + ", upper "
-                         + ("holds" if hs.trace_holds[1] else "crossed (discretisation "
-                            "error near an optimal microstructure)"))
-            lines.append(line)
-        return "\n".join(lines)
 
 
 def _check_axes(axes, ndim: int) -> tuple[str, ...]:
@@ -225,14 +133,16 @@ def simulate_steps(mesh_or_labels, conductivity: Mapping, *, spacing=None,
                    order: int | str = AUTO, axes=None, tol: float = DEFAULT_TOLERANCE,
                    exclude=(), material_names: Mapping[int, str] | None = None,
                    refine: int = 0, protocol: str = "mixed", adapt: int | str = AUTO,
-                   labels=None, max_aspect: float | None = None
+                   labels=None, max_aspect: float | None = None,
+                   interval: bool = True, gap: float = GAP_TARGET,
+                   memory: float = DEFAULT_MEMORY
                    ) -> Generator[tuple[int, int, str], None, SimulationResult]:
     """Run :func:`simulate` step by step, for a progress bar.
 
     Parameters
     ----------
     mesh_or_labels, conductivity, spacing, order, axes, tol, exclude, material_names, refine,
-    protocol, adapt, labels, max_aspect
+    protocol, adapt, labels, max_aspect, interval, gap, memory
         As for :func:`simulate`.
 
     Yields
@@ -248,7 +158,10 @@ def simulate_steps(mesh_or_labels, conductivity: Mapping, *, spacing=None,
     if order != AUTO and (isinstance(order, bool) or order not in ORDERS):
         raise ValueError(f"order must be 1 or 2 (P1 or P2 elements) or 'auto', not {order!r}.")
     adapt = check_adapt(adapt)
+    may_refine = adapt == AUTO          # an asked mesh (adapt given) is kept as asked
     check_tolerance(tol)
+    gap_target = check_gap(gap)
+    check_memory_budget(memory)
     if protocol not in PROTOCOLS:
         raise ValueError(f"protocol must be one of {', '.join(PROTOCOLS)}, not {protocol!r}.")
     seconds: dict[str, float] = {}
@@ -265,8 +178,17 @@ def simulate_steps(mesh_or_labels, conductivity: Mapping, *, spacing=None,
     reference = (voxel_lattice_vertices(source, mesh)
                  if order == 1 and adapt == AUTO and source is not None
                  and mesh.recipe is not None and mesh.recipe.remeshable else None)
+    chosen = order
     order, adapt, growth, choice = auto_settings(mesh, order, adapt, source is not None,
                                                  reference)
+    interval_wanted = bool(interval) and protocol == "mixed"
+    if chosen == AUTO and order == 2 and check_memory(mesh, 2, interval_wanted, memory,
+                                                      asked=False):
+        order, adapt, growth, choice = auto_settings(mesh, 1, 0, source is not None)
+        choice = (f"P1 (P2 would need about "
+                  f"{format_bytes(estimate_memory(mesh, 2, interval_wanted))}, above the "
+                  f"memory budget of {format_bytes(memory)})")
+    check_memory(mesh, order, interval_wanted, memory, asked=True)   # before any solve
     start = len(mesh.points)
     seconds["mesh"] = time.perf_counter() - t0
     total = 2 + len(names) + adapt
@@ -276,7 +198,7 @@ def simulate_steps(mesh_or_labels, conductivity: Mapping, *, spacing=None,
                                 "refining where the flux jumps most")
         t0 = time.perf_counter()
         first = simulate(mesh, conductivity, order=1, adapt=0, axes=names, tol=tol,
-                         protocol=protocol)
+                         protocol=protocol, interval=False)
         # mark whole leaves (the unit the mesher splits) by their summed indicator
         leaf = np.asarray(mesh.cell_data["leaf"])
         indicator = np.bincount(leaf, flux_jump_indicator(mesh, [first.flux[a] for a in names]))
@@ -288,66 +210,149 @@ def simulate_steps(mesh_or_labels, conductivity: Mapping, *, spacing=None,
             mesh, tree = refine_within(source, mesh, indicator, target, tree)
         materials, cell_material = np.unique(mesh.material, return_inverse=True)
         seconds[f"adapt {step + 1}"] = time.perf_counter() - t0
-    yield 1 + adapt, total, f"assembling P{order} on {mesh.n_cells} elements"
-
-    t0 = time.perf_counter()
-    space = fe_space(mesh, order)
-    volumes = np.empty(mesh.n_cells)
-    matrix = stiffness_matrix(space, tensors, cell_material, volumes)
-    doflocs = space.doflocs
-    coarse = p1_embedding(space)
-    seconds["assemble"] = time.perf_counter() - t0
-    lo, hi = mesh.image_box()
-    per_material = np.bincount(cell_material, weights=volumes, minlength=materials.size)
-    fractions = per_material / float(np.prod(hi - lo))
-    if not mesh.records_box:
-        _check_box_faces(mesh, names, lo, hi)
-    if not mesh.records_box and fractions.sum() < 1 - 1e-9:
-        warnings.warn("the mesh has voids and does not record the image box, so the box is "
-                      "the extent of its points; if an excluded material covered a whole "
-                      "face of the image, k_eff refers to a smaller box: simulate the label "
-                      "image instead.", stacklevel=2)
-    image_axes = {n: i for i, n in enumerate(axis_names(mesh.ndim))}
-    parts = connected_parts(matrix)
-
-    last: dict = {}           # the energy's pass over the elements also gives the flux
-
-    def energy(u: np.ndarray) -> float:
-        last["u"], (last["flux"], total) = u, cell_fluxes(space, u, tensors, cell_material)
-        return total
-
     k_eff, bounds, potential, flux, solver = {}, {}, {}, {}, {}
-    seconds["solve"] = 0.0
-    periodic = tensor = None
-    if protocol == "periodic":
+    interval: dict[str, tuple[float, float]] = {}
+    dual_info: dict[str, SolverInfo] = {}
+    notes: list[str] = []
+    certify = 0
+    growth_seen = 1.0
+    done = 1 + adapt
+    check_memory(mesh, order, interval_wanted, memory, asked=True)
+    while True:
+        yield done, total, f"assembling P{order} on {mesh.n_cells} elements"
         t0 = time.perf_counter()
-        periodic = PeriodicProblem(matrix, doflocs, lo, hi, tol=tol,
-                                   cell_vertices=space.element_dofs[:, :mesh.ndim + 1].T)
-        tensor = np.full((mesh.ndim, mesh.ndim), np.nan)
-        seconds["solve"] += time.perf_counter() - t0
-    for step, name in enumerate(names, start=2 + adapt):
-        yield step, total, f"solving along {name} ({matrix.shape[0]} unknowns)"
-        t0 = time.perf_counter()
-        axis = image_axes[name]
-        if periodic is None:
-            result = mixed_boundary(matrix, doflocs, name, lo, hi, energy, tol=tol,
-                                    parts=parts, cell_dofs=space.element_dofs,
-                                    cell_material=mesh.material, coarse=coarse)
-            value, values, info = result.k_eff, result.values, result.info
-        else:
-            tensor[:, axis], values, info = periodic.solve(axis)
-            value = float(tensor[axis, axis])
-        voigt, reuss = voigt_reuss(tensors, fractions, axis)
-        check_within_bounds(value, voigt, reuss, name)
-        k_eff[name] = value
-        bounds[name] = (reuss, voigt)
-        solver[name] = info
-        potential[name] = vertex_values(values, len(mesh.points))
-        cells_flux = last["flux"] if last.get("u") is values else cell_fluxes(
-            space, values, tensors, cell_material)[0]                   # (M, d) axis order
-        flux[name] = np.ascontiguousarray(cells_flux[:, ::-1])
-        last.clear()
-        seconds["solve"] += time.perf_counter() - t0
+        space = fe_space(mesh, order)
+        volumes = np.empty(mesh.n_cells)
+        matrix = stiffness_matrix(space, tensors, cell_material, volumes)
+        doflocs = space.doflocs
+        coarse = p1_embedding(space)
+        seconds["assemble"] = seconds.get("assemble", 0.0) + time.perf_counter() - t0
+        lo, hi = mesh.image_box()
+        per_material = np.bincount(cell_material, weights=volumes, minlength=materials.size)
+        fractions = per_material / float(np.prod(hi - lo))
+        if not mesh.records_box:
+            _check_box_faces(mesh, names, lo, hi)
+        if not mesh.records_box and fractions.sum() < 1 - 1e-9:
+            warnings.warn("the mesh has voids and does not record the image box, so the box "
+                          "is the extent of its points; if an excluded material covered a "
+                          "whole face of the image, k_eff refers to a smaller box: simulate "
+                          "the label image instead.", stacklevel=2)
+        image_axes = {n: i for i, n in enumerate(axis_names(mesh.ndim))}
+        parts = connected_parts(matrix)
+
+        last: dict = {}           # the energy's pass over the elements also gives the flux
+
+        def energy(u: np.ndarray, space=space, cell_material=cell_material,
+                   last=last) -> float:
+            last["u"], (last["flux"], total) = u, cell_fluxes(space, u, tensors, cell_material)
+            return total
+
+        seconds.setdefault("solve", 0.0)
+        periodic = tensor = None
+        if protocol == "periodic":
+            t0 = time.perf_counter()
+            periodic = PeriodicProblem(matrix, doflocs, lo, hi, tol=tol,
+                                       cell_vertices=space.element_dofs[:, :mesh.ndim + 1].T)
+            tensor = np.full((mesh.ndim, mesh.ndim), np.nan)
+            seconds["solve"] += time.perf_counter() - t0
+        dual_space = facets = None
+        gap_indicator = np.zeros(mesh.n_cells) if interval_wanted else None
+        for step, name in enumerate(names, start=done + 1):
+            yield step, total, f"solving along {name} ({matrix.shape[0]} unknowns)"
+            t0 = time.perf_counter()
+            axis = image_axes[name]
+            if periodic is None:
+                result = mixed_boundary(matrix, doflocs, name, lo, hi, energy, tol=tol,
+                                        parts=parts, cell_dofs=space.element_dofs,
+                                        cell_material=mesh.material, coarse=coarse)
+                value, values, info = result.k_eff, result.values, result.info
+            else:
+                tensor[:, axis], values, info = periodic.solve(axis)
+                value = float(tensor[axis, axis])
+            voigt, reuss = voigt_reuss(tensors, fractions, axis)
+            check_within_bounds(value, voigt, reuss, name)
+            k_eff[name] = value
+            bounds[name] = (reuss, voigt)
+            solver[name] = info
+            potential[name] = vertex_values(values, len(mesh.points))
+            cells_flux = last["flux"] if last.get("u") is values else cell_fluxes(
+                space, values, tensors, cell_material)[0]                   # (M, d) axis order
+            flux[name] = np.ascontiguousarray(cells_flux[:, ::-1])
+            last.clear()
+            del cells_flux
+            seconds["solve"] += time.perf_counter() - t0
+            if interval_wanted:
+                t0 = time.perf_counter()
+                dual_space = fe_space(mesh, 1) if dual_space is None else dual_space
+                facets = facet_table(mesh.cells) if facets is None else facets
+                dual = dual_bound(mesh, dual_space, tensors, cell_material, axis, lo, hi,
+                                  tol=tol, facets=facets)
+                if dual.k_lower > value * (1 + BOUND_SLACK):
+                    raise ValueError(f"along {name} the dual bound {dual.k_lower:.9g} lies "
+                                     f"above the primal {value:.9g}: one of the solves is "
+                                     "wrong; please report this with the input.")
+                interval[name] = (min(dual.k_lower, value), value)
+                dual_info[name] = dual.info
+                # the gap per element, relative to this axis' flux: axes weigh the same
+                gap_indicator += hypercircle(space, values, dual.flux, tensors,
+                                             cell_material) / (value * flux_scale(lo, hi, axis))
+                del dual
+                seconds["dual"] = seconds.get("dual", 0.0) + time.perf_counter() - t0
+        done += 1 + len(names)
+        wide = {a: g for a, g in relative_gaps(interval).items() if g > gap_target}
+        if not wide:
+            break
+        level = refine + certify + 1
+        why = (cannot_refine(mesh, mesh_or_labels, level) if may_refine else
+               "adapt was given, so the mesh is kept as asked (leave adapt to auto to "
+               "refine for the interval)")
+        # predicted before meshing (a refine-4 mesh of a small 3-D image took minutes to
+        # make): the growth of the last level, at least 2^(d-1) (interfaces are d-1 dim.);
+        # the first level is checked once meshed
+        growth = max(growth_seen, 2.0 ** (mesh.ndim - 1))
+        cap = CERTIFY_UNKNOWNS[mesh.ndim]
+        if why is None and unknowns(mesh, order) * growth > cap:
+            why = (f"the next refinement would take about "
+                   f"{unknowns(mesh, order) * growth:,.0f} unknowns, above the {cap:,} the "
+                   "interval's refinement may take (pass --refine to go further)")
+        if why is None and estimate_memory(mesh, order, interval_wanted) * growth > memory:
+            why = (f"the next refinement would need about "
+                   f"{format_bytes(estimate_memory(mesh, order, interval_wanted) * growth)}"
+                   f", above the memory budget of {format_bytes(memory)} (raise it with "
+                   "--memory)")
+        if why is None:
+            yield done, total + 2 + len(names), (
+                f"interval wider than {100 * gap_target:g} %: meshing the labels again with "
+                f"interface elements of 2^-{level} voxels")
+            t0 = time.perf_counter()
+            # one split per adaptive step cannot grade a large flat leaf down to a corner
+            # within the refine levels (a 256^2 checkerboard stayed at a 37 % gap after
+            # three): interface refinement reaches every corner at once (1.7 % there)
+            finer = prepare_mesh(source, spacing=spacing, exclude=exclude,
+                                 material_names=material_names, refine=level,
+                                 max_aspect=max_aspect)
+            seconds[f"certify {certify + 1}"] = time.perf_counter() - t0
+            why = check_memory(finer, order, interval_wanted, memory, asked=False)
+            if why is None and unknowns(finer, order) > cap:
+                why = (f"the next refinement would take about {unknowns(finer, order):,} "
+                       f"unknowns, above the {cap:,} the interval's refinement may take "
+                       "(pass --refine to go further)")
+            if why is None:
+                del matrix, space, coarse, parts, periodic, dual_space, facets
+                if certify:       # from one interface level to the next (the first
+                    growth_seen = finer.n_cells / mesh.n_cells   # step leaves adapt's mesh)
+                mesh, tree = finer, None
+                materials, cell_material = np.unique(mesh.material, return_inverse=True)
+                certify += 1
+                total += 2 + len(names)
+                continue
+        widest = max(wide, key=wide.get)
+        lo_k, hi_k = interval[widest]
+        notes.append(f"the interval along {widest} is {lo_k:.6g} .. {hi_k:.6g} (gap "
+                     f"{100 * wide[widest]:.3g} %), wider than the target "
+                     f"{100 * gap_target:g} %, and {why}: k_eff is certain only to within "
+                     "that interval.")
+        break
     seconds["setup"] = sum(info.setup for info in solver.values())
     if tensor is not None:
         check_symmetric(tensor)
@@ -356,20 +361,27 @@ def simulate_steps(mesh_or_labels, conductivity: Mapping, *, spacing=None,
     if phases is not None:
         full = tensor is not None and not np.isnan(tensor).any()
         hashin = HashinShtrikman.of(*phases, mesh.ndim, tensor if full else None)
+    for note in notes:
+        warnings.warn(note, stacklevel=2)
+    if certify:
+        choice += f", {certify} step{'s' * (certify > 1)} refined for the interval"
     yield total, total, "done"
     return SimulationResult(
         k_eff=k_eff, bounds=bounds, potential=potential, flux=flux, solver=solver,
         volume_fractions={int(m): float(f) for m, f in zip(materials, fractions)},
         mesh=mesh, order=order, dofs=int(matrix.shape[0]), seconds=seconds,
         protocol=protocol, tensor=None if tensor is None else tensor[::-1, ::-1].copy(),
-        hashin_shtrikman=hashin, adapt=adapt, choice=choice)
+        hashin_shtrikman=hashin, adapt=adapt, choice=choice, interval=interval,
+        gap_target=gap_target, certify=certify, dual_solver=dual_info, warnings=notes,
+        memory_estimate=estimate_memory(mesh, order, interval_wanted), memory=float(memory))
 
 
 def simulate(mesh_or_labels, conductivity: Mapping, *, spacing=None,
              order: int | str = AUTO, axes=None, tol: float = DEFAULT_TOLERANCE, exclude=(),
              material_names: Mapping[int, str] | None = None,
              refine: int = 0, protocol: str = "mixed", adapt: int | str = AUTO,
-             labels=None, max_aspect: float | None = None) -> SimulationResult:
+             labels=None, max_aspect: float | None = None, interval: bool = True,
+             gap: float = GAP_TARGET, memory: float = DEFAULT_MEMORY) -> SimulationResult:
     """Steady diffusion on an IMESH mesh: effective conductivity of the image box.
 
     For each axis asked, the mixed-boundary protocol: potential 0 and 1 on the two faces
@@ -420,6 +432,24 @@ def simulate(mesh_or_labels, conductivity: Mapping, *, spacing=None,
     max_aspect : float, optional
         Labels only: largest residual aspect of the lattice cells anisotropic voxels are
         cut into (``mesh_labels(max_aspect=...)``; default 1.25).
+    interval : bool
+        Mixed protocol: also bound k_eff from below (:mod:`._dual`), so that
+        ``result.interval[axis] = (lower, upper)`` contains the exact k_eff of the meshed
+        geometry. The upper bound is k_eff itself (the conforming solution's energy with
+        the potential exactly 0/1 on the two faces, the rest insulated); the lower is the
+        complementary energy of a divergence-free flux with no normal component on the
+        insulated boundary (sides and excluded materials). Both hold for these boundary
+        conditions only; the periodic protocol has no interval.
+    gap : float
+        Target ``(upper - lower) / lower`` (default 2 %): wider, and with `adapt` left
+        to ``"auto"``, the labels are meshed again with interface elements one level
+        finer (``refine + 1``, ...), while refine levels, `memory` and
+        :data:`CERTIFY_UNKNOWNS` allow; still wider
+        at the end, a warning gives the interval (also in ``result.warnings``).
+    memory : float
+        Budget in bytes (default 4 GiB), checked from the mesh before assembly
+        (:mod:`._budget`): the default order falls back to P1 beyond it, an asked order
+        is refused with a ValueError, a refinement for the interval is not made.
 
     Returns
     -------
@@ -438,7 +468,8 @@ def simulate(mesh_or_labels, conductivity: Mapping, *, spacing=None,
     steps = simulate_steps(mesh_or_labels, conductivity, spacing=spacing, order=order,
                            axes=axes, tol=tol, exclude=exclude, material_names=material_names,
                            refine=refine, protocol=protocol, adapt=adapt, labels=labels,
-                           max_aspect=max_aspect)
+                           max_aspect=max_aspect, interval=interval, gap=gap,
+                           memory=memory)
     while True:
         try:
             next(steps)

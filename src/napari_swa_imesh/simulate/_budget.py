@@ -1,0 +1,112 @@
+"""The memory budget of a steady run, in bytes, estimated from the mesh before assembly.
+
+A budget in unknowns does not say whether a run fits: P2 at 128^3 was within its unknowns
+and killed at 8 GB. The estimate here is the peak of one solve, measured per unknown on
+IMESH meshes of three-phase blobs (P1, P2 and the Crouzeix-Raviart dual of
+:mod:`._dual`: matrix, multigrid hierarchy, vectors and the element passes), plus what
+the result keeps (the mesh, a flux and a potential per axis). The counts of unknowns come
+from the mesh's vertices and elements by Euler's relation (edges ~ vertices + elements,
+facets ~ (d + 1) / 2 elements), so nothing is assembled to know the cost.
+"""
+
+from __future__ import annotations
+
+from ..mesh import Mesh
+
+__all__ = ["DEFAULT_MEMORY", "check_memory", "estimate_memory", "format_bytes",
+           "parse_memory"]
+
+#: Default budget of a steady run (bytes): a sixth of this 24 GB machine.
+DEFAULT_MEMORY = 4 * 2 ** 30
+#: Peak bytes per unknown of one solve, measured at 40^3 (three-phase blobs, contrast
+#: 1e4, one axis; peak RSS less the interpreter's 78 MB): P1 2260 (65k vertices, 140 MB),
+#: P2 1550 (451k unknowns, 666 MB; the adapted 20^3 default: 1560 for 433k, issue 26's
+#: 64^3 default 1300); 2-D taken alike (its rows are shorter).
+BYTES_PER_UNKNOWN = {(2, 1): 2300.0, (2, 2): 1600.0, (3, 1): 2300.0, (3, 2): 1600.0}
+#: The dual's CR solve, per facet (measured 565 at 40^3: 625k facets, 353 MB with the
+#: primal matrix kept).
+BYTES_PER_FACET = {2: 600.0, 3: 600.0}
+#: Bytes per element the result keeps (cells, material, a flux per axis).
+BYTES_PER_CELL = {2: 60.0, 3: 100.0}
+#: Reading a size: K, M, G, T (powers of 1024).
+_SCALE = {"k": 2 ** 10, "m": 2 ** 20, "g": 2 ** 30, "t": 2 ** 40}
+
+
+def parse_memory(text: str) -> float:
+    """``--memory``: a size in bytes with an optional K, M, G or T suffix (``4G``).
+
+    >>> parse_memory("1.5G") == 3 * 2 ** 29
+    True
+    """
+    t = str(text).strip().lower().removesuffix("ib").removesuffix("b")
+    scale = _SCALE.get(t[-1:], 1)
+    try:
+        value = float(t[:-1] if scale > 1 else t) * scale
+    except ValueError:
+        value = float("nan")
+    if not value > 0 or value == float("inf"):
+        raise ValueError(f"--memory takes a size such as 4G or 500M, not {text!r}.")
+    return value
+
+
+def unknowns(mesh: Mesh, order: int) -> int:
+    """Degrees of freedom of a P1/P2 solve on `mesh` (P2: vertices + edges, by Euler)."""
+    n = len(mesh.points)
+    return n if order == 1 else n + n + mesh.n_cells
+
+
+def estimate_memory(mesh: Mesh, order: int, interval: bool) -> int:
+    """Estimated peak bytes of a steady run on `mesh`.
+
+    Parameters
+    ----------
+    mesh : Mesh
+    order : {1, 2}
+    interval : bool
+        With the dual solve of the certified interval (it runs after the primal one, so
+        the larger of the two counts, plus the primal potential kept for the gap).
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from napari_swa_imesh.mesh import mesh_labels
+    >>> estimate_memory(mesh_labels(np.ones((4, 4), np.uint8)), 1, False) > 0
+    True
+    """
+    d = mesh.ndim
+    primal = BYTES_PER_UNKNOWN[(d, order)] * unknowns(mesh, order)
+    peak = primal
+    if interval:
+        facets = (d + 1) * mesh.n_cells / 2
+        peak = max(primal, BYTES_PER_FACET[d] * facets + 8 * unknowns(mesh, order))
+    return int(peak + BYTES_PER_CELL[d] * mesh.n_cells)
+
+
+def format_bytes(n: float) -> str:
+    """``1.5 GB``, ``320 MB``: binary units, three figures."""
+    for unit, size in (("GB", 2 ** 30), ("MB", 2 ** 20), ("kB", 2 ** 10)):
+        if n >= size:
+            return f"{n / size:.3g} {unit}"
+    return f"{int(n)} B"
+
+
+def check_memory(mesh: Mesh, order: int, interval: bool, memory: float, *,
+                 asked: bool) -> str | None:
+    """None when a run on `mesh` fits `memory` bytes; else why not.
+
+    With `asked` (the run the caller asked for) a run that does not fit is refused with a
+    ValueError that says what to do; otherwise (a refinement the run would like) the
+    reason is returned as a clause for the warning.
+    """
+    need = estimate_memory(mesh, order, interval)
+    if need <= memory:
+        return None
+    if asked:
+        raise ValueError(
+            f"P{order} on {mesh.n_cells:,} elements needs about {format_bytes(need)}, above "
+            f"the memory budget of {format_bytes(memory)}: pass a larger --memory"
+            + (", --order 1" if order == 2 else "")
+            + (" or --no-interval (skips the dual solve)" if interval else "")
+            + ", or crop the image.")
+    return (f"the next refinement would need about {format_bytes(need)}, above the memory "
+            f"budget of {format_bytes(memory)} (raise it with --memory)")
