@@ -417,14 +417,15 @@ def heldout_tables(ants_python):
     import anatomy_heldout as H
 
     title = ("Real-anatomy MR phantoms, held-out generator (anatomy_heldout.py: hard labels "
-             "+ PSF, other T1 contrasts, texture, Gaussian noise, polynomial field; crops "
+             "+ PSF, T1 and T2 contrasts, intensity by location, texture, Gaussian noise, "
+             "polynomial field; crops "
              f"{'x'.join(f'{e:g}' for e in H.CROP_MM)} mm; mean of {len(H.CASES)} cases "
              "per variant)")
     cases = ((var, (name, image, truth, brain))
              for name, var, image, truth, brain in H.cases())
     return generator_table(title, cases, H.VARIANTS, ants_python,
-                           lambda v: f"noise {v[0]:.0%}, bias {v[1]:.0%}, "
-                                     f"{'x'.join(f'{s:g}' for s in v[2])} mm")
+                           lambda v: f"{v[0]}, noise {v[1]:.0%}, bias {v[2]:.0%}, "
+                                     f"{'x'.join(f'{s:g}' for s in v[3])} mm")
 
 
 def generator_table(title, cases, variants, ants_python, label):
