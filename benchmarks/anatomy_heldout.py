@@ -5,11 +5,18 @@ by tissue-probability mixing, Rician noise and a random-Gaussian bias field at 1
 one shares only the anatomy source and differs in every step from anatomy to intensity:
 
 * **labels, then a PSF**: each voxel of a 0.5 mm grid takes its most probable tissue (hard
-  labels, sharper sulci than the maps' average), the T1 contrast of that label, and the
-  scanner's point-spread function (Gaussian, FWHM one output voxel per axis) and the
+  labels, sharper sulci than the maps' average), the intensity of that label where it lies
+  (below), and the scanner's point-spread function (Gaussian, FWHM :data:`PSF_FWHM` output
+  voxels per axis) and the
   averaging over the output voxel make the partial volume;
-* **other contrast ratios** (CSF 0.20, GM 0.62, WM 0.86 against 0.25 / 0.55 / 0.80), and a
-  within-tissue intensity texture (smooth, 3 %) that no class mean describes;
+* **other contrast ratios**: T1 (CSF 0.20, GM 0.62, WM 0.86 against 0.25 / 0.55 / 0.80) and
+  T2 (CSF 1.00, GM 0.62, WM 0.48: the order reversed);
+* **tissue intensity that depends on where the tissue is**, as on real scans, so that no
+  class mean describes a whole class and the boxes (the largest homogeneous blocks: deep
+  tissue) are not typical of it: grey matter far from CSF (deep nuclei) lies
+  :data:`DEEP_GM` of the way towards white matter, white matter within a few mm of grey
+  matter (U-fibres) :data:`SUBCORTICAL_WM` of its mean darker (in T1; T2 alike, towards
+  grey), and a within-tissue texture (smooth, 3 %);
 * **Gaussian noise** (a magnitude image of high SNR; sigma 3 % or 9 % of WM), not Rician;
 * **bias**: a random low-order field, ``exp`` of a cubic polynomial of the physical
   coordinates scaled to a peak-to-peak of 0 % or 40 %;
@@ -29,18 +36,26 @@ except ImportError:     # a script's neighbour (python benchmarks/bench_accuracy
 import numpy as np
 from scipy import ndimage as ndi
 
-__all__ = ["CASES", "CROP_MM", "MEANS", "VARIANTS", "cases", "make_case"]
+__all__ = ["CASES", "CONTRASTS", "CROP_MM", "MEANS", "VARIANTS", "cases", "make_case"]
 
-MEANS = np.array([0.0, 0.20, 0.62, 0.86], np.float32)       # background, CSF, GM, WM
-# (noise, bias, spacing): 1 mm and 1.5 x 0.94 x 0.94 mm voxels
-VARIANTS = [(0.03, 0.0, (1.0, 1.0, 1.0)), (0.03, 0.4, (1.0, 1.0, 1.0)),
-            (0.09, 0.0, (1.0, 1.0, 1.0)), (0.09, 0.4, (1.0, 1.0, 1.0)),
-            (0.03, 0.0, (1.5, 0.94, 0.94)), (0.03, 0.4, (1.5, 0.94, 0.94))]
+CONTRASTS = {"T1": np.array([0.0, 0.20, 0.62, 0.86], np.float32),   # bg, CSF, GM, WM
+             "T2": np.array([0.0, 1.00, 0.62, 0.48], np.float32)}
+MEANS = CONTRASTS["T1"]
+ISO, ANISO = (1.0, 1.0, 1.0), (1.5, 0.94, 0.94)
+# (contrast, noise, bias, spacing): 1 mm and 1.5 x 0.94 x 0.94 mm voxels
+VARIANTS = [("T1", 0.03, 0.0, ISO), ("T1", 0.03, 0.4, ISO), ("T1", 0.09, 0.0, ISO),
+            ("T1", 0.09, 0.4, ISO), ("T1", 0.03, 0.0, ANISO), ("T1", 0.03, 0.4, ANISO),
+            ("T2", 0.03, 0.0, ISO), ("T2", 0.03, 0.4, ISO)]
 CROP_MM = (48.0, 72.0, 108.0)   # physical extent of a crop (z, y, x), inside a quadrant
 # (quadrant, anatomy seed, noise seed); the held-out quadrants of the tuning generator
 CASES = [("inf-ant", 7, 71), ("sup-post", 8, 81)]
 TEXTURE = 0.03
 FINE = 0.5                      # mm of the hard-label grid
+DEEP_GM = 0.3                   # deep GM: this fraction of the way from GM to WM ...
+DEEP_GM_MM = 4.0                # ... reached with this length of distance from CSF
+SUBCORTICAL_WM = 0.06           # WM next to GM: this much darker (T1), fading over ...
+SUBCORTICAL_MM = 3.0            # ... this length
+PSF_FWHM = 1.2                  # output voxels per axis
 
 
 def _fine_labels(crop: str, anatomy_seed: int) -> tuple[np.ndarray, np.ndarray]:
@@ -77,18 +92,36 @@ def _poly_field(shape, spacing, amplitude, rng) -> np.ndarray:
     return np.exp(np.log1p(amplitude) * (log - 0.5))
 
 
-def make_case(crop: str, anatomy_seed: int, noise: float, bias: float, spacing, seed: int
-              ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+def _tissue_intensity(lab: np.ndarray, means: np.ndarray) -> np.ndarray:
+    """Intensity of every 0.5 mm label voxel: its class mean, moved by where it lies
+    (deep grey matter towards white, white matter next to grey towards grey)."""
+    mm = FINE * np.float32(1)
+    d_csf = ndi.distance_transform_edt(lab != 1).astype(np.float32) * mm
+    d_gm = ndi.distance_transform_edt(lab != 2).astype(np.float32) * mm
+    out = means[lab].astype(np.float32)
+    gm, wm = lab == 2, lab == 3
+    deep = 1 - np.exp(-np.maximum(d_csf - FINE, 0) / DEEP_GM_MM)
+    out[gm] += (DEEP_GM * (means[3] - means[2]) * deep[gm]).astype(np.float32)
+    near = np.exp(-np.maximum(d_gm - FINE, 0) / SUBCORTICAL_MM)
+    out[wm] -= (SUBCORTICAL_WM * abs(means[3]) * np.sign(means[3] - means[2])
+                * near[wm]).astype(np.float32)
+    return out
+
+
+def make_case(crop: str, anatomy_seed: int, noise: float, bias: float, spacing, seed: int,
+              contrast: str = "T1") -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """(image float32, truth int32, brain bool) of one held-out case."""
+    means = CONTRASTS[contrast]
     lab, n = _fine_labels(crop, anatomy_seed)
     rng = np.random.default_rng(seed)
-    # T1 of the labels with a smooth within-tissue texture, then the PSF and the voxel
+    # intensities of the labels where they lie, a smooth within-tissue texture, then the
+    # PSF and the voxel
     tex = ndi.gaussian_filter(rng.standard_normal(tuple(k // 4 for k in n)), 2.0)
     tex = ndi.zoom(tex / (tex.std() + 1e-12), [k / s for k, s in zip(n, tex.shape)],
                    order=1)[tuple(slice(0, k) for k in n)]
-    fine = MEANS[lab] * (1 + TEXTURE * tex).astype(np.float32)
+    fine = _tissue_intensity(lab, means) * (1 + TEXTURE * tex).astype(np.float32)
     out = tuple(int(e // s) for e, s in zip(CROP_MM, spacing))
-    sigma = [s / FINE / 2.355 for s in spacing]              # FWHM one output voxel
+    sigma = [PSF_FWHM * s / FINE / 2.355 for s in spacing]
     fine = ndi.gaussian_filter(fine, sigma)
     # the output voxel centres on the fine grid (fine index of physical position p: p/FINE - .5)
     centres = [((np.arange(k) + 0.5) * s) / FINE - 0.5 for k, s in zip(out, spacing)]
@@ -103,13 +136,16 @@ def make_case(crop: str, anatomy_seed: int, noise: float, bias: float, spacing, 
     truth = np.where(brain, np.argmax(frac[1:], axis=0) + 1, 0).astype(np.int32)
     if bias:
         clean = clean * _poly_field(out, spacing, bias, rng)
-    image = clean + noise * MEANS[3] * rng.standard_normal(out)
+    image = clean + noise * MEANS[3] * rng.standard_normal(out)   # sigma: % of T1 WM
     return image.astype(np.float32), truth, brain
 
 
 def cases(variants=VARIANTS, which=CASES):
-    """Yield ``(name, (noise, bias, spacing), image, truth, brain)`` for every case."""
-    for noise, bias, spacing in variants:
+    """Yield ``(name, (contrast, noise, bias, spacing), image, truth, brain)`` for every
+    case."""
+    for contrast, noise, bias, spacing in variants:
         for crop, anatomy_seed, seed in which:
-            image, truth, brain = make_case(crop, anatomy_seed, noise, bias, spacing, seed)
-            yield f"{crop}/a{anatomy_seed}/s{seed}", (noise, bias, spacing), image, truth, brain
+            image, truth, brain = make_case(crop, anatomy_seed, noise, bias, spacing, seed,
+                                            contrast)
+            yield (f"{crop}/a{anatomy_seed}/s{seed}", (contrast, noise, bias, spacing),
+                   image, truth, brain)

@@ -1,7 +1,7 @@
 """Segmentation accuracy: the recommended method against the reference and common peers.
 
 Run:  python benchmarks/bench_accuracy.py [--quick] [--skip-cost] [--ants-python PY]
-      [--anatomy dev|val|both|none] [--only-anatomy]
+      [--anatomy dev|val|both|none] [--only-anatomy] [--markdown docs/benchmarks/accuracy.md]
 
 Every method sees the same data and the same sample boxes:
 
@@ -31,9 +31,12 @@ Data:
   development split; boxes from the truth as ``samples-from-truth --scale 2``; Dice inside
   the brain; k-means and Atropos get the brain mask (as on MR), the default only the boxes.
   This is the *tuning* generator; ``anatomy_heldout.py`` is an independent one (hard labels
-  + PSF, other contrasts, Gaussian noise, polynomial field, 1 mm and 1.5x0.94x0.94 mm) that
-  nothing was tuned on, reported after it in the same columns (also: the default without
-  bias correction, and k-means + GMM + MRF on the brain mask).
+  + PSF, tissue intensity by location, T1 and T2 contrasts, Gaussian noise, polynomial
+  field, 1 mm and 1.5x0.94x0.94 mm) that nothing was tuned on, reported after it in the
+  same columns (also: the default without bias correction, and k-means + GMM + MRF on the
+  brain mask), then both side by side with the issue-25 goal judged per variant
+  (``accuracy_report.py``); ``--markdown PATH`` writes that table (and the mosaics' mean
+  Dice, when they ran) to a page, e.g. ``docs/benchmarks/accuracy.md``.
 
 Reported: Dice per material and mean, wall time (fit + predict, seconds) and peak memory
 (tracemalloc: numpy/Python allocations of the run; for Atropos the growth of the child
@@ -52,6 +55,7 @@ import tempfile
 import time
 import tracemalloc
 
+import accuracy_report as R
 import numpy as np
 
 MOSAICS_FULL = [
@@ -417,14 +421,14 @@ def heldout_tables(ants_python):
     import anatomy_heldout as H
 
     title = ("Real-anatomy MR phantoms, held-out generator (anatomy_heldout.py: hard labels "
-             "+ PSF, other T1 contrasts, texture, Gaussian noise, polynomial field; crops "
+             "+ PSF, T1 and T2 contrasts, intensity by location, texture, Gaussian noise, "
+             "polynomial field; crops "
              f"{'x'.join(f'{e:g}' for e in H.CROP_MM)} mm; mean of {len(H.CASES)} cases "
              "per variant)")
     cases = ((var, (name, image, truth, brain))
              for name, var, image, truth, brain in H.cases())
     return generator_table(title, cases, H.VARIANTS, ants_python,
-                           lambda v: f"noise {v[0]:.0%}, bias {v[1]:.0%}, "
-                                     f"{'x'.join(f'{s:g}' for s in v[2])} mm")
+                           _heldout_label)
 
 
 def generator_table(title, cases, variants, ants_python, label):
@@ -470,6 +474,28 @@ def generator_table(title, cases, variants, ants_python, label):
     return out
 
 
+def _methods(out) -> list[str]:
+    return list(dict.fromkeys(m for _, m in out))
+
+
+def _anatomy_variants():
+    import anatomy
+
+    return anatomy.VARIANTS
+
+
+def _heldout_label(v) -> str:
+    return f"{v[0]}, noise {v[1]:.0%}, bias {v[2]:.0%}, {'x'.join(f'{s:g}' for s in v[3])} mm"
+
+
+def _write_markdown(path: str, text: str) -> None:
+    from napari_swa_imesh.io import atomic_write
+
+    with atomic_write([path], force=True) as (tmp,):
+        tmp.write_text(text)
+    print(f"\nwrote {path}")
+
+
 def summary(rows):
     print("\n## Summary: mean Dice per dataset")
     methods = []
@@ -487,22 +513,53 @@ def main() -> None:
     ap.add_argument("--skip-cost", action="store_true", help="skip the 256^3 cost lines")
     ap.add_argument("--skip-rf-cost", action="store_true",
                     help="skip the RF's 256^3 cost line (about 5 min and 6 GB)")
-    ap.add_argument("--anatomy", choices=["dev", "val", "both", "none"], default="val",
-                    help="real-anatomy MR split(s) to run (default: the held-out 'val')")
+    ap.add_argument("--anatomy", choices=["dev", "val", "both", "heldout", "none"],
+                    default="val",
+                    help="real-anatomy MR split(s) of the tuning generator to run, each "
+                         "followed by the held-out generator (default: 'val'; 'heldout': "
+                         "the held-out generator alone)")
     ap.add_argument("--only-anatomy", action="store_true",
                     help="run only the real-anatomy tables")
     ap.add_argument("--ants-python", default=os.environ.get("ANTS_PYTHON"),
                     help="a Python with antspyx installed (default: $ANTS_PYTHON)")
+    ap.add_argument("--markdown", metavar="PATH",
+                    help="also write the tuning/held-out table (and the mosaics' mean "
+                         "Dice, when run) to this markdown file, e.g. "
+                         "docs/benchmarks/accuracy.md")
     args = ap.parse_args()
+    if args.markdown:
+        from napari_swa_imesh.io import check_writable
+
+        try:
+            check_writable(args.markdown, force=True)   # the page is regenerated
+        except OSError as exc:
+            print(f"error: --markdown: {exc}", file=sys.stderr)
+            sys.exit(2)
     rows: list = []
     if not args.only_anatomy:
         mosaic_tables(args.quick, rows)
         phantom_tables(args.quick, rows, args.ants_python)
         summary(rows)
-    for split in {"both": ["dev", "val"], "none": []}.get(args.anatomy, [args.anatomy]):
-        anatomy_tables(split, args.ants_python)
+    lines: list[str] = []
+    names: list[str] = []
+    for split in {"both": ["dev", "val"], "none": [], "heldout": []}.get(args.anatomy,
+                                                                       [args.anatomy]):
+        out = anatomy_tables(split, args.ants_python)
+        names = _methods(out)
+        lines += R.generator_rows(f"tuning ({split})", out, _anatomy_variants(), lambda v:
+                                  f"T1, noise {v[0]:.0%}, bias {v[1]:.0%}, 1 mm", names)
     if args.anatomy != "none":
-        heldout_tables(args.ants_python)
+        import anatomy_heldout as H
+
+        out = heldout_tables(args.ants_python)
+        names = _methods(out)
+        lines += R.generator_rows("held-out", out, H.VARIANTS, _heldout_label, names)
+        print("\n## Tuning and held-out side by side (CSF / GM / WM)\n")
+        print("\n".join(R.markdown_page(lines, names, [], "").splitlines()[4:]))
+    if args.markdown:
+        _write_markdown(args.markdown, R.markdown_page(
+            lines, names, R.mosaic_rows(rows),
+            "python benchmarks/bench_accuracy.py " + " ".join(sys.argv[1:])))
     if not args.skip_cost and not args.only_anatomy:
         cost_table(with_rf=not (args.quick or args.skip_rf_cost))
 

@@ -17,15 +17,32 @@ def test_heldout_shares_no_crop_seed_or_contrast_with_tuning():
     assert all(e <= n for e, n in zip(anatomy_heldout.CROP_MM, anatomy.CROP))
 
 
-@pytest.mark.parametrize("spacing", [(1.0, 1.0, 1.0), (1.5, 0.94, 0.94)])
-def test_heldout_case_is_a_labelled_gaussian_phantom(spacing):
+@pytest.mark.parametrize("spacing, contrast", [((1.0, 1.0, 1.0), "T1"),
+                                               ((1.5, 0.94, 0.94), "T1"),
+                                               ((1.0, 1.0, 1.0), "T2")])
+def test_heldout_case_is_a_labelled_gaussian_phantom(spacing, contrast):
     pytest.importorskip("nilearn")
-    image, truth, brain = anatomy_heldout.make_case("inf-ant", 7, 0.09, 0.4, spacing, 0)
+    image, truth, brain = anatomy_heldout.make_case("inf-ant", 7, 0.09, 0.4, spacing, 0,
+                                                    contrast)
     shape = tuple(int(e // s) for e, s in zip(anatomy_heldout.CROP_MM, spacing))
     assert image.shape == truth.shape == brain.shape == shape
     assert set(np.unique(truth)) == {0, 1, 2, 3}
     assert np.all(truth[~brain] == 0) and np.all(truth[brain] > 0)
     means = [image[truth == k].mean() for k in (1, 2, 3)]
-    assert means[0] < means[1] < means[2]
+    assert (means[0] < means[1] < means[2]) == (contrast == "T1")
+    assert (means[0] > means[1] > means[2]) == (contrast == "T2")
     # Gaussian, not Rician: the dark background goes below zero
     assert image[~brain].min() < 0
+
+
+def test_heldout_tissue_intensity_depends_on_where_it_lies():
+    # deep grey matter (far from CSF) is brighter than cortical (T1), white matter next to
+    # grey darker than deep white: no class mean describes a whole class
+    lab = np.full((40, 40, 40), 3, np.int8)
+    lab[:, :, :4] = 1                       # CSF
+    lab[:, :, 4:10] = 2                     # cortex
+    lab[:, :, 30:] = 2                      # a deep nucleus, far from CSF
+    out = anatomy_heldout._tissue_intensity(lab, anatomy_heldout.CONTRASTS["T1"])
+    assert out[20, 20, 35] > out[20, 20, 5] + 0.03
+    assert out[20, 20, 11] < out[20, 20, 20] - 0.02
+    assert np.all(out[lab == 1] == anatomy_heldout.CONTRASTS["T1"][1])
