@@ -55,8 +55,9 @@ import tempfile
 import time
 import tracemalloc
 
-import accuracy_report as R
 import numpy as np
+
+import accuracy_report as R
 
 MOSAICS_FULL = [
     (("brick", "grass"), "halves"), (("grass", "gravel"), "halves"),
@@ -461,7 +462,7 @@ def generator_table(title, cases, variants, ants_python, label):
                 print(f"  {name} {label(var)}: scales {m.scales}, bias "
                       f"{m.bias_correction} {m.scores['bias_range']}, Dice "
                       + " ".join(f"{v:.3f}" for v in rec[-1][0].values()), flush=True)
-    print(f"\n| variant | " + " | ".join(f"{n} CSF / GM / WM" for n in names) + " |")
+    print("\n| variant | " + " | ".join(f"{n} CSF / GM / WM" for n in names) + " |")
     print("|---|" + "---|" * len(names))
     for var in variants:
         cells = []

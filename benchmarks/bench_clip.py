@@ -71,11 +71,14 @@ def compute(mesh) -> None:
 
 
 def in_napari(labels, spacing) -> None:
-    import napari
     from qtpy.QtWidgets import QApplication
 
-    from napari_swa_imesh._napari._mesh_widget import (COLOR_BY_MATERIAL, COLOR_BY_QUALITY,
-                                                       MeshWidget)
+    import napari
+    from napari_swa_imesh._napari._mesh_widget import (
+        COLOR_BY_MATERIAL,
+        COLOR_BY_QUALITY,
+        MeshWidget,
+    )
 
     viewer = napari.Viewer(show=True)
     viewer.window._qt_window.resize(1500, 940)

@@ -38,8 +38,8 @@ import os
 import sys
 import time
 
-
 import numpy as np
+
 from bench_simulate import K3D, fv_keff, refine, richardson, three_phase, voxel_fe_keff
 from napari_swa_imesh.mesh import mesh_labels
 from napari_swa_imesh.simulate import simulate

@@ -37,9 +37,9 @@ import time
 from pathlib import Path
 
 import numpy as np
-from bench_pipeline import CHILD  # the whole command in a fresh process, with its peak
 from scipy import ndimage, sparse
 
+from bench_pipeline import CHILD  # the whole command in a fresh process, with its peak
 from napari_swa_imesh.simulate import simulate
 from napari_swa_imesh.simulate._solve import solve_dirichlet
 

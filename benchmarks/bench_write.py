@@ -34,7 +34,6 @@ def _cache(n: int) -> Path:
     if not path.exists():
         sys.path.insert(0, str(Path(__file__).parent))
         from bench_mesh import brain_like
-
         from napari_swa_imesh.mesh import mesh_labels
 
         mesh = mesh_labels(brain_like(n, 3), exclude=(0,))

@@ -10,8 +10,8 @@ import pytest
 
 from napari_swa_imesh.cli import main
 from napari_swa_imesh.data import tissue_phantom
-from napari_swa_imesh.segmentation import RecommendedModel, samples_from_truth
 from napari_swa_imesh.pipeline import _batch
+from napari_swa_imesh.segmentation import RecommendedModel, samples_from_truth
 
 
 def run(capsys, *argv):

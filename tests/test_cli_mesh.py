@@ -280,8 +280,8 @@ def test_no_check_skips_the_checks(tmp_path, capsys):
 
 
 def test_too_large_for_memory_is_refused_before_meshing(tmp_path, capsys, monkeypatch):
-    from napari_swa_imesh.mesh.mesher import _imesh
     from napari_swa_imesh.mesh import _cli
+    from napari_swa_imesh.mesh.mesher import _imesh
 
     np.save(tmp_path / "labels.npy", blob_3d())
     monkeypatch.setattr(_cli, "available_memory", lambda: 1000)

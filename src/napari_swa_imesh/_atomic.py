@@ -114,7 +114,7 @@ def _umask() -> int:
 
 
 def _alive(pid: int) -> bool:
-    import psutil                       # not os.kill(pid, 0): on Windows that kills
+    import psutil  # not os.kill(pid, 0): on Windows that kills
 
     return psutil.pid_exists(pid)
 

@@ -87,8 +87,7 @@ def run_demo(args) -> int:
         "files": str(out),
     }
     try:
-        from .mesh import check_mesh
-        from .mesh import mesh_labels, write_mesh
+        from .mesh import check_mesh, mesh_labels, write_mesh
     except ImportError:  # pragma: no cover - the mesher ships with the package
         mesh_labels = None
     if mesh_labels is not None:

@@ -311,6 +311,6 @@ class OptionError(ValueError):
         """``repr(value)`` with its braces doubled, to put a given value in a template."""
         return repr(value).replace("{", "{{").replace("}", "}}")
 
-    def as_option(self, option: str, **words: str) -> "OptionError":
+    def as_option(self, option: str, **words: str) -> OptionError:
         """The same error naming the option `option` (and any of its words replaced)."""
         return OptionError(option, self.template, **{**self.words, **words})

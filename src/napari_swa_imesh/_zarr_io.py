@@ -91,7 +91,6 @@ def open_levels(path, *, chunks=None):
         than one channel or time point.
     """
     require("dask", "zarr", purpose="reading or writing a Zarr store")
-    import dask.array as da
     import zarr
 
     p = Path(path)

@@ -18,8 +18,7 @@ from typing import cast
 import numpy as np
 
 from ._atomic import atomic_write, check_writable, is_store
-from ._headers import (Refused, check_affine, complete_frame, load_nifti, load_npy,
-                       nifti_placement)
+from ._headers import Refused, check_affine, complete_frame, load_nifti, load_npy, nifti_placement
 from ._validation import normalize_spacing
 
 __all__ = ["read_image", "read_affine", "is_nifti", "grid_affine", "write_labels",

@@ -5,13 +5,12 @@ import dataclasses
 
 import numpy as np
 import pytest
+from imesh_cases import blobs, cases
 
 from napari_swa_imesh import build_tree
 from napari_swa_imesh.mesh.checks import _chain_check, _checks
 from napari_swa_imesh.mesh.checks._checks import check_mesh
 from napari_swa_imesh.mesh.mesher._imesh import mesh_labels
-
-from imesh_cases import blobs, cases
 
 LABELS = {2: blobs((14, 11), 3, seed=4, sigma=1.5), 3: blobs((7, 6, 9), 3, seed=5, sigma=1.0)}
 

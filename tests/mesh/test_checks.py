@@ -4,11 +4,10 @@ import dataclasses
 
 import numpy as np
 import pytest
+from imesh_cases import blobs
 
 from napari_swa_imesh.mesh.checks._checks import check_mesh, rasterize_materials
 from napari_swa_imesh.mesh.mesher._imesh import mesh_labels
-
-from imesh_cases import blobs
 
 LABELS = {2: blobs((12, 10), 3, seed=1, sigma=1.5), 3: blobs((6, 7, 8), 3, seed=2, sigma=1.0)}
 

@@ -7,8 +7,15 @@ import numpy as np
 import pytest
 from imesh_cases import blobs, noise
 
-from napari_swa_imesh.mesh import (Mesh, MeshClipper, clip_cells, mesh_labels, radius_edge_ratio,
-                                   signed_volumes)
+from napari_swa_imesh.mesh import (
+    Mesh,
+    MeshClipper,
+    clip_cells,
+    mesh_labels,
+    radius_edge_ratio,
+    signed_volumes,
+)
+
 
 def _random_delaunay():
     """A mesh that is no octree's: tilted faces let two kept elements share a face

@@ -12,11 +12,10 @@ import re
 import meshio
 import numpy as np
 import pytest
+from test_export import NEEDS_H5PY, grid_mesh, sample_mesh
 
 from napari_swa_imesh.mesh import facet_groups, mesh_labels, write_mesh
 from napari_swa_imesh.mesh.checks._facets import paired_facets
-
-from test_export import NEEDS_H5PY, grid_mesh, sample_mesh
 
 
 def _rows(a) -> np.ndarray:

@@ -4,8 +4,8 @@ keys the shift-and-OR packing gives (several passes), facet by facet and side by
 import numpy as np
 import pytest
 
-from napari_swa_imesh.mesh.checks import _facets
 from napari_swa_imesh.mesh import mesh_labels
+from napari_swa_imesh.mesh.checks import _facets
 
 
 def _decoded(passes, d):

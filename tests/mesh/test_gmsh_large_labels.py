@@ -5,12 +5,11 @@ from __future__ import annotations
 import meshio
 import numpy as np
 import pytest
+from test_export import grid_mesh
 
 from napari_swa_imesh.cli import main
 from napari_swa_imesh.mesh import read_mesh, write_mesh
 from napari_swa_imesh.mesh.formats._gmsh import gmsh_tags
-
-from test_export import grid_mesh
 
 BIG = 2**40 + 3
 

@@ -4,13 +4,12 @@ import math
 
 import numpy as np
 import pytest
+from imesh_cases import blobs, cases, noise
 
-from napari_swa_imesh.mesh.checks._checks import check_mesh, rasterize_materials
 from napari_swa_imesh import build_tree
+from napari_swa_imesh.mesh.checks._checks import check_mesh, rasterize_materials
 from napari_swa_imesh.mesh.mesher._imesh import mesh_labels, mesh_tree
 from napari_swa_imesh.mesh.model._quality import dihedral_angles, radius_edge_ratio, triangle_angles
-
-from imesh_cases import blobs, cases, noise
 
 BOUND = {2: 1 / math.sqrt(2), 3: math.sqrt(5) / 2}
 CASES = [(d, name, lab) for d in (2, 3) for name, lab in cases(d)]

@@ -17,8 +17,8 @@ import pytest
 
 from napari_swa_imesh.mesh import mesh_labels
 from napari_swa_imesh.mesh.checks._checks import check_mesh
-from napari_swa_imesh.mesh.mesher._coarsen import coarsen_labels
 from napari_swa_imesh.mesh.checks._facets import facet_groups
+from napari_swa_imesh.mesh.mesher._coarsen import coarsen_labels
 from napari_swa_imesh.mesh.mesher._lattice import (
     ASPECT_LIMIT,
     MAX_FACTOR,
@@ -26,10 +26,14 @@ from napari_swa_imesh.mesh.mesher._lattice import (
     choose_lattice,
     subdivision_factors,
 )
-from napari_swa_imesh.mesh.model._memory import estimate_mesh_memory
-from napari_swa_imesh.mesh.model._quality import dihedral_angles, radius_edge_ratio, signed_volumes
-from napari_swa_imesh.mesh.model._quality import triangle_angles
 from napari_swa_imesh.mesh.mesher._templates import template_quality
+from napari_swa_imesh.mesh.model._memory import estimate_mesh_memory
+from napari_swa_imesh.mesh.model._quality import (
+    dihedral_angles,
+    radius_edge_ratio,
+    signed_volumes,
+    triangle_angles,
+)
 
 #: The physical bound for any spacing at the default limit (issue 22: radius-to-edge <=
 #: 1.40, dihedral angles >= 29 deg; the reference's own sqrt(29)/4 and 30 deg hold at

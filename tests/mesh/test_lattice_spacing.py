@@ -17,9 +17,9 @@ import pytest
 from hypothesis import HealthCheck, assume, given, settings
 from hypothesis import strategies as st
 
-from napari_swa_imesh.mesh.mesher import _templates
 from napari_swa_imesh.mesh import mesh_labels
 from napari_swa_imesh.mesh.checks._checks import check_mesh
+from napari_swa_imesh.mesh.mesher import _templates
 from napari_swa_imesh.mesh.mesher._lattice import (
     ASPECT_LIMIT,
     MAX_FACTOR,

@@ -9,8 +9,12 @@ from hypothesis import strategies as st
 
 from napari_swa_imesh.mesh import Mesh, facet_groups, mesh_labels
 from napari_swa_imesh.mesh.checks._facets import _sorted_groups
-from napari_swa_imesh.mesh.checks._leaf_facets import (_as_made, material_codes,
-                                                 present_materials, template_group_rows)
+from napari_swa_imesh.mesh.checks._leaf_facets import (
+    _as_made,
+    material_codes,
+    present_materials,
+    template_group_rows,
+)
 
 
 def _assert_same(fast, slow):

@@ -14,11 +14,11 @@ import math
 import numpy as np
 import pytest
 
-from napari_swa_imesh.mesh.mesher import _templates_luts as luts
 from napari_swa_imesh.mesh import mesh_labels, quality_bounds
-from napari_swa_imesh.mesh.model._bounds import leaf_configurations
-from napari_swa_imesh.mesh.mesher._lattice import aspect_table
 from napari_swa_imesh.mesh.checks._checks import check_mesh
+from napari_swa_imesh.mesh.mesher import _templates_luts as luts
+from napari_swa_imesh.mesh.mesher._lattice import aspect_table
+from napari_swa_imesh.mesh.model._bounds import leaf_configurations
 from napari_swa_imesh.mesh.model._quality import quality_data, signed_volumes
 
 TABLE = luts.LEAF_TABLE[3]

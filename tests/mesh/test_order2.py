@@ -13,10 +13,9 @@ import re
 import meshio
 import numpy as np
 import pytest
+from test_export import NEEDS_H5PY, canonical, sample_mesh
 
 from napari_swa_imesh.mesh import read_mesh, write_mesh
-
-from test_export import NEEDS_H5PY, canonical, sample_mesh
 
 VTK_EDGES = {2: [(0, 1), (1, 2), (2, 0)], 3: [(0, 1), (1, 2), (2, 0), (0, 3), (1, 3), (2, 3)]}
 

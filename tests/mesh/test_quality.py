@@ -5,8 +5,15 @@ import math
 import numpy as np
 import pytest
 
-from napari_swa_imesh.mesh.model._quality import (QUALITY_METRICS, dihedral_angles, max_angle, min_angle,
-                                            radius_edge_ratio, signed_volumes, triangle_angles)
+from napari_swa_imesh.mesh.model._quality import (
+    QUALITY_METRICS,
+    dihedral_angles,
+    max_angle,
+    min_angle,
+    radius_edge_ratio,
+    signed_volumes,
+    triangle_angles,
+)
 
 EQUILATERAL = np.array([[0.0, 0.0], [1.0, 0.0], [0.5, math.sqrt(3) / 2]])
 REGULAR_TET = np.array([[1.0, 1, 1], [1, -1, -1], [-1, 1, -1], [-1, -1, 1]])

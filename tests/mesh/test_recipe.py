@@ -10,8 +10,8 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from napari_swa_imesh.mesh import Mesh, clip_cells, facet_groups, mesh_labels, mesh_tree
-from napari_swa_imesh.mesh.mesher._adapt import refine_marked
 from napari_swa_imesh.mesh.checks._facets import _sorted_groups
+from napari_swa_imesh.mesh.mesher._adapt import refine_marked
 from napari_swa_imesh.mesh.mesher._lattice import Lattice
 from napari_swa_imesh.mesh.model._recipe import Adapted, Recipe
 

@@ -10,8 +10,15 @@ import numpy as np
 import pytest
 
 from napari_swa_imesh.cli import main
-from napari_swa_imesh.mesh import (MESH_SUFFIXES, MeshFormat, mesh_format, mesh_formats,
-                                   mesh_labels, read_mesh, write_mesh)
+from napari_swa_imesh.mesh import (
+    MESH_SUFFIXES,
+    MeshFormat,
+    mesh_format,
+    mesh_formats,
+    mesh_labels,
+    read_mesh,
+    write_mesh,
+)
 from napari_swa_imesh.mesh.formats import _registry
 from napari_swa_imesh.mesh.formats._export import check_write_options, mesh_output_paths
 from napari_swa_imesh.mesh.formats._registry import UnknownSuffixError, register_format

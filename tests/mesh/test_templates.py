@@ -6,10 +6,13 @@ import numpy as np
 import pytest
 
 from napari_swa_imesh.mesh.mesher import _templates_luts as luts
-from napari_swa_imesh.mesh.model._bounds import (format_quality_table, leaf_configurations, quality_bounds,
-                                           quality_table)
-from napari_swa_imesh.mesh.model._quality import QUALITY_METRICS
-from napari_swa_imesh.mesh.model._quality import signed_volumes
+from napari_swa_imesh.mesh.model._bounds import (
+    format_quality_table,
+    leaf_configurations,
+    quality_bounds,
+    quality_table,
+)
+from napari_swa_imesh.mesh.model._quality import QUALITY_METRICS, signed_volumes
 
 
 def _facets_on(simplices: np.ndarray, axis: int, side: int) -> set:

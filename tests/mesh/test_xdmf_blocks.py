@@ -6,8 +6,8 @@ import meshio
 import numpy as np
 import pytest
 
-from napari_swa_imesh.mesh.formats import _xdmf
 from napari_swa_imesh.mesh import mesh_labels, write_mesh
+from napari_swa_imesh.mesh.formats import _xdmf
 from napari_swa_imesh.mesh.formats._export import _meshio_of
 from napari_swa_imesh.mesh.formats._prepare import ExportMesh
 

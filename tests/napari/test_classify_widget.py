@@ -3,8 +3,8 @@
 import csv
 
 import numpy as np
-from swa_napari_helpers import draw_boxes, rect, wait_idle
 from scipy import ndimage as ndi
+from swa_napari_helpers import draw_boxes, rect, wait_idle
 
 from napari_swa_imesh._napari._classify_widget import METHOD_RECOMMENDED, METHOD_REFERENCE
 from napari_swa_imesh._napari._sample_data import make_texture_mosaic

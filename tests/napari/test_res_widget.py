@@ -3,8 +3,8 @@ chosen scale going stale when the samples change."""
 
 import numpy as np
 import pytest
-from swa_napari_helpers import wait_idle
 from matplotlib.backend_bases import MouseEvent
+from swa_napari_helpers import wait_idle
 
 from napari_swa_imesh._napari import _samples_layer as sl
 from napari_swa_imesh._napari._classify_widget import METHOD_REFERENCE

@@ -152,8 +152,11 @@ def test_a_rectangle_drawn_with_the_mouse_lies_on_the_current_slice(phantom_view
     """Drive napari's own rectangle tool (mouse press, drag, release) on slice 20 of the
     2:1:1 phantom: the box is centred on that slice, in voxel indices."""
     from napari.utils._test_utils import read_only_mouse_event
-    from napari.utils.interactions import (mouse_move_callbacks, mouse_press_callbacks,
-                                           mouse_release_callbacks)
+    from napari.utils.interactions import (
+        mouse_move_callbacks,
+        mouse_press_callbacks,
+        mouse_release_callbacks,
+    )
 
     viewer, image, _ = phantom_viewer
     widget = SamplesWidget(viewer)

@@ -10,11 +10,11 @@ from __future__ import annotations
 import sys
 import time
 
-import napari
 import npe2
 from napari.utils.notifications import notification_manager
 from qtpy.QtWidgets import QApplication
 
+import napari
 import napari_swa_imesh
 
 PLUGIN = "napari-swa-imesh"

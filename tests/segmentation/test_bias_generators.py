@@ -3,7 +3,6 @@ tuning one (benchmarks/anatomy.py) and makes what it says."""
 
 import numpy as np
 import pytest
-
 from benchmarks import anatomy, anatomy_heldout
 
 

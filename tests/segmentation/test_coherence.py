@@ -6,8 +6,7 @@ import numpy as np
 import pytest
 from scipy import ndimage as ndi
 
-from napari_swa_imesh.segmentation import RecommendedModel, Samples, dice_scores
-from napari_swa_imesh.segmentation import _window_features
+from napari_swa_imesh.segmentation import RecommendedModel, Samples, _window_features, dice_scores
 from napari_swa_imesh.segmentation._window_features import (
     coherence_pairs,
     multiscale_features,

@@ -142,8 +142,7 @@ def test_errors_are_clear():
 
 @pytest.mark.parametrize("features", ["F1", "F2", "F5"])
 def test_signatures_are_the_moments_of_the_classified_tiles(features):
-    from napari_swa_imesh.segmentation import tile_moments
-    from napari_swa_imesh.segmentation import material_signatures
+    from napari_swa_imesh.segmentation import material_signatures, tile_moments
 
     img, truth, s = two_textures((64, 64))
     res = segment(img, s, method="reference", scale=2, feature_set=features)

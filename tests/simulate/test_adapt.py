@@ -11,14 +11,13 @@ import numpy as np
 import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
+from simulate_cases import blobs
 
 from napari_swa_imesh.cli import main
 from napari_swa_imesh.mesh import check_mesh, mesh_labels, quality_bounds
 from napari_swa_imesh.mesh.mesher._adapt import refine_marked
-from napari_swa_imesh.simulate import simulate
-from napari_swa_imesh.simulate import _adapt
+from napari_swa_imesh.simulate import _adapt, simulate
 from napari_swa_imesh.simulate._adapt import doerfler, flux_jump_indicator
-from simulate_cases import blobs
 
 
 @settings(max_examples=16, deadline=None)

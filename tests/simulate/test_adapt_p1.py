@@ -11,13 +11,12 @@ import numpy as np
 import pytest
 from hypothesis import example, given, settings
 from hypothesis import strategies as st
+from simulate_cases import blobs
 
 from napari_swa_imesh.cli import main
 from napari_swa_imesh.mesh import check_mesh, mesh_labels, quality_bounds
-from napari_swa_imesh.simulate import simulate
-from napari_swa_imesh.simulate import _adapt
+from napari_swa_imesh.simulate import _adapt, simulate
 from napari_swa_imesh.simulate._adapt import refine_within
-from simulate_cases import blobs
 
 K = {1: 1.0, 2: 10.0, 3: 0.1}
 

@@ -11,9 +11,8 @@ from scipy import sparse
 from scipy.sparse.linalg import spsolve
 from skfem.helpers import dot, grad, mul
 
-from napari_swa_imesh.mesh import Mesh, mesh_labels
+from napari_swa_imesh.mesh import Mesh, mesh_labels, signed_volumes
 from napari_swa_imesh.simulate import _assembly
-from napari_swa_imesh.mesh import signed_volumes
 from napari_swa_imesh.simulate._assembly import (
     cell_fluxes,
     cell_gradients,

@@ -70,7 +70,7 @@ class ClassifyWidget(QWidget):
 
     labels_ready = Signal(object)
 
-    def __init__(self, napari_viewer: "napari.viewer.Viewer", parent: QWidget | None = None):
+    def __init__(self, napari_viewer: napari.viewer.Viewer, parent: QWidget | None = None):
         super().__init__(parent)
         self.viewer = napari_viewer
         self.result: SegmentationResult | None = None
@@ -374,7 +374,7 @@ class ClassifyWidget(QWidget):
                               on_result=lambda out: self._show_result(image, *out))
 
     # -- results (main thread) ---------------------------------------------------------------
-    def _show_result(self, image, result: "SegmentationResult", dice) -> None:
+    def _show_result(self, image, result: SegmentationResult, dice) -> None:
         self.result, self.dice = result, dice
         materials = result.model.materials
         names = {m.label: m.name for m in materials}
@@ -482,7 +482,7 @@ class ClassifyWidget(QWidget):
             self.load_model(path)
 
 
-def run_summary(result: "SegmentationResult", dice: dict[int, float] | None,
+def run_summary(result: SegmentationResult, dice: dict[int, float] | None,
                 names: dict[int, str]) -> str:
     """One line about a classification: method and scales, scores, Dice, time.
 

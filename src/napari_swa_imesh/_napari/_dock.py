@@ -18,9 +18,21 @@ preferred height, so plots ask for their minimum height (:mod:`._plots`) and gro
 from __future__ import annotations
 
 from qtpy.QtCore import QSize, Qt
-from qtpy.QtWidgets import (QAbstractItemView, QAbstractScrollArea, QCheckBox, QComboBox,
-                            QFrame, QGroupBox, QHBoxLayout, QLabel, QScrollArea, QSizePolicy,
-                            QToolButton, QVBoxLayout, QWidget)
+from qtpy.QtWidgets import (
+    QAbstractItemView,
+    QAbstractScrollArea,
+    QCheckBox,
+    QComboBox,
+    QFrame,
+    QGroupBox,
+    QHBoxLayout,
+    QLabel,
+    QScrollArea,
+    QSizePolicy,
+    QToolButton,
+    QVBoxLayout,
+    QWidget,
+)
 
 __all__ = ["scroll_body", "side_by_side", "group", "wrapped_label", "button", "fit_dock",
            "Fold", "SCROLL_MIN_HEIGHT", "DOCK_WIDTH"]
@@ -60,7 +72,7 @@ def scroll_body(widget: QWidget) -> QVBoxLayout:
 
 
 def side_by_side(*widgets) -> QWidget:
-    """magicgui widgets side by side, without labels."""
+    """Magicgui widgets side by side, without labels."""
     from magicgui.widgets import Container
 
     return Container(widgets=list(widgets), layout="horizontal", labels=False).native

@@ -62,7 +62,7 @@ def material_palette(names: dict[int, str], colors: dict[int, str | None] | None
 
 
 def labels_colormap(colors: dict[int, str]):
-    """napari DirectLabelColormap: each material its colour, 0 and unknown transparent."""
+    """Napari DirectLabelColormap: each material its colour, 0 and unknown transparent."""
     from napari.utils.colormaps import DirectLabelColormap
 
     color_dict = {None: "transparent", 0: "transparent"}
@@ -137,7 +137,7 @@ class _Follower:
                 emitter.disconnect(self.reset)
 
 
-def layer_picker(viewer: "napari.viewer.Viewer", kind: str, *, label: str, accept=None,
+def layer_picker(viewer: napari.viewer.Viewer, kind: str, *, label: str, accept=None,
                  none_text: str | None = None, tooltip: str | None = None):
     """A magicgui ComboBox of `viewer`'s layers of one type, kept in step with the layer list.
 

@@ -7,7 +7,7 @@ The Surface shows the mesh's boundary and material interfaces, or, with the clip
 
 from __future__ import annotations
 
-from functools import lru_cache
+from functools import cache
 from typing import TYPE_CHECKING
 
 import numpy as np
@@ -15,9 +15,16 @@ from magicgui.widgets import CheckBox, ComboBox, Container, FloatSpinBox, PushBu
 from qtpy.QtCore import Qt, Signal
 from qtpy.QtWidgets import QFileDialog, QLabel, QListWidget, QListWidgetItem, QWidget
 
-from ..mesh import (MeshClipper, check_mesh, mesh_formats, mesh_labels, mesh_surface,
-                    quality_bounds, write_mesh)
-from ..mesh import ASPECT_LIMIT, MESH_SUFFIXES
+from ..mesh import (
+    ASPECT_LIMIT,
+    MeshClipper,
+    check_mesh,
+    mesh_formats,
+    mesh_labels,
+    mesh_surface,
+    quality_bounds,
+    write_mesh,
+)
 from ._clip_panel import ClipPanel
 from ._dock import fit_dock, scroll_body, wrapped_label
 from ._help import explain_terms
@@ -35,8 +42,9 @@ from ._plots import ThemedFigure, dark_theme, theme_text_color
 from ._tasks import TaskPanel, notify_error, notify_info
 
 if TYPE_CHECKING:
-    import napari
     from matplotlib.figure import Figure
+
+    import napari
 
     from ..mesh import Mesh
 
@@ -51,7 +59,7 @@ METHODS = ("template", "delaunay")
 _ELEMENT = {2: "triangles", 3: "tetrahedra"}
 
 
-@lru_cache(maxsize=None)
+@cache
 def bound_range(ndim: int, spacing: tuple[float, ...] = (), subdivide: bool = True,
                 max_aspect: float | None = None) -> tuple[float, float]:
     """Radius-to-edge range of every IMESH template element for these voxels (shaded).
@@ -68,19 +76,19 @@ def bound_range(ndim: int, spacing: tuple[float, ...] = (), subdivide: bool = Tr
                           max_aspect=max_aspect if subdivide else None)["quality"]
 
 
-def _mesh_bound(mesh: "Mesh") -> tuple[float, float]:
+def _mesh_bound(mesh: Mesh) -> tuple[float, float]:
     """:func:`bound_range` for the lattice `mesh` was cut on (its recorded max aspect)."""
     subdivided = _subdivided(mesh)
     return bound_range(mesh.ndim, mesh.spacing, subdivided,
                        mesh.recipe.lattice.max_aspect if subdivided else None)
 
 
-def _subdivided(mesh: "Mesh") -> bool:
+def _subdivided(mesh: Mesh) -> bool:
     """Whether the mesh was cut on a lattice finer than its voxels for anisotropy."""
     return mesh.recipe is not None and mesh.recipe.subdivided
 
 
-def _method(mesh: "Mesh") -> str:
+def _method(mesh: Mesh) -> str:
     """The method that made `mesh` (the template mesher's when it does not say)."""
     return "template" if mesh.recipe is None else mesh.recipe.method
 
@@ -91,7 +99,7 @@ def _aspect(spacing: tuple[float, ...]) -> str:
     return ":".join(f"{s / smallest:.3g}" for s in spacing)
 
 
-def bound_label(mesh: "Mesh") -> str:
+def bound_label(mesh: Mesh) -> str:
     """What the shaded range is for `mesh`: the IMESH bound for its voxels, or none."""
     cubic = len(set(mesh.spacing)) <= 1
     voxels = "square/cubic voxels" if cubic else f"{_aspect(mesh.spacing)} voxels"
@@ -110,7 +118,7 @@ def text_overlay(viewer):
         else viewer.text_overlay
 
 
-def quality_legend(mesh: "Mesh", lo: float, hi: float, worst: float) -> str:
+def quality_legend(mesh: Mesh, lo: float, hi: float, worst: float) -> str:
     """The canvas text that goes with the quality colour bar: scale, bound and worst."""
     holds = "within" if worst <= hi + 1e-9 else "ABOVE"
     # short lines: the canvas of a laptop screen is about 550 px wide
@@ -131,7 +139,7 @@ def _values(surface: dict) -> dict[str, np.ndarray]:
     return {"quality": surface["quality"], "material": surface["material"]}
 
 
-def _bound_line(mesh: "Mesh") -> str:
+def _bound_line(mesh: Mesh) -> str:
     """The summary's sentence on the quality bound that holds for `mesh`'s voxels."""
     subdivided = _subdivided(mesh)
     hi = _mesh_bound(mesh)[1]
@@ -160,7 +168,7 @@ class MeshWidget(QWidget):
 
     mesh_ready = Signal(object)
 
-    def __init__(self, napari_viewer: "napari.viewer.Viewer", parent: QWidget | None = None):
+    def __init__(self, napari_viewer: napari.viewer.Viewer, parent: QWidget | None = None):
         super().__init__(parent)
         self.viewer = napari_viewer
         self.mesh: Mesh | None = None
@@ -231,7 +239,7 @@ class MeshWidget(QWidget):
         explain_terms(self)
 
     @property
-    def figure(self) -> "Figure":
+    def figure(self) -> Figure:
         return self.plot.figure
 
     # -- inputs ----------------------------------------------------------------------------
@@ -322,7 +330,7 @@ class MeshWidget(QWidget):
                               on_result=lambda out: self._show_mesh(layer, *out))
 
     # -- results (main thread) ---------------------------------------------------------------
-    def _show_mesh(self, labels, mesh: "Mesh", checks, full: dict, clipper) -> None:
+    def _show_mesh(self, labels, mesh: Mesh, checks, full: dict, clipper) -> None:
         self.mesh, self.checks, self.full_surface = mesh, checks, full
         self.clip.set_clipper(clipper)
         surface = self._shown_surface()
@@ -428,7 +436,7 @@ class MeshWidget(QWidget):
             return
         overlay.visible = layer in self.viewer.layers and bool(layer.visible)
 
-    def _show_summary(self, mesh: "Mesh", checks, n_faces: int) -> None:
+    def _show_summary(self, mesh: Mesh, checks, n_faces: int) -> None:
         info = mesh.info
         element = _ELEMENT[mesh.ndim]
         materials, counts = np.unique(mesh.material, return_counts=True)
@@ -453,7 +461,7 @@ class MeshWidget(QWidget):
                          "View > Toggle Ndisplay)")
         self.summary.value = "\n".join(lines)
 
-    def _draw_histogram(self, figure: "Figure") -> None:
+    def _draw_histogram(self, figure: Figure) -> None:
         """Element quality histogram; the IMESH bound range (:func:`bound_range`) shaded."""
         figure.clear()
         mesh = self.mesh

@@ -20,13 +20,14 @@ from qtpy.QtCore import QSize
 from qtpy.QtWidgets import QSizePolicy
 
 if TYPE_CHECKING:
-    import napari
     from matplotlib.figure import Figure
+
+    import napari
 
 __all__ = ["ThemedFigure", "dark_theme", "theme_text_color"]
 
 
-def dark_theme(viewer: "napari.viewer.Viewer") -> bool:
+def dark_theme(viewer: napari.viewer.Viewer) -> bool:
     """True when the viewer's theme has a dark background."""
     from napari.utils.theme import get_theme
 
@@ -34,7 +35,7 @@ def dark_theme(viewer: "napari.viewer.Viewer") -> bool:
     return lightness <= 0.5
 
 
-def theme_text_color(viewer: "napari.viewer.Viewer") -> str:
+def theme_text_color(viewer: napari.viewer.Viewer) -> str:
     """Text colour (hex) of the viewer's theme."""
     from napari.utils.theme import get_theme
 
@@ -54,7 +55,7 @@ class ThemedFigure(BaseNapariMPLWidget):
         Smallest canvas height in pixels; the canvas grows from there with its dock.
     """
 
-    def __init__(self, viewer: "napari.viewer.Viewer", draw: Callable[["Figure"], None], *,
+    def __init__(self, viewer: napari.viewer.Viewer, draw: Callable[[Figure], None], *,
                  min_height: int):
         super().__init__(viewer)
         self._draw_figure = draw

@@ -69,7 +69,7 @@ def get_nifti_reader(path) -> Callable | None:
 
 
 def napari_placement(affine, ndim: int) -> tuple[tuple[float, ...], np.ndarray]:
-    """napari ``scale`` and ``affine`` of a layer whose data have index-to-world `affine`.
+    """Napari ``scale`` and ``affine`` of a layer whose data have index-to-world `affine`.
 
     Parameters
     ----------

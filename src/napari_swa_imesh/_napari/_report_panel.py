@@ -98,7 +98,7 @@ class ReportPanel:
         self.set_signatures(rows, Path(path).name)
         return True
 
-    def set_result(self, result: "SimulationResult | None", conductivity=None) -> None:
+    def set_result(self, result: SimulationResult | None, conductivity=None) -> None:
         """The run to report (its conductivity table as given to ``simulate``); None: no
         run (its mesh is gone), so no other labelling's signatures are joined to it."""
         self._run = None if result is None else (result, conductivity)

@@ -17,8 +17,9 @@ from ._plots import ThemedFigure, dark_theme
 from ._tasks import TaskPanel, notify_error, notify_warning
 
 if TYPE_CHECKING:
-    import napari
     from matplotlib.figure import Figure
+
+    import napari
 
     from ..segmentation import ResStatistics
 
@@ -48,7 +49,7 @@ class ResWidget(QWidget):
     scale_chosen = Signal(int)
     stale_changed = Signal(bool)
 
-    def __init__(self, napari_viewer: "napari.viewer.Viewer", parent: QWidget | None = None):
+    def __init__(self, napari_viewer: napari.viewer.Viewer, parent: QWidget | None = None):
         super().__init__(parent)
         self.viewer = napari_viewer
         self.stats: ResStatistics | None = None
@@ -89,7 +90,7 @@ class ResWidget(QWidget):
         explain_terms(self)
 
     @property
-    def figure(self) -> "Figure":
+    def figure(self) -> Figure:
         return self.plot.figure
 
     @property
@@ -184,7 +185,7 @@ class ResWidget(QWidget):
         return self.tasks.run(steps, title="RES statistics",
                               on_result=lambda stats: self.show_stats(stats, fingerprint))
 
-    def show_stats(self, stats: "ResStatistics", fingerprint: str | None = None) -> None:
+    def show_stats(self, stats: ResStatistics, fingerprint: str | None = None) -> None:
         """Plot `stats` and offer its scales; the suggested RES becomes the chosen scale.
 
         Parameters
@@ -220,7 +221,7 @@ class ResWidget(QWidget):
     def _draw(self) -> None:
         self.plot.redraw()
 
-    def _draw_figure(self, figure: "Figure") -> None:
+    def _draw_figure(self, figure: Figure) -> None:
         if self.stats is None:
             figure.clear()
             return

@@ -70,7 +70,7 @@ def _empty_features() -> pd.DataFrame:
                          "depth": pd.Series([], dtype=int), "flag": pd.Series([], dtype=object)})
 
 
-def new_samples_layer(viewer: "napari.viewer.Viewer", image_layer, materials: list[Material],
+def new_samples_layer(viewer: napari.viewer.Viewer, image_layer, materials: list[Material],
                       *, name: str | None = None, depth: int = DEFAULT_DEPTH):
     """Add an empty samples Shapes layer over `image_layer`, ready to draw rectangles."""
     layer = viewer.add_shapes(
@@ -303,7 +303,7 @@ def restyle(layer, report: BoxReport) -> None:
     _recolor(layer)
 
 
-def update_extent_overlay(viewer: "napari.viewer.Viewer", layer, image_layer,
+def update_extent_overlay(viewer: napari.viewer.Viewer, layer, image_layer,
                           report: BoxReport):
     """Draw each 3-D box's extent on its neighbouring slices (a read-only Shapes layer).
 

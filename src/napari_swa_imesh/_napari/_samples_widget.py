@@ -39,7 +39,7 @@ class SamplesWidget(QWidget):
 
     samples_layer_changed = Signal(object)
 
-    def __init__(self, napari_viewer: "napari.viewer.Viewer", parent: QWidget | None = None):
+    def __init__(self, napari_viewer: napari.viewer.Viewer, parent: QWidget | None = None):
         super().__init__(parent)
         self.viewer = napari_viewer
         self._watched = None          # samples layer whose events we listen to

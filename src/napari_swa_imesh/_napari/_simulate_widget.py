@@ -26,8 +26,7 @@ from qtpy.QtCore import Qt, Signal
 from qtpy.QtWidgets import QFileDialog, QLabel, QTableWidget, QWidget
 
 from ..mesh import MeshClipper, shown_faces
-from ..simulate import simulate_steps, write_field
-from ..simulate import P1_GROWTH, mesh_refine, needs_remesh, remesh
+from ..simulate import P1_GROWTH, mesh_refine, needs_remesh, remesh, simulate_steps, write_field
 from ._clip_panel import ClipPanel
 from ._conductivity_table import Conductivity, ConductivityTable, parse_conductivity
 from ._dock import fit_dock, scroll_body, side_by_side, wrapped_label
@@ -38,8 +37,9 @@ from ._report_panel import ReportPanel, classification_signatures, fill_table
 from ._tasks import TaskPanel, notify_error, notify_info
 
 if TYPE_CHECKING:
-    import napari
     from matplotlib.figure import Figure
+
+    import napari
 
     from ..simulate import SimulationResult
 
@@ -68,7 +68,7 @@ class SimulateWidget(QWidget):
 
     simulated = Signal(object)
 
-    def __init__(self, napari_viewer: "napari.viewer.Viewer", parent: QWidget | None = None):
+    def __init__(self, napari_viewer: napari.viewer.Viewer, parent: QWidget | None = None):
         super().__init__(parent)
         self.viewer = napari_viewer
         self.result: SimulationResult | None = None
@@ -140,7 +140,7 @@ class SimulateWidget(QWidget):
         explain_terms(self)
 
     @property
-    def figure(self) -> "Figure":
+    def figure(self) -> Figure:
         return self.plot.figure
 
     # -- inputs ----------------------------------------------------------------------------
@@ -280,7 +280,7 @@ class SimulateWidget(QWidget):
                                                                       *out))
 
     # -- results (main thread) -------------------------------------------------------------
-    def _show_result(self, mesh_layer, conductivity, result: "SimulationResult",
+    def _show_result(self, mesh_layer, conductivity, result: SimulationResult,
                      faces: np.ndarray, clipper: MeshClipper) -> None:
         self.result, self._faces, self._result_layer = result, faces, mesh_layer
         self.summary.value = result.describe()
@@ -294,7 +294,7 @@ class SimulateWidget(QWidget):
         self.report.set_result(result, conductivity)
         self.simulated.emit(result)
 
-    def _show_tensor(self, result: "SimulationResult") -> None:
+    def _show_tensor(self, result: SimulationResult) -> None:
         tensor = result.tensor
         self.tensor_table.setVisible(tensor is not None)
         if tensor is None:
@@ -346,7 +346,7 @@ class SimulateWidget(QWidget):
                 metadata={FIELD_KEY: axis})
         self.field_layer.metadata[FIELD_KEY] = axis
 
-    def _draw_figure(self, figure: "Figure") -> None:
+    def _draw_figure(self, figure: Figure) -> None:
         """Colour bar of the potential, and k_eff per axis inside its bounds."""
         figure.clear()
         result = self.result

@@ -29,7 +29,7 @@ class WorkflowWidget(QWidget):
     the mesher, the mesh to the simulation.
     """
 
-    def __init__(self, napari_viewer: "napari.viewer.Viewer", parent: QWidget | None = None):
+    def __init__(self, napari_viewer: napari.viewer.Viewer, parent: QWidget | None = None):
         super().__init__(parent)
         self.viewer = napari_viewer
         self.samples = SamplesWidget(napari_viewer)

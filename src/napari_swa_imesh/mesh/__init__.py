@@ -32,18 +32,17 @@
 
 from .checks._checks import MeshChecks, check_mesh, rasterize_materials
 from .checks._clip import MeshClipper, clip_cells
-from .checks._facets import FacetGroup, facet_groups
+from .checks._facets import FacetGroup, facet_groups, paired_facets
 from .checks._surface import mesh_surface, shown_faces
-from .checks._facets import paired_facets
 from .formats._common import export_vectors
 from .formats._export import read_mesh, to_meshio, write_mesh, write_mesh_vtu
 from .formats._registry import MESH_SUFFIXES, MeshFormat, mesh_format, mesh_formats
-from .mesher._balance import balance_tree
 from .mesher._adapt import _refine_marked as refine_marked_tree
 from .mesher._adapt import refine_marked
+from .mesher._balance import balance_tree
+from .mesher._imesh import MeshPlan, mesh_labels, mesh_tree, plan_mesh
 from .mesher._imesh import _mesh_arguments as mesh_arguments
 from .mesher._imesh import _mesh_labels as mesh_checked_labels
-from .mesher._imesh import MeshPlan, mesh_labels, mesh_tree, plan_mesh
 from .mesher._lattice import ASPECT_LIMIT, MAX_REFINE, Lattice, check_max_aspect, check_refine
 from .mesher._tree import RegionTree, build_tree
 from .model._bounds import format_quality_table, quality_bounds, quality_table

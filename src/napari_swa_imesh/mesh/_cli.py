@@ -21,8 +21,14 @@ from .checks._checks import _check_mesh
 from .formats._export import MESH_SUFFIXES
 from .formats._registry import mesh_format, mesh_formats
 from .mesher._subdivision import check_max_aspect
-from .model._memory import (available_memory, count_boundary_voxels, current_rss,
-                      estimate_mesh_memory, format_bytes, parse_memory_size)
+from .model._memory import (
+    available_memory,
+    count_boundary_voxels,
+    current_rss,
+    estimate_mesh_memory,
+    format_bytes,
+    parse_memory_size,
+)
 
 __all__ = ["add_commands", "parse_material_names"]
 
@@ -434,8 +440,8 @@ def _mesh_text(r: dict) -> str:
 
 
 def _run_bounds(args: argparse.Namespace) -> int:
-    from .model._bounds import format_lattice_bounds, format_quality_table, quality_table
     from .mesher._lattice import aspect_table, choose_lattice, lattice_choices
+    from .model._bounds import format_lattice_bounds, format_quality_table, quality_table
 
     if args.dim not in (2, 3):
         raise ValueError(f"--dim must be 2 or 3; got {args.dim}.")

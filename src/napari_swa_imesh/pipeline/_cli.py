@@ -59,8 +59,15 @@ def _run_batch(args: argparse.Namespace) -> int:
 
     from ..io import check_writable
     from ..segmentation import default_memory, load_model, parse_memory
-    from ._batch import (connect, expand_inputs, mesh_for, missing_folders, output_for,
-                         quiet_dask, run_batch)
+    from ._batch import (
+        connect,
+        expand_inputs,
+        mesh_for,
+        missing_folders,
+        output_for,
+        quiet_dask,
+        run_batch,
+    )
 
     timer = StepTimer()
     images = expand_inputs(args.images)

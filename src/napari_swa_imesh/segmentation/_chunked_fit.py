@@ -21,7 +21,7 @@ import numpy as np
 
 from .._validation import check_ndim
 from ._bias import grid_factor, upsample_linear_at
-from ._chunked import refuse_flat, bias_round, default_memory, plan_chunks, strided_copy
+from ._chunked import bias_round, default_memory, plan_chunks, refuse_flat, strided_copy
 from ._recommended import DEFAULT_TOP, RecommendedModel
 from ._samples import Samples, check_box_contrast
 from ._window_features import multiscale_feature_names

@@ -119,7 +119,7 @@ class GaussianClassifier(_Standardised):
         self.shrinkage = float(shrinkage)
         self.priors = priors
 
-    def fit(self, X, y) -> "GaussianClassifier":
+    def fit(self, X, y) -> GaussianClassifier:
         X, y, classes, counts = _check_training(X, y)
         Z = self._fit_scaler(X)
         self.classes_ = classes
@@ -253,7 +253,7 @@ class MinimumDistanceClassifier(_Standardised):
 
     name = "md"
 
-    def fit(self, X, y) -> "MinimumDistanceClassifier":
+    def fit(self, X, y) -> MinimumDistanceClassifier:
         X, y, classes, _ = _check_training(X, y)
         self.classes_ = classes
         self.prototypes_ = self._fit_scaler(X)
@@ -303,7 +303,7 @@ class LVQClassifier(_Standardised):
         self.learning_rate = float(learning_rate)
         self.seed = int(seed)
 
-    def fit(self, X, y) -> "LVQClassifier":
+    def fit(self, X, y) -> LVQClassifier:
         from scipy.cluster.vq import kmeans2
 
         X, y, classes, counts = _check_training(X, y)

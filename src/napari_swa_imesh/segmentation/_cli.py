@@ -10,6 +10,7 @@ import numpy as np
 from .._cli_util import StepTimer, print_json
 from .._glossary import define
 from ..io import check_writable
+
 # re-exported for the classify widget until it imports them from the library
 from ._signatures import signatures_csv_text
 
@@ -178,8 +179,16 @@ def _check_segment_args(args: argparse.Namespace) -> None:
 
 
 def _run_segment(args: argparse.Namespace) -> int:
-    from ..io import atomic_write, check_label_format, grid_affine, is_nifti, label_array, \
-        read_affine, read_image, write_labels_to
+    from ..io import (
+        atomic_write,
+        check_label_format,
+        grid_affine,
+        is_nifti,
+        label_array,
+        read_affine,
+        read_image,
+        write_labels_to,
+    )
     from ._metrics import evaluate
     from ._model_io import load_model, write_model_to
     from ._res import plot_res_scales, res_statistics

@@ -102,7 +102,7 @@ class SWAModel(SegmentationModel):
         self.scores: dict = {}
 
     def fit(self, image, samples: Samples, *, spacing=None, check_input: bool = True
-            ) -> "SWAModel":
+            ) -> SWAModel:
         """Fit on the full tiles inside the sample boxes and score with leave-one-out.
 
         Parameters
@@ -184,7 +184,7 @@ class SWAModel(SegmentationModel):
         return meta, arrays
 
     @classmethod
-    def from_file_content(cls, meta: dict, arrays: dict[str, np.ndarray]) -> "SWAModel":
+    def from_file_content(cls, meta: dict, arrays: dict[str, np.ndarray]) -> SWAModel:
         """Rebuild from the ``meta`` dict and arrays of a saved file."""
         model = cls(scale=meta["scale"], feature_set=meta["feature_set"],
                     classifier=meta["classifier"])

@@ -106,7 +106,7 @@ def _softmax_first(a: np.ndarray) -> np.ndarray:
 
 
 def argmax_first(a: np.ndarray) -> np.ndarray:
-    """argmax over the first axis by elementwise comparisons (fast for a few classes)."""
+    """Argmax over the first axis by elementwise comparisons (fast for a few classes)."""
     best = a[0].copy()
     out = np.zeros(a.shape[1:], np.int8)
     better = np.empty(a.shape[1:], bool)

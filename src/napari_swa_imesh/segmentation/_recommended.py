@@ -164,7 +164,7 @@ class RecommendedModel(SegmentationModel):
 
     # -- fitting ---------------------------------------------------------------------------
     def fit(self, image, samples: Samples, *, spacing=None, res_scale: int | None = None,
-            check_input: bool = True) -> "RecommendedModel":
+            check_input: bool = True) -> RecommendedModel:
         """Fit a classifier per level on pixels of the sample boxes, choose the levels.
 
         Parameters
@@ -185,7 +185,7 @@ class RecommendedModel(SegmentationModel):
                             res_scale=res_scale)
 
     def _fit_on(self, source, samples: Samples, *, spacing=None,
-                res_scale: int | None = None) -> "RecommendedModel":
+                res_scale: int | None = None) -> RecommendedModel:
         """:meth:`fit` on a checked training image seen through `source`: the whole
         image in memory (:class:`~._training.WholeImage`) or a store read box by box
         (:mod:`._chunked_fit`); everything else is the same code."""
@@ -469,7 +469,7 @@ class RecommendedModel(SegmentationModel):
 
     @classmethod
     def from_file_content(cls, meta: dict, arrays: dict[str, np.ndarray]
-                          ) -> "RecommendedModel":
+                          ) -> RecommendedModel:
         """Rebuild from the ``meta`` dict and arrays of a saved file."""
         model = cls(max_scale=meta.get("max_scale"), **meta.get("options", {}))
         model._restore_common(meta)

@@ -174,7 +174,7 @@ class Samples:
             f"{scales[worst]} or less")
 
     @classmethod
-    def from_dict(cls, data: dict) -> "Samples":
+    def from_dict(cls, data: dict) -> Samples:
         """Build from the JSON structure, checking it says what the schema says.
 
         Labels and coordinates must be whole numbers (``1`` or ``1.0``, never ``1.5`` or
@@ -287,7 +287,7 @@ def _warn_unknown(entry: dict, known: set[str], where: str) -> None:
                       UserWarning, stacklevel=3)
 
 
-def check_contrast(image: np.ndarray, samples: "Samples | None" = None) -> None:
+def check_contrast(image: np.ndarray, samples: Samples | None = None) -> None:
     """Refuse an image with nothing to segment: one value everywhere, or (with `samples`)
     sample boxes that all hold one and the same value.
 
@@ -433,7 +433,7 @@ def samples_from_truth(
     lab = as_labels(truth, name="truth", min_ndim=IMAGE_NDIM[0], max_ndim=IMAGE_NDIM[-1])
     if per_material < 1:
         raise ValueError(f"per_material must be at least 1; got {per_material}.")
-    from ..mesh import build_tree       # the mesher's region tree; only this function needs it
+    from ..mesh import build_tree  # the mesher's region tree; only this function needs it
 
     tree = build_tree(lab)
     keep = tree.inside & (tree.label > 0)

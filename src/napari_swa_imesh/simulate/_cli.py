@@ -136,10 +136,10 @@ def add_commands(subparsers) -> None:
 
 
 def _run_simulate(args: argparse.Namespace) -> int:
+    from .._cli_util import parse_material_names
     from .._validation import normalize_spacing
     from ..io import read_image
     from ..mesh import read_mesh
-    from .._cli_util import parse_material_names
     from ._conductivity import parse_conductivity_args
     from ._output import check_field_path, check_series_path, write_field, write_series
     from ._report import (

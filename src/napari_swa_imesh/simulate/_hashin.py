@@ -124,7 +124,7 @@ class HashinShtrikman:
 
     @classmethod
     def of(cls, k_low: float, k_high: float, f_high: float, dim: int,
-           tensor: np.ndarray | None = None) -> "HashinShtrikman":
+           tensor: np.ndarray | None = None) -> HashinShtrikman:
         """The bounds, with the trace inequalities evaluated for `tensor` if given.
 
         Raises ValueError when the lower trace inequality fails: no conforming solution

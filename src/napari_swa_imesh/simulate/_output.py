@@ -9,8 +9,7 @@ import numpy as np
 from .._atomic import hdf5_file
 from .._extras import require
 from ..io import atomic_write, check_writable
-from ..mesh import to_meshio, write_mesh_vtu
-from ..mesh import export_vectors
+from ..mesh import export_vectors, to_meshio, write_mesh_vtu
 
 __all__ = ["FIELD_SUFFIXES", "check_field_path", "check_series_path", "write_field",
            "write_series"]
@@ -77,7 +76,7 @@ def write_field(result, path, *, force: bool = False) -> list[Path]:
 
 
 def _write_xdmf(m, xdmf_path, h5_path) -> None:
-    """meshio's XDMF layout (one grid; points, cells, then point and cell data as
+    """Meshio's XDMF layout (one grid; points, cells, then point and cell data as
     ``<stem>.h5:/dataK``), the HDF5 file built in memory (:func:`hdf5_file`): meshio's
     own writer lets HDF5 write to disk, which crashed on a full disk."""
     from xml.etree import ElementTree as ET

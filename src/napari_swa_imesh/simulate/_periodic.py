@@ -17,7 +17,6 @@ a sentence if it has not.
 
 from __future__ import annotations
 
-
 import numpy as np
 from scipy import sparse
 

@@ -11,8 +11,15 @@ import numpy as np
 
 from ..mesh import Mesh, mesh_labels
 from ..mesh import refine_marked_tree as _refine_marked
-from ._adapt import (AUTO, auto_settings, check_adapt, doerfler, flux_jump_indicator,
-                     refine_within, voxel_lattice_vertices)
+from ._adapt import (
+    AUTO,
+    auto_settings,
+    check_adapt,
+    doerfler,
+    flux_jump_indicator,
+    refine_within,
+    voxel_lattice_vertices,
+)
 from ._assembly import cell_fluxes, fe_space, p1_embedding, stiffness_matrix
 from ._budget import (
     DEFAULT_MEMORY,

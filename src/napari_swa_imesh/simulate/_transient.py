@@ -38,9 +38,17 @@ from ._protocols import face_dofs, face_names
 from ._simulate import check_tolerance, prepare_mesh
 from ._solve import DEFAULT_TOLERANCE, solve_spd
 from ._time_steps import adaptive_euler
-from ._transient_error import (DEFAULT_ERROR, POSTERIORI_ROUNDS, SPACE_SHARE,
-                               ErrorEstimate, _edge_count, _error_warnings,
-                               _estimate_indices, _refine_by_estimate, _worth_refining)
+from ._transient_error import (
+    DEFAULT_ERROR,
+    POSTERIORI_ROUNDS,
+    SPACE_SHARE,
+    ErrorEstimate,
+    _edge_count,
+    _error_warnings,
+    _estimate_indices,
+    _refine_by_estimate,
+    _worth_refining,
+)
 from ._transient_space import ESTIMATE_UNKNOWNS, SpaceEstimator, resolve_fronts
 
 __all__ = ["DEFAULT_ERROR", "ErrorEstimate", "TransientResult", "simulate_transient",

@@ -12,9 +12,10 @@ import argparse
 import json
 import logging
 import sys
-from ..formats._registry import PVTU
 from contextlib import contextmanager
 from pathlib import Path
+
+from ..formats._registry import PVTU
 
 __all__ = ["add_block_arguments", "add_commands", "run_blocks", "uses_blocks"]
 

@@ -338,7 +338,7 @@ def mesh_block(plan: BlockPlan, index, data: np.ndarray, grids: list, *,
 
 
 def _signed6(points: np.ndarray, cells: np.ndarray) -> np.ndarray:
-    """d! times the signed volume of each simplex (exact integers)."""
+    """D! times the signed volume of each simplex (exact integers)."""
     p0 = points[cells[:, 0]]
     m = np.stack([points[cells[:, j]] - p0 for j in range(1, cells.shape[1])], axis=1)
     if m.shape[1] == 2:

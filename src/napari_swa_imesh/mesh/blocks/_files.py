@@ -24,12 +24,12 @@ the mesh fits one process. Only the reading by pyvista and meshio is tested here
 
 from __future__ import annotations
 
-from ..formats._registry import PARTITIONED, PVTU, XDMF_INDEX, facets_companion
 from pathlib import Path
 from xml.sax.saxutils import quoteattr
 
 import numpy as np
 
+from ..formats._registry import PARTITIONED, PVTU, XDMF_INDEX, facets_companion
 from ..formats._vtu import write_vtu
 
 __all__ = [

@@ -20,12 +20,12 @@ from __future__ import annotations
 
 import math
 import uuid
-from ..formats._registry import PARTITIONED, PVTU, XDMF_INDEX
 from collections.abc import Callable
 from pathlib import Path
 
 import numpy as np
 
+from ..formats._registry import PARTITIONED, PVTU, XDMF_INDEX
 from . import _core as bk
 from . import _files as bf
 

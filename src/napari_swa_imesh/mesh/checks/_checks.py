@@ -14,13 +14,13 @@ from dataclasses import asdict, dataclass
 
 import numpy as np
 
-from ..mesher._tree import RegionTree, _build_tree
 from ..._validation import as_labels
-from ._chain_check import lattice_checks
-from ._facets import _blocks, _runs, _side_passes
 from ..mesher._lattice import labels_on_lattice
+from ..mesher._tree import RegionTree, _build_tree
 from ..model._quality import _corner_det, _det
 from ..model._types import Mesh
+from ._chain_check import lattice_checks
+from ._facets import _blocks, _runs, _side_passes
 
 __all__ = ["MeshChecks", "check_mesh", "rasterize_materials"]
 

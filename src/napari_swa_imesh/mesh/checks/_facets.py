@@ -22,9 +22,9 @@ from __future__ import annotations
 import numpy as np
 
 from ..formats._common import FACE_CORNERS
+from ..model._types import Mesh
 from ._groups import FacetGroup, named_groups
 from ._leaf_facets import template_group_rows
-from ..model._types import Mesh
 
 __all__ = ["FacetGroup", "facet_groups", "paired_facets", "FACE_CORNERS"]
 

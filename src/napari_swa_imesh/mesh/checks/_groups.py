@@ -9,8 +9,8 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..formats._common import FACE_CORNERS, material_names
-from ._leaf_facets import present_materials
 from ..model._types import Mesh
+from ._leaf_facets import present_materials
 
 __all__ = ["FacetGroup", "named_groups"]
 

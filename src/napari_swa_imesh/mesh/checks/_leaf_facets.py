@@ -202,7 +202,7 @@ def _gather(packed, axes, cells, d) -> list:
 
 
 def _lattice_det(p: list) -> np.ndarray:
-    """det of int32 lattice corners ``p[k][a]``, exact: in int32 when no edge is longer than
+    """Det of int32 lattice corners ``p[k][a]``, exact: in int32 when no edge is longer than
     2**9 (each of the six products then below 2**27, their sum below 2**30; no casts),
     else in int64. Edges are exact in int32: coordinates lie in [0, 2**30)."""
     e = [[p[k][a] - p[0][a] for a in range(len(p[0]))] for k in range(1, len(p))]

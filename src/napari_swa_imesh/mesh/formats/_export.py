@@ -39,8 +39,6 @@ from __future__ import annotations
 
 from pathlib import Path
 
-import numpy as np
-
 from ..._validation import OptionError
 from ...io import atomic_write, check_writable
 from ..model._types import Mesh

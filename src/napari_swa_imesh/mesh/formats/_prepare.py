@@ -20,12 +20,12 @@ from fnmatch import fnmatchcase
 import numpy as np
 
 from ..._validation import OptionError
-from ._common import export_points, export_turns, material_names
 from ..checks._facets import FACE_CORNERS, groups_and_signs
 from ..checks._leaf_facets import present_materials
-from ._order2 import MidEdges, with_mid_nodes
 from ..model._quality import _corner_det
 from ..model._types import Mesh
+from ._common import export_points, export_turns, material_names
+from ._order2 import MidEdges, with_mid_nodes
 from ._vtu import CellBlocks
 
 __all__ = ["ExportMesh", "FileFacets", "check_facet_selection", "select_facet_groups",

@@ -15,9 +15,9 @@ package.
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Callable
 
 __all__ = ["MeshFormat", "MESH_SUFFIXES", "FACET_SUFFIX", "register_format", "mesh_format",
            "mesh_formats", "facets_companion", "node_ele_pair", "UnknownSuffixError"]

@@ -25,20 +25,27 @@ from typing import NamedTuple
 
 import numpy as np
 
-from ._tree import RegionTree, _build_tree
 from ..._validation import normalize_spacing
-from ._balance import balance_tree, count_balanced_leaves
 from ..checks._checks import _check_mesh
-from ._delaunay import delaunay_mesh
-from ._coarsen import coarsen_labels
-from ._door import (METHODS, _exclude_array, _mesh_arguments, check_max_size,  # noqa: F401
-                    check_periodic, record_coarsening, resolution_arguments,
-                    warn_lost_materials)
-from ._lattice import Lattice, lattice_tree
 from ..model._recipe import MadeLattice, Recipe
-from ._templates import template_mesh, template_quality
 from ..model._types import Mesh
 from ..model._world import world_from_affine
+from ._balance import balance_tree, count_balanced_leaves
+from ._coarsen import coarsen_labels
+from ._delaunay import delaunay_mesh
+from ._door import (  # noqa: F401
+    METHODS,
+    _exclude_array,
+    _mesh_arguments,
+    check_max_size,
+    check_periodic,
+    record_coarsening,
+    resolution_arguments,
+    warn_lost_materials,
+)
+from ._lattice import Lattice, lattice_tree
+from ._templates import template_mesh, template_quality
+from ._tree import RegionTree, _build_tree
 
 __all__ = ["mesh_labels", "mesh_tree", "plan_mesh", "MeshPlan", "Meshed"]
 

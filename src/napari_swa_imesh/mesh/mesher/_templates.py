@@ -18,10 +18,10 @@ import time
 
 import numpy as np
 
-from ._tree import RegionTree
+from ..model._quality import quality_data
 from . import _templates_luts as luts
 from ._packed import pack_points
-from ..model._quality import quality_data
+from ._tree import RegionTree
 
 __all__ = ["cut_leaves", "lattice", "mark_corners", "template_mesh", "template_quality"]
 
@@ -294,7 +294,7 @@ def _table_entries(d: int, hanging: np.ndarray, variant: np.ndarray, sited: np.n
     return sited[hit], pos[hit].astype(np.int64), sited[~hit]
 
 
-@functools.lru_cache(maxsize=None)
+@functools.cache
 def _new_points(d: int, variant: int, face: int, case: int) -> np.ndarray:
     """(k, d) local points of a face case that are neither corners nor sites present."""
     present = {tuple(luts.SITES[d][s]) for i, s in enumerate(luts.FACE_SITES[d][face]) if case >> i & 1}

@@ -72,7 +72,7 @@ class RegionTree:
     def __len__(self) -> int:
         return int(self.level.size)
 
-    def select(self, mask: np.ndarray) -> "RegionTree":
+    def select(self, mask: np.ndarray) -> RegionTree:
         """Return a tree holding only the leaves where `mask` is true."""
         return RegionTree(self.origin[mask], self.level[mask], self.label[mask],
                           self.shape, self.padded_shape, self.top_level)

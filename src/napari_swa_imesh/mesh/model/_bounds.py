@@ -25,8 +25,8 @@ import numpy as np
 
 from ..._validation import normalize_spacing
 from ..mesher import _templates_luts as luts
-from ._quality import dihedral_angles, radius_edge_ratio, signed_volumes, triangle_angles
 from ..mesher._templates import cut_leaves, template_quality
+from ._quality import dihedral_angles, radius_edge_ratio, signed_volumes, triangle_angles
 
 __all__ = ["format_lattice_bounds", "format_quality_table", "leaf_configurations",
            "quality_bounds", "quality_table"]
@@ -223,7 +223,7 @@ def _ranges(d: int, worst_of) -> dict[str, tuple[float, float]]:
     return out
 
 
-@functools.lru_cache(maxsize=None)
+@functools.cache
 def _bounds(d: int) -> tuple:
     rows = quality_table(d)
 

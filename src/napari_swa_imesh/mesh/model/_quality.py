@@ -91,7 +91,7 @@ def _corner_det(p: list) -> np.ndarray:
 
 
 def _edge_det(e: list) -> np.ndarray:
-    """det of the edge vectors ``e[k][a]`` (d = 2, 3), the closed form in their dtype."""
+    """Det of the edge vectors ``e[k][a]`` (d = 2, 3), the closed form in their dtype."""
     if len(e) == 2:
         return e[0][0] * e[1][1] - e[0][1] * e[1][0]
     return (e[0][0] * (e[1][1] * e[2][2] - e[1][2] * e[2][1])

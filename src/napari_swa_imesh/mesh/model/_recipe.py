@@ -130,7 +130,7 @@ class MadeLattice:
     leaf_origin: np.ndarray                 # (leaves of the balanced tree, d) lattice cells
 
     @classmethod
-    def record(cls, mesh, packed, leaf_origin: np.ndarray) -> "MadeLattice":
+    def record(cls, mesh, packed, leaf_origin: np.ndarray) -> MadeLattice:
         """The record of `mesh` as the mesher made it; its arrays become read-only."""
         small = leaf_origin.size == 0 or int(leaf_origin.max()) < 2**31
         held = (mesh.points, mesh.cells, mesh.cell_data["leaf"], mesh.cell_data["level"])

@@ -97,8 +97,8 @@ class Mesh:
     material_names: dict[int, str] = field(default_factory=dict)
     info: dict = field(default_factory=dict)
     world: np.ndarray | None = None
-    recipe: "Recipe | None" = field(default=None, init=False, compare=False)
-    made: "MadeLattice | None" = field(default=None, init=False, repr=False, compare=False)
+    recipe: Recipe | None = field(default=None, init=False, compare=False)
+    made: MadeLattice | None = field(default=None, init=False, repr=False, compare=False)
 
     def __setattr__(self, name, value):
         # after construction, a new array, spacing or shape is another mesh: what the
@@ -128,7 +128,7 @@ class Mesh:
 
     @classmethod
     def _trusted(cls, points, cells, material, cell_data, *, spacing, shape,
-                 material_names, info, world=None) -> "Mesh":
+                 material_names, info, world=None) -> Mesh:
         """A mesh from arrays the mesher made (already of the right dtypes and shapes)."""
         mesh = cls.__new__(cls)
         mesh.points, mesh.cells, mesh.material, mesh.cell_data = points, cells, material, cell_data
@@ -137,7 +137,7 @@ class Mesh:
         mesh.recipe = mesh.made = None
         return mesh
 
-    def with_material_names(self, names: dict[int, str]) -> "Mesh":
+    def with_material_names(self, names: dict[int, str]) -> Mesh:
         """The same mesh (the same arrays, recipe and record) with other material names.
 
         Examples
