@@ -40,8 +40,8 @@ Data:
 
 Reported: Dice per material and mean, wall time (fit + predict, seconds) and peak memory
 (tracemalloc: numpy/Python allocations of the run; for Atropos the growth of the child
-process's peak RSS, VmHWM). Last, the cost of the recommended method and of the RF on a 256^3 volume, each in a
-fresh process (peak RSS; the input alone is 64 MB).
+process's peak RSS, VmHWM). Last, the cost of the recommended method and of the RF on a
+256^3 volume, each in a fresh process (peak RSS; the input alone is 64 MB).
 """
 
 from __future__ import annotations
@@ -331,7 +331,8 @@ def phantom_tables(quick, rows, ants_python):
 COST = r"""
 import json, sys, time
 import numpy as np
-""" + PEAK_HELPERS + r"""image = np.load(sys.argv[1]); truth = np.load(sys.argv[2]); which = sys.argv[4]
+""" + PEAK_HELPERS + r"""image = np.load(sys.argv[1]); truth = np.load(sys.argv[2])
+which = sys.argv[4]
 from napari_swa_imesh.segmentation import load_samples, segment, dice_scores
 from skimage.feature import multiscale_basic_features
 from sklearn.ensemble import RandomForestClassifier

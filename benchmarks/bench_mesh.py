@@ -45,7 +45,8 @@ def brain_like(n: int, dim: int, seed: int = 0) -> np.ndarray:
     rough = np.zeros((n,) * dim, np.float32)
     for cells, amp in ((4, 0.06), (16, 0.025), (64, 0.012)):
         coarse = rng.standard_normal((min(cells, n),) * dim).astype(np.float32)
-        rough += amp * ndimage.zoom(coarse, n / coarse.shape[0], order=1)[tuple(slice(0, n) for _ in range(dim))]
+        rough += amp * ndimage.zoom(coarse, n / coarse.shape[0], order=1)[
+            tuple(slice(0, n) for _ in range(dim))]
     r += rough
     del rough
     labels = np.digitize(r, [0.45, 0.62, 0.75, 0.82, 0.92]).astype(np.uint8)
@@ -143,7 +144,8 @@ def pipeline_command(spec: dict) -> dict:
     wall = time.perf_counter() - t
     after = resource.getrusage(resource.RUSAGE_CHILDREN)
     cpu = (after.ru_utime + after.ru_stime) - (before.ru_utime + before.ru_stime)
-    out = {"seconds": wall, "cpu": cpu, "peak_mb": resource.getrusage(resource.RUSAGE_CHILDREN).ru_maxrss / 1024,
+    out = {"seconds": wall, "cpu": cpu,
+           "peak_mb": resource.getrusage(resource.RUSAGE_CHILDREN).ru_maxrss / 1024,
            "exit": res.returncode}
     if res.returncode in (0, 1):
         report = json.loads(res.stdout)
@@ -243,13 +245,16 @@ def _row(r: dict) -> str:
     angles = "-".join(f"{a:.1f}" for a in i["angle_range"])
     extra = ""
     if r["method"] == "delaunay":
-        extra = f"zero-vol {i['n_zero_volume']} of {i['n_delaunay_simplices']}, conforming {i['conforming']}"
+        extra = (f"zero-vol {i['n_zero_volume']} of {i['n_delaunay_simplices']}, "
+                 f"conforming {i['conforming']}")
     elif "checks_passed" in r:
-        extra = f"all checks {'pass' if r['checks_passed'] else 'FAIL'} ({r['check_seconds']:.1f} s)"
+        extra = (f"all checks {'pass' if r['checks_passed'] else 'FAIL'} "
+                 f"({r['check_seconds']:.1f} s)")
     return (f"| {shape} | {r['method']} | {i['balance']} | {i['n_leaves_tree']} / "
-            f"{i['n_leaves_face_balanced']} / {i['n_leaves_balanced']} | {i['n_vertices']} | {el} | "
-            f"{el / max(1, i['n_leaves_meshed']):.2f} | {steps} | {total:.2f} | {r['cpu']:.2f} | "
-            f"{el / total / 1e6:.2f} | {r['peak_rss_mb']:.0f} | {i['worst_ratio']:.4f} | {angles} | {extra} |")
+            f"{i['n_leaves_face_balanced']} / {i['n_leaves_balanced']} | {i['n_vertices']} | "
+            f"{el} | {el / max(1, i['n_leaves_meshed']):.2f} | {steps} | {total:.2f} | "
+            f"{r['cpu']:.2f} | {el / total / 1e6:.2f} | {r['peak_rss_mb']:.0f} | "
+            f"{i['worst_ratio']:.4f} | {angles} | {extra} |")
 
 
 def main(argv=None) -> int:

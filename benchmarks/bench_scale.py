@@ -259,7 +259,8 @@ def bench_fit(work: Path, truth, corner, memory: str) -> None:
     line = f"  its labels against the truth: {100 * float((mine == real).mean()):.2f} %"
     if (work / "big_labels.zarr").exists():
         other = zarr.open_array(str(work / "big_labels.zarr"), mode="r")[sub]
-        line += (f"; against the box-fitted model's labels {100 * float((mine == other).mean()):.2f} %"
+        line += ("; against the box-fitted model's labels "
+                 f"{100 * float((mine == other).mean()):.2f} %"
                  f" (that model against the truth {100 * float((other == real).mean()):.2f} %)")
     print(line + f" (every {step}th voxel)")
 

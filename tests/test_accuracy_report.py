@@ -8,7 +8,7 @@ from pathlib import Path
 
 BENCH = Path(__file__).resolve().parents[1] / "benchmarks"
 sys.path.insert(0, str(BENCH))
-import accuracy_report as R
+import accuracy_report as R  # noqa: E402 (benchmarks/ is put on sys.path just above)
 
 NAMES = ["recommended", "bias off", R.PEER]
 

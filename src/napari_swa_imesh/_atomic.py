@@ -333,17 +333,17 @@ def atomic_write(paths: Sequence, *, force: bool = False,
     if len({t.resolve() for t in targets}) != len(targets):
         raise ValueError(f"two outputs name the same file ({', '.join(map(str, targets))}); "
                          "give each output its own name.")
-    folders: dict[Path, Path] = {}
+    temp_dirs: dict[Path, Path] = {}
     temps: list[Path] = []
     prefix = _temp_prefix()
     parent = Path(".")
     try:
         for t in targets:
             parent = (t.parent if str(t.parent) else Path(".")).resolve()
-            if parent not in folders:
+            if parent not in temp_dirs:
                 remove_stale_temporaries(parent)
-                folders[parent] = Path(tempfile.mkdtemp(prefix=prefix, dir=parent))
-            temps.append(folders[parent] / t.name)
+                temp_dirs[parent] = Path(tempfile.mkdtemp(prefix=prefix, dir=parent))
+            temps.append(temp_dirs[parent] / t.name)
         yield temps
         missing = [str(t) for t, tmp in zip(targets, temps)
                    if not (tmp.is_dir() if is_store(t) or t in as_folder else tmp.is_file())]
@@ -355,12 +355,12 @@ def atomic_write(paths: Sequence, *, force: bool = False,
         with _signals_held():
             _publish(temps, targets, force)
     except Exception as exc:
-        if isinstance(exc, FileExistsError) or not _disk_full(exc, folders):
+        if isinstance(exc, FileExistsError) or not _disk_full(exc, temp_dirs):
             raise
-        full = next((p for p, f in folders.items() if _size(f)), parent)
-        raise _full_error(full, folders.get(full)) from exc
+        full = next((p for p, f in temp_dirs.items() if _size(f)), parent)
+        raise _full_error(full, temp_dirs.get(full)) from exc
     finally:
-        for folder in folders.values():
+        for folder in temp_dirs.values():
             shutil.rmtree(folder, ignore_errors=True)
 
 

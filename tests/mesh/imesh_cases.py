@@ -37,7 +37,8 @@ def thin(shape, seed: int) -> np.ndarray:
 
 def cases(dim: int):
     """(name, labels) pairs: several materials, thin structures, one material, non-dyadic."""
-    shapes = {2: [(16, 16), (23, 37), (5, 64), (33, 17)], 3: [(8, 8, 8), (11, 14, 9), (16, 5, 12)]}[dim]
+    shapes = {2: [(16, 16), (23, 37), (5, 64), (33, 17)],
+              3: [(8, 8, 8), (11, 14, 9), (16, 5, 12)]}[dim]
     out = []
     for k, shape in enumerate(shapes):
         out.append((f"blobs3-{shape}", blobs(shape, 3, seed=k)))

@@ -41,7 +41,8 @@ def _naive_balance(tree: RegionTree, connectivity: int) -> np.ndarray:
 
 
 @pytest.mark.parametrize("connectivity", [1, 2, 3])
-@pytest.mark.parametrize("shape,seed", [((16, 16), 0), ((13, 20), 1), ((8, 8, 8), 2), ((9, 7, 12), 3)])
+@pytest.mark.parametrize("shape,seed",
+                         [((16, 16), 0), ((13, 20), 1), ((8, 8, 8), 2), ((9, 7, 12), 3)])
 def test_balanced_and_minimal(shape, seed, connectivity):
     d = len(shape)
     if connectivity > d:

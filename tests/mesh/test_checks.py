@@ -55,7 +55,8 @@ def test_overlapping_elements_fail():
     from napari_swa_imesh.mesh.model._types import Mesh
 
     points = np.array([[0.0, 0], [1, 0], [0, 1], [1, 1]])
-    good = Mesh(points, np.array([[0, 1, 3], [0, 3, 2]]), np.array([1, 1]), spacing=(1.0, 1.0), shape=(1, 1))
+    good = Mesh(points, np.array([[0, 1, 3], [0, 3, 2]]), np.array([1, 1]), spacing=(1.0, 1.0),
+                shape=(1, 1))
     assert check_mesh(good, np.ones((1, 1), int))["all_passed"]
     # both triangles on the same side of their shared edge (0, 1)
     bad = dataclasses.replace(good, cells=np.array([[0, 1, 3], [0, 1, 2]]))

@@ -103,4 +103,5 @@ def test_paired_facets_match_counting_in_every_pass_plan(monkeypatch, shape, pas
         pairs = seen[f]
         assert own[0] == pairs[0][0] and opp[0] == pairs[0][1]
         assert own[1:] == ([pairs[1][0]] if len(pairs) == 2 else [-1])
-    np.testing.assert_array_equal(facets, cells[owners[:, 0, None], FACE_CORNERS[d][opposite[:, 0]]])
+    np.testing.assert_array_equal(facets,
+                                  cells[owners[:, 0, None], FACE_CORNERS[d][opposite[:, 0]]])

@@ -53,9 +53,11 @@ def test_spacing_places_points_in_physical_units(spacing):
     scaled = mesh_labels(lab, spacing=spacing, subdivide=False)
     np.testing.assert_allclose(scaled.points, plain.points * np.broadcast_to(spacing, (2,)))
     np.testing.assert_array_equal(scaled.cells, plain.cells)
-    assert scaled.points.max(axis=0) == pytest.approx(np.array(lab.shape) * np.broadcast_to(spacing, (2,)))
+    assert scaled.points.max(axis=0) == pytest.approx(
+        np.array(lab.shape) * np.broadcast_to(spacing, (2,)))
     assert check_mesh(scaled, lab)["all_passed"]
-    np.testing.assert_allclose(scaled.quality, radius_edge_ratio(scaled.points, scaled.cells), rtol=1e-9)
+    np.testing.assert_allclose(scaled.quality, radius_edge_ratio(scaled.points, scaled.cells),
+                               rtol=1e-9)
 
 
 def test_coarse_inside_fine_at_boundaries():
@@ -79,7 +81,8 @@ def test_info_counts():
     assert "face_balance_count" not in info["seconds"]
     full = mesh_tree(build_tree(lab), report_face_balance=True).info
     assert info["n_leaves_tree"] <= full["n_leaves_face_balanced"] <= info["n_leaves_balanced"]
-    assert full["balance_extra_leaves"] == info["n_leaves_balanced"] - full["n_leaves_face_balanced"]
+    assert (full["balance_extra_leaves"]
+            == info["n_leaves_balanced"] - full["n_leaves_face_balanced"])
     assert mesh_labels(lab[0]).info["n_leaves_face_balanced"] == mesh_labels(lab[0]).info[
         "n_leaves_balanced"]  # 2-D: the balance used is the face balance
     assert info["worst_ratio"] == pytest.approx(mesh.quality.max())

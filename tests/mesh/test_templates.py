@@ -65,7 +65,8 @@ def test_shared_faces_are_cut_the_same_from_both_sides(d, v):
         shift[axis] = 2
         for case in _valid_cases(d, f, v):
             # the face's sites, in the same bit order seen from the neighbour below
-            mine = {tuple(luts.SITES[d][s]) for i, s in enumerate(luts.FACE_SITES[d][f]) if case >> i & 1}
+            mine = {tuple(luts.SITES[d][s])
+                    for i, s in enumerate(luts.FACE_SITES[d][f]) if case >> i & 1}
             theirs = 0
             for i, s in enumerate(luts.FACE_SITES[d][g]):
                 if tuple(luts.SITES[d][s] - shift) in mine:
@@ -102,7 +103,8 @@ def test_parity_rule_is_the_even_corner_diagonal():
     for f, (axis, side) in enumerate(luts.FACES[3]):
         for v in (1, 2):
             for tri in _facets_on(luts.FACE_LUT[3][v][f][0], axis, side):
-                shared = set(tri) & set(next(iter(_facets_on(luts.FACE_LUT[3][v][f][0], axis, side) - {tri})))
+                others = _facets_on(luts.FACE_LUT[3][v][f][0], axis, side) - {tri}
+                shared = set(tri) & set(next(iter(others)))
                 assert all((sum(c) // 2 + v - 1) % 2 == 0 for c in shared), (f, v)
             full = (1 << len(luts.FACE_SITES[3][f])) - 1
             for tri in _facets_on(luts.FACE_LUT[3][v][f][full], axis, side):
@@ -143,9 +145,11 @@ def test_quality_table_3d_bound():
     worst = max(r["radius_edge_ratio"] for r in rows)
     assert worst == pytest.approx(math.sqrt(5) / 2)
     assert worst < math.sqrt(29) / 4
-    assert min(r["min_dihedral"] for r in rows) == pytest.approx(math.degrees(math.atan(1 / math.sqrt(2))))
+    assert min(r["min_dihedral"] for r in rows) == pytest.approx(
+        math.degrees(math.atan(1 / math.sqrt(2))))
     # 90 + arctan(1/sqrt(2)): the fan simplex over a face corner
-    assert max(r["max_dihedral"] for r in rows) == pytest.approx(90 + math.degrees(math.atan(1 / math.sqrt(2))))
+    assert max(r["max_dihedral"] for r in rows) == pytest.approx(
+        90 + math.degrees(math.atan(1 / math.sqrt(2))))
     text = format_quality_table(rows)
     assert "dihedral angles in [35.264, 125.264] deg" in text
     assert len(text.splitlines()) == len(rows) + 4

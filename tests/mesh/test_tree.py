@@ -1,4 +1,5 @@
-"""Region tree properties the mesher relies on (the tree is the mesher's own, in mesh/mesher/_tree.py)."""
+"""Region tree properties the mesher relies on (the tree is the mesher's own, in
+mesh/mesher/_tree.py)."""
 
 import numpy as np
 import pytest

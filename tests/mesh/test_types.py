@@ -30,7 +30,8 @@ def test_arrays_are_normalised_without_copying_what_fits():
     ({"cells": np.array([[0.0, 1, 2]])}, TypeError, "integer vertex ids"),
     ({"material": np.array([1, 2])}, ValueError, r"one id per element \(1\)"),
     ({"material": np.array([1.5])}, TypeError, "material must hold integer ids"),
-    ({"cell_data": {"quality": np.ones(2)}}, ValueError, r"cell_data\['quality'\] must hold one value"),
+    ({"cell_data": {"quality": np.ones(2)}}, ValueError,
+     r"cell_data\['quality'\] must hold one value"),
     ({"spacing": (1.0, 1.0, 1.0)}, ValueError, "spacing must be empty or hold 2 values"),
 ])
 def test_bad_arrays_are_refused(change, error, match):

@@ -50,5 +50,6 @@ def test_h5_holds_the_mesh_once_under_meshios_names(tmp_path):
     write_mesh(mesh, tmp_path / "m.xdmf", facet_groups="none")
     with h5py.File(tmp_path / "m.h5", "r") as h5:
         assert sorted(h5) == sorted(f"data{k}" for k in range(3 + len(mesh.cell_data)))
-        assert h5["data1"].shape == (mesh.n_cells, 4) and h5["data1"].compression == "gzip" and h5["data1"].shuffle
+        assert (h5["data1"].shape == (mesh.n_cells, 4) and h5["data1"].compression == "gzip"
+                and h5["data1"].shuffle)
     assert "m.h5:/data1" in (tmp_path / "m.xdmf").read_text()

@@ -5,10 +5,10 @@ The reported case: a new user docked the workflow and the four step widgets, nap
 2363 px on a 1024-px screen, the canvas became a 230-px strip, and napari kept that size at
 the next start. A dock's minimum height adds to the window's, so each dock must be able to
 shrink well below a 1080-px screen, and all five docked together must still fit an 800x600
-screen (the tests' Xvfb screen is now a 1280x800 laptop's: test_laptop_screen.py). Measured before the docks scrolled: minimum heights of
-585, 328, 682 and 595 px for the four step docks, and the window grew from 630 to 2376 px;
-now every dock (the Simulate dock too) can shrink to 68-95 px and the window keeps its
-size.
+screen (the tests' Xvfb screen is now a 1280x800 laptop's: test_laptop_screen.py).
+Measured before the docks scrolled: minimum heights of 585, 328, 682 and 595 px for the
+four step docks, and the window grew from 630 to 2376 px; now every dock (the Simulate
+dock too) can shrink to 68-95 px and the window keeps its size.
 """
 
 import pytest

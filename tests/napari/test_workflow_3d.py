@@ -2,9 +2,9 @@
 -> export, with every output placed in physical units.
 
 Dice thresholds: 8 samples per material from the truth (4-voxel boxes: the suggested RES
-is 1, where the recommended method's windows fit; the statistics settle at 2) measured Dice 0.954 (CSF), 0.757 (grey matter: a shell about two tiles
-thick, so tile staircasing costs the most there) and 0.897 (white matter). The thresholds
-sit a few points below.
+is 1, where the recommended method's windows fit; the statistics settle at 2) measured
+Dice 0.954 (CSF), 0.757 (grey matter: a shell about two tiles thick, so tile staircasing
+costs the most there) and 0.897 (white matter). The thresholds sit a few points below.
 """
 
 import numpy as np

@@ -33,7 +33,8 @@ def _brute_acf(tile: np.ndarray, valid: np.ndarray, axis: int, max_lag: int) -> 
     return np.array(acf) / acf[0]
 
 
-@pytest.mark.parametrize("shape, scale", [((13, 22), 2), ((16, 16), 3), ((9, 7, 12), 2), ((5, 4, 6, 7), 2)],
+@pytest.mark.parametrize("shape, scale",
+                         [((13, 22), 2), ((16, 16), 3), ((9, 7, 12), 2), ((5, 4, 6, 7), 2)],
                          ids=str)
 @pytest.mark.parametrize("with_mask", [False, True])
 def test_acf_matches_explicit_loop(shape, scale, with_mask):

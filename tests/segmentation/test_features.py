@@ -39,7 +39,8 @@ def test_every_set_matches_its_groups(shape, feature_set):
     grid = tuple(math.ceil(s / 2**scale) for s in shape)
     assert features.shape == grid + (n_features(feature_set, len(shape), scale),)
     assert features.dtype == np.float64 and counts.dtype == np.int64
-    assert names == feature_names(feature_set, len(shape), scale) and len(names) == features.shape[-1]
+    assert (names == feature_names(feature_set, len(shape), scale)
+            and len(names) == features.shape[-1])
 
     moments, expected_counts = tile_moments(image, scale, mask=mask)
     np.testing.assert_array_equal(counts, expected_counts)

@@ -43,7 +43,8 @@ def test_marked_refinement_is_a_conforming_exact_mesh_within_its_bound(d, seed, 
     voxel = float(np.prod(spacing[:d]))
     corners = fine.points[fine.cells]
     edges = corners[:, 1:] - corners[:, :1]
-    volumes = np.bincount(fine.material, weights=np.abs(np.linalg.det(edges)) / (2 if d == 2 else 6))
+    volumes = np.bincount(fine.material,
+                          weights=np.abs(np.linalg.det(edges)) / (2 if d == 2 else 6))
     np.testing.assert_allclose(volumes[1:], np.bincount(labels.ravel())[1:] * voxel, rtol=1e-9)
     bound = quality_bounds(d, spacing[:d])["quality"][1]
     assert fine.quality.max() <= bound * (1 + 1e-9)

@@ -67,10 +67,10 @@ def bound_range(ndim: int, spacing: tuple[float, ...] = (), subdivide: bool = Tr
     From the regular simplex (the best any element can be) to the worst template simplex
     stretched by the lattice cells the mesher cuts voxels of `spacing` into
     (:func:`napari_swa_imesh.mesh.quality_bounds`; the voxels themselves with
-    ``subdivide=False``; cells of residual aspect at most `max_aspect`): for cubic cells the proven bound of
-    :func:`~napari_swa_imesh.mesh.quality_table`, which meshes every leaf configuration
-    with the mesher's own templates, not a number copied here. About 1.5 s in 3-D the
-    first time, so call it in a worker first; it is cached.
+    ``subdivide=False``; cells of residual aspect at most `max_aspect`): for cubic cells
+    the proven bound of :func:`~napari_swa_imesh.mesh.quality_table`, which meshes every
+    leaf configuration with the mesher's own templates, not a number copied here. About
+    1.5 s in 3-D the first time, so call it in a worker first; it is cached.
     """
     return quality_bounds(ndim, spacing or None, subdivide=subdivide,
                           max_aspect=max_aspect if subdivide else None)["quality"]

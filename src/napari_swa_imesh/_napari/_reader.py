@@ -40,7 +40,8 @@ from ._layers import AFFINE_KEY
 
 __all__ = ["get_nifti_reader", "read_nifti", "napari_placement", "looks_like_labels",
            "LABEL_WORDS", "MAX_LABELS", "get_tiff_reader", "read_tiff", "get_mesh_reader",
-           "read_mesh_layer", "MESH_READ_SUFFIXES"]
+           "read_mesh_layer",
+           "MESH_READ_SUFFIXES"]  # noqa: F822 (defined lazily by the module __getattr__ below)
 
 
 def __getattr__(name: str):

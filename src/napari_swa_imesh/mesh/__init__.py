@@ -59,7 +59,8 @@ from .model._types import Mesh
 from .model._world import voxel_sizes, world_from_affine
 
 __all__ = [
-    "FacetGroup", "facet_groups", "write_mesh_vtu", "Mesh", "balance_tree", "mesh_labels", "mesh_tree", "check_mesh", "MeshChecks",
+    "FacetGroup", "facet_groups", "write_mesh_vtu", "Mesh", "balance_tree", "mesh_labels",
+    "mesh_tree", "check_mesh", "MeshChecks",
     "rasterize_materials", "QUALITY_METRICS", "dihedral_angles", "max_angle", "min_angle",
     "radius_edge_ratio", "signed_volumes", "quality_bounds", "quality_table",
     "format_quality_table", "read_mesh", "to_meshio", "write_mesh", "estimate_mesh_memory",

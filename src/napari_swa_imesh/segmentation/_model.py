@@ -161,7 +161,9 @@ class SWAModel(SegmentationModel):
         return feats, counts
 
     def classify_features(self, feats: np.ndarray) -> np.ndarray:
-        """Labels (int32, int64 for labels >= 2^31; tile grid shape) of tile features from :meth:`tile_features`."""
+        """Labels (int32, int64 for labels >= 2^31; tile grid shape) of tile features from
+        :meth:`tile_features`.
+        """
         tiles = feats.reshape(-1, feats.shape[-1])
         # partial tiles at the far edge get features from their valid pixels; a non-finite
         # feature (e.g. a one-pixel sliver's skewness) is replaced by the training mean so

@@ -102,7 +102,8 @@ class SegmentationModel:
 
     def _common_meta(self) -> dict:
         """The ``meta`` entries both models write."""
-        return {"version": __version__, "method": self.method, "ndim": self.ndim, "spacing": self.spacing,
+        return {"version": __version__, "method": self.method, "ndim": self.ndim,
+                "spacing": self.spacing,
                 "materials": [{"label": m.label, "name": m.name, "color": m.color}
                               for m in self.materials]}
 

@@ -61,7 +61,8 @@ class ResStatistics:
 
     Parameters
     ----------
-    scales, materials, names, mean, std, min, max, n_tiles, ndim, suggested_scale, material_res, reason, method
+    scales, materials, names, mean, std, min, max, n_tiles, ndim, suggested_scale, \
+material_res, reason, method
         The attributes below, in this order.
 
     Attributes

@@ -193,7 +193,8 @@ def multiscale_features(image, max_scale: int, coherence: bool = True
         out[..., c + 1] = 0.5 * np.log(np.maximum(var, LOG_FLOOR))
         c += 2
         for k in range(j):
-            out[..., c] = 0.5 * np.log(np.maximum(ndi.uniform_filter(energies[k], w, mode="reflect"), LOG_FLOOR))
+            out[..., c] = 0.5 * np.log(np.maximum(
+                ndi.uniform_filter(energies[k], w, mode="reflect"), LOG_FLOOR))
             c += 1
         c += len(coherence_pairs(j)) if coherence else 0
     del energies

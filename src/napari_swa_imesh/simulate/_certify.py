@@ -25,14 +25,14 @@ CERTIFY_UNKNOWNS = {2: 1_200_000, 3: 300_000}
 
 def check_gap(gap) -> float:
     """The interval's target relative width, or ValueError."""
-    if isinstance(gap, bool) or not isinstance(gap, Real) or not gap > 0:
+    if isinstance(gap, bool) or not isinstance(gap, Real) or not gap > 0:  # type: ignore[operator]
         raise ValueError(f"gap must be a positive relative width (0.02 for 2 %; inf never "
                          f"refines), not {gap!r}.")
     return float(gap)
 
 
 def check_memory_budget(memory) -> None:
-    if isinstance(memory, bool) or not isinstance(memory, Real) or not memory > 0:
+    if isinstance(memory, bool) or not isinstance(memory, Real) or not memory > 0:  # type: ignore[operator]
         raise ValueError(f"memory must be a positive number of bytes, not {memory!r}.")
 
 

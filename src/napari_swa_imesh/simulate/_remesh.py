@@ -88,13 +88,14 @@ def remesh(mesh: Mesh, labels, *, refine: int, periodic: bool) -> Mesh:
         raise ValueError(f"the labels are {labels.shape} but the mesh was made from "
                          f"{tuple(mesh.shape)} labels; give the label image of this mesh.")
     subdivided = recipe is not None and recipe.subdivided
+    lattice = None if recipe is None else recipe.lattice   # set whenever subdivided
     new = mesh_labels(labels, method="template" if recipe is None else recipe.method,
                       exclude=() if recipe is None else recipe.exclude,
                       spacing=mesh.spacing or None,
                       material_names=dict(mesh.material_names), refine=refine,
                       max_size=None if recipe is None else recipe.max_size,
                       subdivide=subdivided,
-                      max_aspect=recipe.lattice.max_aspect if subdivided else None,
+                      max_aspect=lattice.max_aspect if subdivided and lattice is not None else None,
                       periodic=periodic)
     old_volumes, new_volumes = _material_volumes(mesh), _material_volumes(new)
     same = old_volumes.keys() == new_volumes.keys() and all(

@@ -158,7 +158,7 @@ def _estimate_indices(count: int) -> list[int]:
 def _error_warnings(estimate: ErrorEstimate, plan, record, order: int,
                     from_mesh: bool) -> list[str]:
     """One sentence per way the run may miss its asked error."""
-    out = []
+    out: list[str] = []
     if estimate.jump == 0:
         return out
     worst = estimate.relative()

@@ -228,11 +228,11 @@ class SpaceEstimator:
         basis = fe_basis(mesh, 2)
         self.mass = mass_matrix(mass_basis(basis), capacity_per_cell)
         lo, hi = mesh.image_box()
-        parts = [face_dofs(basis.doflocs, lo, hi, face) for face in fixed]
-        self.fixed = np.concatenate(parts) if parts else np.zeros(0, dtype=np.intp)
+        face_parts = [face_dofs(basis.doflocs, lo, hi, face) for face in fixed]
+        self.fixed = np.concatenate(face_parts) if face_parts else np.zeros(0, dtype=np.intp)
         self.values = (np.concatenate([np.full(p.size, float(fixed[f]))
-                                       for f, p in zip(fixed, parts)])
-                       if parts else np.zeros(0))
+                                       for f, p in zip(fixed, face_parts)])
+                       if face_parts else np.zeros(0))
         # a part touching no fixed value floats: pin one dof of it, and afterwards shift
         # the part so that its amount is the P1 field's (the reconstruction keeps it)
         parts = connected_parts(stiffness)

@@ -486,7 +486,9 @@ def assemble(pieces: list[Piece], plan: BlockPlan, spacing=None):
         offsets.append(offsets[-1] + len(p.cells))
     merged = {n: (np.concatenate([f for f, _ in v]), np.concatenate([o for _, o in v]))
               for n, v in groups.items()}
-    cat = (lambda xs, w: np.concatenate(xs) if xs else np.zeros((0,) * w))
-    return (pts * spacing, cat(cells, 2).astype(np.intp) if cells else np.zeros((0, d + 1), np.intp),
+    def cat(xs, w):
+        return np.concatenate(xs) if xs else np.zeros((0,) * w)
+    return (pts * spacing,
+            cat(cells, 2).astype(np.intp) if cells else np.zeros((0, d + 1), np.intp),
             cat(mats, 1).astype(np.int64) if mats else np.zeros(0, np.int64),
             cat(qual, 1) if qual else np.zeros(0), merged)

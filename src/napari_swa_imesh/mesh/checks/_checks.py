@@ -178,7 +178,8 @@ def _rasterize(points: np.ndarray, cells: np.ndarray, material: np.ndarray, shap
                 inv = _inv(edges[e])
                 pix = lo[e, None, :] + offsets[None]  # (n, box, d)
                 inbox = (pix <= hi[e, None, :]).all(axis=-1)
-                lam = np.einsum("nkd,nde->nke", pix + 0.5 - p[e, None, 0, :], inv)  # barycentric 1..d
+                # barycentric 1..d
+                lam = np.einsum("nkd,nde->nke", pix + 0.5 - p[e, None, 0, :], inv)
                 inside = inbox & (lam >= -_TOL).all(axis=-1) & (lam.sum(axis=-1) <= 1 + _TOL)
                 which, k = np.nonzero(inside)
                 flat = np.ravel_multi_index(tuple(pix[which, k].T), shape)
@@ -287,12 +288,13 @@ def check_mesh(mesh: Mesh, labels, *, exclude=(), tree: RegionTree | None = None
     lab = as_labels(labels, min_ndim=2, max_ndim=3)
     d = lab.ndim
     if mesh.ndim != d:
-        raise ValueError(f"a {d}-D label image needs a {d}-D mesh of {d + 1}-vertex cells; got points "
-                         f"{mesh.points.shape} and cells {mesh.cells.shape}.")
-    exclude_arr = np.asarray(list(exclude) if not np.isscalar(exclude) else [exclude], dtype=np.int64)
+        raise ValueError(f"a {d}-D label image needs a {d}-D mesh of {d + 1}-vertex cells; "
+                         f"got points {mesh.points.shape} and cells {mesh.cells.shape}.")
+    exclude_arr = np.asarray([exclude] if np.isscalar(exclude) else list(exclude), dtype=np.int64)
     if tree is not None:
         if not isinstance(tree, RegionTree):
-            raise TypeError(f"tree must be a RegionTree (from build_tree); got {type(tree).__name__}.")
+            raise TypeError("tree must be a RegionTree (from build_tree); "
+                            f"got {type(tree).__name__}.")
         multiple = len(tree.shape) == lab.ndim and all(
             t % n == 0 for t, n in zip(tree.shape, lab.shape))
         if not multiple:

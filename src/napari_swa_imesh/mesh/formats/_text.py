@@ -70,7 +70,7 @@ def _digits8(x: np.ndarray, blank: bool = True) -> np.ndarray:
 
 
 def int_rows(block: np.ndarray, sep: bytes = b" ") -> bytes | None:
-    """Lines of the integers of `block` (n, k), fields joined by `sep`, or None when a
+    r"""Lines of the integers of `block` (n, k), fields joined by `sep`, or None when a
     value is negative or has more than 16 digits.
 
     Each column is right-aligned, with blanks, to the digits of its largest value in the
@@ -79,7 +79,7 @@ def int_rows(block: np.ndarray, sep: bytes = b" ") -> bytes | None:
     Examples
     --------
     >>> int_rows(np.array([[1, 20], [300, 4]]), b", ")
-    b'  1, 20\\n300,  4\\n'
+    b'  1, 20\n300,  4\n'
     """
     block = np.asarray(block)
     n, k = block.shape
@@ -120,7 +120,7 @@ def int_rows(block: np.ndarray, sep: bytes = b" ") -> bytes | None:
 
 
 def sci_rows(ids: np.ndarray, values: np.ndarray, sep: bytes = b", ") -> bytes | None:
-    """Lines ``<id><sep><value><sep>...`` with every value in scientific notation with 13
+    r"""Lines ``<id><sep><value><sep>...`` with every value in scientific notation with 13
     significant digits (as ``%.12e``, the last digit within one unit), or None when a
     value is not finite, or nonzero outside 1e-30 .. 1e30, or an id is not writable by
     :func:`int_rows`.
@@ -131,7 +131,7 @@ def sci_rows(ids: np.ndarray, values: np.ndarray, sep: bytes = b", ") -> bytes |
     Examples
     --------
     >>> sci_rows(np.array([1]), np.array([[0.5, -1250.0, 0.0]]))
-    b'1,  5.000000000000e-01, -1.250000000000e+03,  0.000000000000e+00\\n'
+    b'1,  5.000000000000e-01, -1.250000000000e+03,  0.000000000000e+00\n'
     """
     ids = np.asarray(ids).reshape(-1, 1)
     values = np.asarray(values, dtype=np.float64)
@@ -170,10 +170,10 @@ def sci_rows(ids: np.ndarray, values: np.ndarray, sep: bytes = b", ") -> bytes |
     out["esign"] = np.where(exp < 0, ord("-"), ord("+"))
     e = np.abs(exp)
     out["exp"] = ((e // 10) + 0x30) | ((e % 10 + 0x30) << 8)
-    line = np.dtype([("id", "S%d" % (len(head) // n - 1)), ("values", record, (k,)),
+    line = np.dtype([("id", f"S{len(head) // n - 1}"), ("values", record, (k,)),
                      ("end", "S1")])
     rows = np.empty(n, dtype=line)
-    rows["id"] = np.frombuffer(head, dtype="S%d" % (len(head) // n))
+    rows["id"] = np.frombuffer(head, dtype=f"S{len(head) // n}")
     rows["values"] = out.reshape(n, k)
     rows["end"] = b"\n"
     return rows.tobytes()

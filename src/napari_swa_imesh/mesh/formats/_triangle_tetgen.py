@@ -110,8 +110,8 @@ def write_rows(fh, ints: np.ndarray, floats: np.ndarray | None = None, *, sep: s
 
 
 def _write_bytes(fh, data: bytes, binary: bool) -> None:
-    """`data` (ASCII) to `fh`: as it is to a binary file, else to the bytes under a text
-    file (flushed first, so the order holds; the writers open theirs with ``newline="\\n"``
+    r"""`data` (ASCII) to `fh`: as it is to a binary file, else to the bytes under a text
+    file (flushed first, so the order holds; the writers open theirs with ``newline="\n"``
     so that both parts end lines alike on every platform), else decoded."""
     if binary:
         fh.write(data)

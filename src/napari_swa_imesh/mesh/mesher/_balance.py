@@ -185,7 +185,9 @@ def balance_violations(tree: RegionTree, *, connectivity: int = 1) -> int:
         nonzero = int(np.count_nonzero(step))
         if nonzero == 0 or nonzero > connectivity or tuple(step) < (0,) * d:
             continue
-        a = level_map[tuple(slice(max(0, -s), n - max(0, s)) for s, n in zip(step, level_map.shape))]
-        b = level_map[tuple(slice(max(0, s), n - max(0, -s)) for s, n in zip(step, level_map.shape))]
+        a = level_map[tuple(slice(max(0, -s), n - max(0, s))
+                            for s, n in zip(step, level_map.shape))]
+        b = level_map[tuple(slice(max(0, s), n - max(0, -s))
+                            for s, n in zip(step, level_map.shape))]
         count += int(np.count_nonzero(np.abs(a - b) > 1))
     return count

@@ -110,11 +110,11 @@ def mesh_labels(labels, *, method: str = "template", exclude=(), spacing=None,
     Mesh
         ``points (N, d) float64`` in physical units, ``cells (M, d+1) intp`` positively
         oriented, ``material (M,) int64``, ``cell_data`` with ``quality`` (radius-to-edge),
-        ``level`` and ``leaf`` (index of the balanced leaf), and ``min_angle``/``max_angle`` (2-D) or
-        ``min_dihedral``/``max_dihedral`` (3-D) in degrees; ``recipe`` says how it was
-        made (:class:`~._recipe.Recipe`: method, exclusions, lattice, size cap, periodic
-        faces, coarsening); ``info`` holds counts, the worst ratio, the angle range and
-        seconds per step.
+        ``level`` and ``leaf`` (index of the balanced leaf), and
+        ``min_angle``/``max_angle`` (2-D) or ``min_dihedral``/``max_dihedral`` (3-D) in
+        degrees; ``recipe`` says how it was made (:class:`~._recipe.Recipe`: method,
+        exclusions, lattice, size cap, periodic faces, coarsening); ``info`` holds counts,
+        the worst ratio, the angle range and seconds per step.
 
     Notes
     -----
@@ -332,7 +332,8 @@ def mesh_tree(tree: RegionTree, *, method: str = "template", exclude=(), spacing
     if connectivity is not None and connectivity not in range(1, d + 1):
         raise ValueError(f"connectivity must be 1..{d} for a {d}-D tree; got {connectivity!r}.")
     if method == "template" and connectivity is not None and connectivity < d - 1:
-        raise ValueError(f"templates need balance across faces and edges (connectivity >= {d - 1}).")
+        raise ValueError("templates need balance across faces and edges "
+                         f"(connectivity >= {d - 1}).")
     return _mesh_tree(tree, method=method, exclude=_exclude_array(exclude),
                       spacing=normalize_spacing(spacing, d), material_names=_names(material_names),
                       connectivity=connectivity, report_face_balance=bool(report_face_balance),

@@ -47,9 +47,9 @@ from ._subdivision import (
 )
 from ._tree import PAD_LABEL, RegionTree, _build_tree
 
-__all__ = ["ASPECT_LIMIT", "MAX_FACTOR", "MAX_REFINE", "RATIO_TOLERANCE", "Lattice", "aspect_bounds", "aspect_table",
-           "check_max_aspect", "choose_lattice", "labels_on_lattice", "lattice_choices",
-           "lattice_tree", "subdivision_factors"]
+__all__ = ["ASPECT_LIMIT", "MAX_FACTOR", "MAX_REFINE", "RATIO_TOLERANCE", "Lattice",
+           "aspect_bounds", "aspect_table", "check_max_aspect", "choose_lattice",
+           "labels_on_lattice", "lattice_choices", "lattice_tree", "subdivision_factors"]
 
 #: Largest interface refinement level: 2**-4 voxels (4096 cells per voxel in 3-D).
 MAX_REFINE = 4

@@ -94,7 +94,8 @@ def template_mesh(bal: RegionTree, meshed: np.ndarray, *, rule: str = "parity"):
         raise ValueError(f"rule must be 'parity' or 'lowest'; got {rule!r}.")
     # the points elements use: corners of meshed leaves, the sites they carry, and the
     # new points of the templates (marked without scattering every element's keys)
-    used = is_vertex if meshed.sum() == bal.inside.sum() else mark_corners(bal, meshed, shape, strides)
+    used = (is_vertex if meshed.sum() == bal.inside.sum()
+            else mark_corners(bal, meshed, shape, strides))
     used[site_of_coarse[hanging[coarse]]] = True
     del site_of_coarse
     seconds["vertices"] = time.perf_counter() - t
@@ -297,7 +298,8 @@ def _table_entries(d: int, hanging: np.ndarray, variant: np.ndarray, sited: np.n
 @functools.cache
 def _new_points(d: int, variant: int, face: int, case: int) -> np.ndarray:
     """(k, d) local points of a face case that are neither corners nor sites present."""
-    present = {tuple(luts.SITES[d][s]) for i, s in enumerate(luts.FACE_SITES[d][face]) if case >> i & 1}
+    present = {tuple(luts.SITES[d][s])
+               for i, s in enumerate(luts.FACE_SITES[d][face]) if case >> i & 1}
     pts = {tuple(p) for p in luts.FACE_LUT[d][variant][face][case].reshape(-1, d).tolist()}
     new = [p for p in sorted(pts) if p not in present and any(c == 1 for c in p)]
     return np.array(new, dtype=np.int64).reshape(-1, d)

@@ -34,7 +34,8 @@ __all__ = ["format_lattice_bounds", "format_quality_table", "leaf_configurations
 
 def _check_dim(dim) -> int:
     if dim not in (2, 3):
-        raise ValueError(f"the quality table exists for dim 2 or 3 (the mesher's templates); got {dim!r}.")
+        raise ValueError("the quality table exists for dim 2 or 3 (the mesher's templates); "
+                         f"got {dim!r}.")
     return int(dim)
 
 
@@ -328,7 +329,8 @@ def format_quality_table(rows: list[dict]) -> str:
         verts = " ".join("(" + ",".join(str(c) for c in v) + ")" for v in r["vertices"])
         lines.append(f"{k:>2}  {r['kind']:<5} {verts:<44} {r['circumradius']:7.4f} "
                      f"{r['shortest_edge']:7.4f} {r['radius_edge_ratio']:8.4f} "
-                     f"{r[angle_cols[0]]:12.3f} {r[angle_cols[1]]:12.3f} {r['n_configurations']:>8}")
+                     f"{r[angle_cols[0]]:12.3f} {r[angle_cols[1]]:12.3f} "
+                     f"{r['n_configurations']:>8}")
     worst = max(r["radius_edge_ratio"] for r in rows)
     lo = min(r[angle_cols[0]] for r in rows)
     hi = max(r[angle_cols[1]] for r in rows)

@@ -198,7 +198,8 @@ def estimate_mesh_memory(shape, dtype=np.uint8, *, n_boundary: int | None = None
         label_bytes += n_vox * dtype.itemsize
     # the tree works on signed labels: unsigned ones are a free view unless the top bit
     # is used (then a copy twice as wide), and on a padded copy unless the shape fits
-    widen = dtype.kind in "ub" and (max_label is None or max_label > 2**(8 * dtype.itemsize - 1) - 1)
+    widen = dtype.kind in "ub" and (max_label is None
+                                    or max_label > 2**(8 * dtype.itemsize - 1) - 1)
     work_item = min(8, 2 * dtype.itemsize) if widen else dtype.itemsize
     work_bytes = (n_pad * work_item if widen else 0) + (n_pad * work_item if n_pad != n_vox else 0)
 

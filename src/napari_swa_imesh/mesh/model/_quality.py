@@ -48,9 +48,11 @@ _REGULAR_DIHEDRAL = math.degrees(math.acos(1 / 3))  # 70.53 deg
 _WORST_DIHEDRAL = math.degrees(math.atan(1 / math.sqrt(2)))
 
 QUALITY_METRICS: tuple[QualityMetric, ...] = (
-    QualityMetric("quality", 2, "1", (1 / math.sqrt(3), math.inf), (1 / math.sqrt(3), 1 / math.sqrt(2)),
+    QualityMetric("quality", 2, "1", (1 / math.sqrt(3), math.inf),
+                  (1 / math.sqrt(3), 1 / math.sqrt(2)),
                   "radius-to-edge ratio: circumradius / shortest edge (equilateral: 0.577)"),
-    QualityMetric("quality", 3, "1", (math.sqrt(6) / 4, math.inf), (math.sqrt(6) / 4, math.sqrt(5) / 2),
+    QualityMetric("quality", 3, "1", (math.sqrt(6) / 4, math.inf),
+                  (math.sqrt(6) / 4, math.sqrt(5) / 2),
                   "radius-to-edge ratio: circumradius / shortest edge (regular: 0.612)"),
     QualityMetric("min_angle", 2, "deg", (0.0, 60.0), (45.0, 60.0),
                   "smallest interior angle of the triangle"),
@@ -162,7 +164,8 @@ def radius_edge_ratio(points, cells) -> np.ndarray:
                        + sq[:, 2, None] * np.cross(a, b))
                 radius = np.sqrt(np.einsum("mi,mi->m", num, num)) / (2 * np.abs(det))
             else:
-                raise ValueError(f"cells must be triangles or tetrahedra; got {d + 1} vertices per cell.")
+                raise ValueError("cells must be triangles or tetrahedra; "
+                                 f"got {d + 1} vertices per cell.")
             i, j = np.triu_indices(d + 1, 1)
             ev = p[:, j] - p[:, i]  # (m, n_edges, d)
             shortest = np.sqrt(np.einsum("mki,mki->mk", ev, ev).min(axis=1))
@@ -187,7 +190,8 @@ def triangle_angles(points, cells) -> tuple[np.ndarray, np.ndarray]:
     """
     cells = np.asarray(cells)
     if cells.ndim != 2 or cells.shape[1] != 3:
-        raise ValueError(f"angles need triangles (3 vertices per cell); got cells of shape {cells.shape}.")
+        raise ValueError("angles need triangles (3 vertices per cell); "
+                         f"got cells of shape {cells.shape}.")
     lo = np.empty(len(cells))
     hi = np.empty(len(cells))
     for start, p in _chunks(points, cells):
@@ -261,7 +265,8 @@ def dihedral_angles(points, cells) -> tuple[np.ndarray, np.ndarray]:
     """
     cells = np.asarray(cells)
     if cells.shape[1] != 4:
-        raise ValueError(f"dihedral_angles needs tetrahedra (4 vertices per cell); got {cells.shape[1]}.")
+        raise ValueError("dihedral_angles needs tetrahedra (4 vertices per cell); "
+                         f"got {cells.shape[1]}.")
     lo = np.empty(len(cells))
     hi = np.empty(len(cells))
     for start, p in _chunks(points, cells):
