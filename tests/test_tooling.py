@@ -7,6 +7,7 @@ developer does, from the repository root, with the configuration in ``pyproject.
 
 from __future__ import annotations
 
+import importlib.util
 import os
 import shutil
 import subprocess
@@ -121,7 +122,11 @@ def test_warnings_met_in_our_code_fail_third_party_ones_do_not(tmp_path, categor
 
 
 def test_every_slow_file_exists():
-    from conftest import SLOW_FILES
+    # by path: `from conftest import` may find tests/napari/conftest.py first
+    spec = importlib.util.spec_from_file_location("_root_conftest", ROOT / "tests" / "conftest.py")
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    SLOW_FILES = module.SLOW_FILES
 
     missing = sorted(f for f in SLOW_FILES if not (ROOT / "tests" / f).is_file())
     assert not missing, f"tests/conftest.py marks files that are gone: {missing}"

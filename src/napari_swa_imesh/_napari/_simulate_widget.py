@@ -283,7 +283,8 @@ class SimulateWidget(QWidget):
     def _show_result(self, mesh_layer, conductivity, result: SimulationResult,
                      faces: np.ndarray, clipper: MeshClipper) -> None:
         self.result, self._faces, self._result_layer = result, faces, mesh_layer
-        self.summary.value = result.describe()
+        self.summary.value = _brief(result)
+        self.summary.tooltip = result.describe()    # the whole account, as the CLI prints
         self.clip.set_clipper(clipper)
         with self.show_combo.changed.blocked():
             self.show_combo.value = next(iter(result.k_eff))
@@ -404,3 +405,17 @@ class SimulateWidget(QWidget):
                                               "VTK XML (*.vtu);;XDMF (*.xdmf)")
         if path:
             self.export_field(path)
+
+
+def _brief(result: SimulationResult) -> str:
+    """The tab's short account: k_eff per axis with its certified interval, and any
+    warning (Reuss-Voigt is drawn in the figure; the whole text is the tooltip)."""
+    lines = [f"P{result.order} on {result.mesh.n_cells} elements, {result.dofs} unknowns"
+             + (f" ({result.choice})" if result.choice else "")]
+    for axis, k in result.k_eff.items():
+        line = f"k_eff {axis} = {k:.6g}"
+        if axis in result.interval:
+            lo, hi = result.interval[axis]
+            line += f"  (certified {lo:.5g} .. {hi:.5g}, gap {100 * result.gap[axis]:.2g} %)"
+        lines.append(line)
+    return "\n".join(lines + [f"warning: {w}" for w in result.warnings])
