@@ -41,7 +41,7 @@ def test_k_eff_of_layers_in_series_and_the_field_on_the_surface(make_napari_view
     # the certified interval: exact for layers, shown in the summary and the figure
     assert result.interval["x"] == pytest.approx((1.5, 1.5), rel=1e-9)
     assert "certified 1.5 .. 1.5" in widget.summary.value
-    assert "certified x: 1.5 <= k_eff <= 1.5" in widget.summary.tooltip
+    assert "certified x: 1.5 <= k_eff <= 1.5" in widget.summary.native.toolTip()
     assert "certified" in [t.get_text() for t in
                            widget.figure.axes[1].get_legend().get_texts()]
     field = widget.field_layer

@@ -15,7 +15,7 @@ from qtpy.QtWidgets import QAbstractButton, QComboBox, QGroupBox, QLabel, QTabWi
 
 from .._glossary import define, terms_in
 
-__all__ = ["explain_terms", "with_terms"]
+__all__ = ["explain_terms", "set_tooltip", "with_terms"]
 
 _BASE = "_swa_base_tooltip"      # the tooltip a widget set itself, before any definition
 
@@ -53,6 +53,12 @@ class _Refresher(QObject):
         if event.type() == QEvent.ToolTip and isinstance(obj, QWidget):
             _refresh(obj)
         return False
+
+
+def set_tooltip(widget: QWidget, text: str) -> None:
+    """Give `widget` its own tooltip `text`, kept when the glossary's definitions are added."""
+    widget.setProperty(_BASE, text)
+    _refresh(widget)
 
 
 def explain_terms(root: QWidget) -> None:

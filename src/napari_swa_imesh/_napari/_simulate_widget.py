@@ -30,7 +30,7 @@ from ..simulate import P1_GROWTH, mesh_refine, needs_remesh, remesh, simulate_st
 from ._clip_panel import ClipPanel
 from ._conductivity_table import Conductivity, ConductivityTable, parse_conductivity
 from ._dock import fit_dock, scroll_body, side_by_side, wrapped_label
-from ._help import explain_terms
+from ._help import explain_terms, set_tooltip
 from ._layers import MESH_KEY, layer_picker, pick
 from ._plots import ThemedFigure
 from ._report_panel import ReportPanel, classification_signatures, fill_table
@@ -284,7 +284,7 @@ class SimulateWidget(QWidget):
                      faces: np.ndarray, clipper: MeshClipper) -> None:
         self.result, self._faces, self._result_layer = result, faces, mesh_layer
         self.summary.value = _brief(result)
-        self.summary.tooltip = result.describe()    # the whole account, as the CLI prints
+        set_tooltip(self.summary.native, result.describe())   # the whole account
         self.clip.set_clipper(clipper)
         with self.show_combo.changed.blocked():
             self.show_combo.value = next(iter(result.k_eff))
