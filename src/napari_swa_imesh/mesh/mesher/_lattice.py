@@ -164,7 +164,7 @@ def check_level(value, name: str, top: int, meaning: str) -> int:
 
 
 def check_refine(refine) -> int:
-    """`refine` as an int in ``0 .. MAX_REFINE``, or ValueError saying what to pass."""
+    """`refine` as an int from 0 to ``MAX_REFINE``, or ValueError saying what to pass."""
     return check_level(refine, "refine", MAX_REFINE,
                        "elements at interfaces are 2^-refine voxels")
 
