@@ -106,10 +106,13 @@ def test_asked_mesh_is_kept_and_its_wide_interval_said():
     assert r.certify == 0
 
 
-def test_mesh_file_gap_is_said_not_refined():
+@pytest.mark.parametrize("adapt", ["auto", 0])
+def test_mesh_file_gap_is_said_not_refined(adapt):
+    # a mesh input is never meshed again, whatever adapt says (the command line passes
+    # one for a mesh file): the sentence names the mesh, not the adapt option
     mesh = mesh_labels(checkerboard(2, 4))
     with pytest.warns(UserWarning, match="a mesh is not meshed again"):
-        r = simulate(mesh, {1: 1.0, 2: 10.0}, axes="x", order=1)
+        r = simulate(mesh, {1: 1.0, 2: 10.0}, axes="x", order=1, adapt=adapt)
     assert r.certify == 0
 
 

@@ -310,9 +310,10 @@ def simulate_steps(mesh_or_labels, conductivity: Mapping, *, spacing=None,
         if not wide:
             break
         level = refine + certify + 1
-        why = (cannot_refine(mesh, mesh_or_labels, level) if may_refine else
-               "adapt was given, so the mesh is kept as asked (leave adapt to auto to "
-               "refine for the interval)")
+        why = cannot_refine(mesh, mesh_or_labels, level)   # a mesh input says so first
+        if why is None and not may_refine:
+            why = ("adapt was given, so the mesh is kept as asked (leave adapt to auto to "
+                   "refine for the interval)")
         # predicted before meshing (a refine-4 mesh of a small 3-D image took minutes to
         # make): the growth of the last level, at least 2^(d-1) (interfaces are d-1 dim.);
         # the first level is checked once meshed
