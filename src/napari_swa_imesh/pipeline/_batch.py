@@ -18,9 +18,10 @@ from __future__ import annotations
 
 import glob
 import uuid
-from collections.abc import Callable, Iterator, Sequence
-from contextlib import contextmanager
+from collections.abc import Callable, Sequence
 from pathlib import Path
+
+from .._dask_logs import quiet_dask
 
 __all__ = ["expand_inputs", "output_for", "mesh_for", "connect", "run_batch", "segment_one",
            "simulate_labels", "missing_folders", "quiet_dask", "CONNECT_SECONDS",
@@ -54,24 +55,6 @@ def missing_folders(output) -> list[Path]:
         raise PermissionError(f"cannot create {missing[0]} in folder {path}; choose "
                               "another output folder (-o).")
     return missing[::-1]
-
-
-@contextmanager
-def quiet_dask() -> Iterator[None]:
-    """Silence distributed's own logs (worker restarts, tracebacks of lost workers) in
-    this process while the block runs: the batch's rows and one sentence say what
-    happened. Entered by the ``batch`` command only, never at import."""
-    import logging
-
-    loggers = [logging.getLogger(n) for n in ("distributed", "tornado", "asyncio")]
-    levels = [lg.level for lg in loggers]
-    for lg in loggers:
-        lg.setLevel(logging.CRITICAL + 1)
-    try:
-        yield
-    finally:
-        for lg, level in zip(loggers, levels):
-            lg.setLevel(level)
 
 
 def _stem_suffix(path: Path) -> tuple[str, str]:

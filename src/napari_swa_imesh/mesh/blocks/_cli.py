@@ -10,11 +10,10 @@ from __future__ import annotations
 
 import argparse
 import json
-import logging
 import sys
-from contextlib import contextmanager
 from pathlib import Path
 
+from ..._dask_logs import quiet_dask
 from ..formats._registry import PVTU
 
 __all__ = ["add_block_arguments", "add_commands", "run_blocks", "uses_blocks"]
@@ -64,21 +63,6 @@ def uses_blocks(args: argparse.Namespace) -> bool:
                    for k in ("workers", "scheduler", "memory", "block")))
 
 
-@contextmanager
-def _quiet_dask():
-    """Silence distributed's own logs while the command runs (the progress lines and
-    one sentence say what happened)."""
-    loggers = [logging.getLogger(n) for n in ("distributed", "tornado", "asyncio")]
-    levels = [lg.level for lg in loggers]
-    for lg in loggers:
-        lg.setLevel(logging.CRITICAL + 1)
-    try:
-        yield
-    finally:
-        for lg, level in zip(loggers, levels):
-            lg.setLevel(level)
-
-
 def run_blocks(args: argparse.Namespace, names: dict[int, str]) -> int:
     """Run the block-wise ``mesh`` (`names` parsed from ``--material-names``); exit
     status 0 (errors raise ValueError & co)."""
@@ -105,7 +89,7 @@ def run_blocks(args: argparse.Namespace, names: dict[int, str]) -> int:
             print(f"\r{stage}: {done}/{total} blocks", end="\n" if done == total else "",
                   file=sys.stderr, flush=True)
 
-    with _quiet_dask():
+    with quiet_dask():
         report = mesh_blocks(args.labels, args.output, block=args.block, memory=memory,
                              workers=workers, scheduler=args.scheduler,
                              exclude=tuple(args.exclude), spacing=args.spacing,
