@@ -129,7 +129,7 @@ def test_no_import_cycle():
 
 
 def test_a_planted_cycle_is_found(monkeypatch):
-    a, b = f"{PACKAGE}.io", f"{PACKAGE}.mesh.mesher._tree"
+    a, b = f"{PACKAGE}.io", f"{PACKAGE}.mesh.mesher._balance"
     monkeypatch.setitem(GRAPH, a, GRAPH[a] | {b})
     monkeypatch.setitem(GRAPH, b, GRAPH[b] | {a})
     assert any(a in c and b in c for c in _cycles())
@@ -184,10 +184,6 @@ MAY_IMPORT = {
     "pipeline": {"segmentation", "mesh", "simulate"},
     "_napari": {"segmentation", "mesh", "simulate", "pipeline"},
 }
-#: the one allowed edge against the layering: the region tree is the mesher's own
-#: (mesh/mesher/_tree.py) and samples_from_truth picks its boxes from it (imported
-#: inside that function from mesh's face, so importing segmentation does not load mesh)
-LAYER_EXCEPTIONS = {(f"{PACKAGE}.segmentation._samples", f"{PACKAGE}.mesh", "build_tree")}
 #: private names the command line still takes from its own package's modules, until the
 #: mesh plan/steps object (issue 24, "the CLI re-implements the mesher") replaces them
 CLI_PRIVATE_EXCEPTIONS = {
@@ -241,9 +237,7 @@ def _layer_breaks(name: str, source: str | None = None) -> list[str]:
     for target, names in _from_imports(name, source):
         there = _package(target) if target.startswith(PACKAGE + ".") else ""
         if there and there != home and there not in MAY_IMPORT[home]:
-            left = [n for n in names if (name, target, n) not in LAYER_EXCEPTIONS]
-            if left or not names:
-                bad.append(f"from {target} import {', '.join(names)}")
+            bad.append(f"from {target} import {', '.join(names)}")
     return bad
 
 
@@ -268,13 +262,13 @@ def test_the_layer_check_finds_a_planted_break():
     assert _layer_breaks(seg, "from ..io import read_image") == []
 
 
-def test_segmentation_needs_mesh_only_for_the_tree_and_only_inside_a_function():
-    src = MODULES[f"{PACKAGE}.segmentation._samples"].read_text(encoding="utf-8")
-    top = [n for n in ast.parse(src).body if isinstance(n, ast.ImportFrom)]
-    assert not any(n.module and n.module.startswith("mesh") for n in top)
-    assert LAYER_EXCEPTIONS <= {(f"{PACKAGE}.segmentation._samples", t, n)
-                                for t, names in _from_imports(f"{PACKAGE}.segmentation._samples")
-                                for n in names}
+def test_the_region_tree_is_shared_below_every_step():
+    # the tree of a label image serves the mesher's leaves and segmentation's samples from
+    # a truth; it lives with the house's shared helpers, so it may import no step package
+    tree = f"{PACKAGE}._region_tree"
+    assert {_package(m) for m in GRAPH[tree]} <= {""}
+    assert tree in GRAPH[f"{PACKAGE}.segmentation._samples"]
+    assert tree in GRAPH[f"{PACKAGE}.mesh.mesher._imesh"]
 
 
 def test_the_private_reach_in_check_finds_a_planted_one():

@@ -5,8 +5,8 @@ import pytest
 from imesh_cases import blobs, noise
 
 from napari_swa_imesh import build_tree
+from napari_swa_imesh._region_tree import RegionTree
 from napari_swa_imesh.mesh.mesher._balance import balance_tree, balance_violations
-from napari_swa_imesh.mesh.mesher._tree import RegionTree
 
 
 def _naive_balance(tree: RegionTree, connectivity: int) -> np.ndarray:

@@ -195,7 +195,7 @@ def test_labels_mesh_the_same_in_every_integer_dtype(dtype):
 
 
 def test_labels_are_not_copied_before_meshing():
-    from napari_swa_imesh.mesh.mesher._tree import _signed_labels, build_tree
+    from napari_swa_imesh._region_tree import _signed_labels, build_tree
 
     lab = blobs((8, 8, 8), 3, seed=2, sigma=1.0).astype(np.uint8)
     work = _signed_labels(lab)

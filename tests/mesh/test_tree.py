@@ -5,7 +5,7 @@ import numpy as np
 import pytest
 
 from napari_swa_imesh import build_tree
-from napari_swa_imesh.mesh.mesher._tree import PAD_LABEL
+from napari_swa_imesh._region_tree import PAD_LABEL
 
 
 @pytest.mark.parametrize("shape", [(16, 16), (13, 7), (5, 9, 6), (4, 6, 3, 5)])
@@ -40,7 +40,7 @@ def test_padding_is_separate():
 
 @pytest.mark.parametrize("shape", [(13, 7), (5, 6, 9), (16, 16, 16), (3, 40), (4, 3, 5, 2)])
 def test_leaf_finder_agrees_with_the_painted_leaf_image(shape):
-    from napari_swa_imesh.mesh.mesher._tree import leaf_finder
+    from napari_swa_imesh._region_tree import leaf_finder
 
     rng = np.random.default_rng(len(shape))
     lab = (rng.random(shape) < 0.1).astype(np.uint8)

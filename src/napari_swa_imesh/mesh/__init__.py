@@ -30,6 +30,7 @@
   mesh and its tree).
 """
 
+from .._region_tree import RegionTree, build_tree
 from .checks._checks import MeshChecks, check_mesh, rasterize_materials
 from .checks._clip import MeshClipper, clip_cells
 from .checks._facets import FacetGroup, facet_groups, paired_facets
@@ -44,7 +45,6 @@ from .mesher._imesh import MeshPlan, mesh_labels, mesh_tree, plan_mesh
 from .mesher._imesh import _mesh_arguments as mesh_arguments
 from .mesher._imesh import _mesh_labels as mesh_checked_labels
 from .mesher._lattice import ASPECT_LIMIT, MAX_REFINE, Lattice, check_max_aspect, check_refine
-from .mesher._tree import RegionTree, build_tree
 from .model._bounds import format_quality_table, quality_bounds, quality_table
 from .model._memory import count_boundary_voxels, estimate_mesh_memory
 from .model._quality import (

@@ -19,6 +19,7 @@ from pathlib import Path
 
 import numpy as np
 
+from .._region_tree import build_tree
 from .._validation import IMAGE_NDIM, as_labels
 
 __all__ = ["Material", "SampleBox", "Samples", "load_samples", "save_samples",
@@ -433,8 +434,6 @@ def samples_from_truth(
     lab = as_labels(truth, name="truth", min_ndim=IMAGE_NDIM[0], max_ndim=IMAGE_NDIM[-1])
     if per_material < 1:
         raise ValueError(f"per_material must be at least 1; got {per_material}.")
-    from ..mesh import build_tree  # the mesher's region tree; only this function needs it
-
     tree = build_tree(lab)
     keep = tree.inside & (tree.label > 0)
     tree = tree.select(keep)

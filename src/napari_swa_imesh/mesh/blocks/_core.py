@@ -35,10 +35,10 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from ..._region_tree import PAD_LABEL, RegionTree, _fold_pairs
 from ..formats._common import FACE_CORNERS, material_names
 from ..mesher._balance import _any_children, _dilate
 from ..mesher._templates import template_mesh, template_quality
-from ..mesher._tree import PAD_LABEL, RegionTree, _fold_pairs
 
 __all__ = [
     "BlockPlan",

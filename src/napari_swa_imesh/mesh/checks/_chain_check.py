@@ -36,8 +36,8 @@ import math
 
 import numpy as np
 
+from ..._region_tree import RegionTree
 from ..mesher._packed import pack_points, unpack
-from ..mesher._tree import RegionTree
 from ..model._quality import _edge_det
 
 __all__ = ["lattice_checks"]

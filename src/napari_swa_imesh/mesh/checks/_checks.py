@@ -14,9 +14,9 @@ from dataclasses import asdict, dataclass
 
 import numpy as np
 
+from ..._region_tree import RegionTree, _build_tree
 from ..._validation import as_labels
 from ..mesher._lattice import labels_on_lattice
-from ..mesher._tree import RegionTree, _build_tree
 from ..model._quality import _corner_det, _det
 from ..model._types import Mesh
 from ._chain_check import lattice_checks

@@ -14,12 +14,12 @@ import time
 
 import numpy as np
 
+from ..._region_tree import RegionTree
 from ..model._recipe import Adapted
 from ..model._types import Mesh
 from ._balance import balance_tree
 from ._imesh import _mesh_arguments, _mesh_tree, _names
 from ._lattice import MAX_REFINE, Lattice, finer_tree, lattice_tree, split_box_faces, split_leaves
-from ._tree import RegionTree
 
 __all__ = ["refine_marked"]
 

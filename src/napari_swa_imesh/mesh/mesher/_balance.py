@@ -30,7 +30,7 @@ import itertools
 
 import numpy as np
 
-from ._tree import RegionTree
+from ..._region_tree import RegionTree
 
 __all__ = ["balance_tree", "balance_violations", "count_balanced_leaves"]
 

@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from ._tree import pad_to_multiple
+from ..._region_tree import pad_to_multiple
 
 __all__ = ["MAX_COARSEN", "coarsen_labels"]
 

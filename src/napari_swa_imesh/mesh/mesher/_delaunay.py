@@ -11,9 +11,9 @@ import time
 
 import numpy as np
 
+from ..._region_tree import RegionTree
 from ..model._quality import quality_data, signed_volumes
 from ._templates import lattice, mark_corners
-from ._tree import RegionTree
 
 __all__ = ["delaunay_mesh"]
 

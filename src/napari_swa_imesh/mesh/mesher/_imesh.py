@@ -25,6 +25,7 @@ from typing import NamedTuple
 
 import numpy as np
 
+from ..._region_tree import RegionTree, _build_tree
 from ..._validation import normalize_spacing
 from ..checks._checks import _check_mesh
 from ..model._recipe import MadeLattice, Recipe
@@ -45,7 +46,6 @@ from ._door import (  # noqa: F401
 )
 from ._lattice import Lattice, lattice_tree
 from ._templates import template_mesh, template_quality
-from ._tree import RegionTree, _build_tree
 
 __all__ = ["mesh_labels", "mesh_tree", "plan_mesh", "MeshPlan", "Meshed"]
 

@@ -35,6 +35,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ..._region_tree import PAD_LABEL, RegionTree, _build_tree
 from ._subdivision import (
     ASPECT_LIMIT,
     MAX_FACTOR,
@@ -45,7 +46,6 @@ from ._subdivision import (
     lattice_choices,
     subdivision_factors,
 )
-from ._tree import PAD_LABEL, RegionTree, _build_tree
 
 __all__ = ["ASPECT_LIMIT", "MAX_FACTOR", "MAX_REFINE", "RATIO_TOLERANCE", "Lattice",
            "aspect_bounds", "aspect_table", "check_max_aspect", "choose_lattice",

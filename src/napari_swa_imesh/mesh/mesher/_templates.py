@@ -18,10 +18,10 @@ import time
 
 import numpy as np
 
+from ..._region_tree import RegionTree
 from ..model._quality import quality_data
 from . import _templates_luts as luts
 from ._packed import pack_points
-from ._tree import RegionTree
 
 __all__ = ["cut_leaves", "lattice", "mark_corners", "template_mesh", "template_quality"]
 

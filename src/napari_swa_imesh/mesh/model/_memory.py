@@ -74,7 +74,7 @@ _CHUNK_VOXELS = 1 << 24
 
 def _padded_shape(shape: tuple[int, ...]) -> tuple[int, ...]:
     """Shape of the grid the tree covers: every axis padded to a multiple of the roots."""
-    from ..mesher._tree import default_top_level
+    from ..._region_tree import default_top_level
 
     block = 1 << default_top_level(shape)
     return tuple(-(-n // block) * block for n in shape)
@@ -226,7 +226,7 @@ def estimate_mesh_memory(shape, dtype=np.uint8, *, n_boundary: int | None = None
 
 
 def _top_level(shape) -> int:
-    from ..mesher._tree import default_top_level
+    from ..._region_tree import default_top_level
 
     return default_top_level(tuple(shape))
 

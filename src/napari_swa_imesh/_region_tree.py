@@ -21,7 +21,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..._validation import as_labels
+from ._validation import as_labels
 
 __all__ = ["PAD_LABEL", "RegionTree", "build_tree", "leaf_finder", "pad_to_multiple"]
 
