@@ -311,9 +311,6 @@ _MESH_SUFFIX = re.compile(r"^(\.(vtu|vtk|msh|xdmf|h5|inp|node|ele|poly|face)|_\w
                           re.IGNORECASE)
 #: the format registry: the only module that may spell them
 _REGISTRY = {f"{PACKAGE}.mesh._registry", f"{PACKAGE}.mesh.formats._registry"}
-#: field (solution) files, written by simulate beside the mesh formats: not yet routed
-#: through the registry (issue 24; see the report of the records branch)
-_NOT_YET = {f"{PACKAGE}.simulate._output"}
 
 
 def _suffix_literals(name: str) -> list[str]:
@@ -333,7 +330,7 @@ def test_only_the_format_registry_spells_mesh_suffixes():
     """One record per format (issue 24): a suffix literal anywhere else is knowledge of a
     format kept outside its record, which the next format would have to find."""
     spelled = {name: _suffix_literals(name) for name in MODULES
-               if name not in _REGISTRY | _NOT_YET}
+               if name not in _REGISTRY}
     assert {name: found for name, found in spelled.items() if found} == {}
     assert any(_suffix_literals(name) for name in _REGISTRY if name in MODULES)
 

@@ -9,25 +9,37 @@ import numpy as np
 from .._atomic import hdf5_file
 from .._extras import require
 from ..io import atomic_write, check_writable
-from ..mesh import export_vectors, to_meshio, write_mesh_vtu
+from ..mesh import MeshFormat, export_vectors, mesh_formats, to_meshio, write_mesh_vtu
 
 __all__ = ["FIELD_SUFFIXES", "check_field_path", "check_series_path", "write_field",
            "write_series"]
 
-FIELD_SUFFIXES = (".vtu", ".xdmf")
+#: the mesh formats (from the format registry) that hold fields, and the one that holds
+#: a time series of them
+_FIELD_FORMATS: dict[str, MeshFormat] = {f.suffix: f for f in mesh_formats() if f.fields}
+(_SERIES_FORMAT,) = (f for f in mesh_formats() if f.series)
+FIELD_SUFFIXES = tuple(_FIELD_FORMATS)
+
+
+def _field_format(path) -> MeshFormat:
+    p = Path(path)
+    fmt = _FIELD_FORMATS.get(p.suffix.lower())
+    if fmt is None:
+        raise ValueError(f"cannot write a field to {p.name!r}: use {' or '.join(FIELD_SUFFIXES)}"
+                         " (VTK XML or XDMF/HDF5, both read by ParaView).")
+    return fmt
 
 
 def check_field_path(path, *, force: bool = False) -> list[Path]:
     """The files :func:`write_field` writes for `path`, checked before any work."""
     p = Path(path)
-    suffix = p.suffix.lower()
-    if suffix not in FIELD_SUFFIXES:
-        raise ValueError(f"cannot write a field to {p.name!r}: use {' or '.join(FIELD_SUFFIXES)}"
-                         " (VTK XML or XDMF/HDF5, both read by ParaView).")
-    if suffix == ".xdmf":
-        require("h5py", purpose="writing a field as .xdmf (with its .h5)",
-                alternative="or write it as .vtu")
-    targets = [p] if suffix == ".vtu" else [p, p.with_suffix(".h5")]
+    fmt = _field_format(p)
+    targets = fmt.files(p)
+    if fmt.requires is not None:
+        plain = [f.suffix for f in _FIELD_FORMATS.values() if f.requires is None]
+        require("h5py", purpose=f"writing a field as {fmt.suffix} (with its "
+                f"{' and '.join(t.suffix for t in targets[1:])})",
+                alternative=f"or write it as {' or '.join(plain)}")
     return [check_writable(t, force=force) for t in targets]
 
 
@@ -63,16 +75,22 @@ def write_field(result, path, *, force: bool = False) -> list[Path]:
         The files written (all or none).
     """
     targets = check_field_path(path, force=force)
+    write = _FIELD_WRITERS[_field_format(targets[0]).name]
     point_data, cell_data = _fields(result)
     with atomic_write(targets, force=force) as temps:
-        if temps[0].suffix.lower() == ".vtu":
-            write_mesh_vtu(result.mesh, temps[0], point_data=point_data, cell_data=cell_data)
-        else:
-            m = to_meshio(result.mesh)
-            m.point_data.update(point_data)
-            m.cell_data.update({k: [v] for k, v in cell_data.items()})
-            _write_xdmf(m, temps[0], temps[1])
+        write(result.mesh, temps, point_data, cell_data)
     return targets
+
+
+def _write_vtu_fields(mesh, temps, point_data, cell_data) -> None:
+    write_mesh_vtu(mesh, temps[0], point_data=point_data, cell_data=cell_data)
+
+
+def _write_xdmf_fields(mesh, temps, point_data, cell_data) -> None:
+    m = to_meshio(mesh)
+    m.point_data.update(point_data)
+    m.cell_data.update({k: [v] for k, v in cell_data.items()})
+    _write_xdmf(m, temps[0], temps[1])
 
 
 def _write_xdmf(m, xdmf_path, h5_path) -> None:
@@ -113,14 +131,21 @@ def _write_xdmf(m, xdmf_path, h5_path) -> None:
     Path(xdmf_path).write_bytes(b'<?xml version="1.0"?>\n' + ET.tostring(root) + b"\n")
 
 
+#: how each field format (by its registry name) is written
+_FIELD_WRITERS = {"vtu": _write_vtu_fields, "xdmf": _write_xdmf_fields}
+
+
 def check_series_path(path, *, force: bool = False) -> list[Path]:
     """The files :func:`write_series` writes (``.xdmf`` and its ``.h5``), checked."""
     p = Path(path)
-    if p.suffix.lower() != ".xdmf":
+    fmt = _SERIES_FORMAT
+    if p.suffix.lower() not in fmt.suffixes:
         raise ValueError(f"a time series is written as XDMF/HDF5: name the output "
-                         f"{p.with_suffix('.xdmf').name!r} instead of {p.name!r}.")
-    require("h5py", purpose="writing a time series (.xdmf with its .h5)")
-    return [check_writable(t, force=force) for t in (p, p.with_suffix(".h5"))]
+                         f"{p.with_suffix(fmt.suffix).name!r} instead of {p.name!r}.")
+    targets = fmt.files(p)
+    require("h5py", purpose=f"writing a time series ({fmt.suffix} with its "
+            f"{' and '.join(t.suffix for t in targets[1:])})")
+    return [check_writable(t, force=force) for t in targets]
 
 
 def write_series(result, path, *, force: bool = False, name: str = "u") -> list[Path]:

@@ -61,6 +61,11 @@ class MeshFormat:
         checked before meshing.
     requires : callable or None
         ``requires(action)``: ImportError naming what to install for "write" or "read".
+    fields : bool
+        Whether the format holds fields beside the mesh (point and cell data: a
+        simulation's potentials and fluxes, written by ``simulate.write_field``).
+    series : bool
+        Whether it holds a time series of fields (``simulate.write_series``).
     """
 
     name: str
@@ -75,6 +80,8 @@ class MeshFormat:
     label: str = ""
     check_labels: Callable | None = None
     requires: Callable[[str], None] | None = None
+    fields: bool = False
+    series: bool = False
 
     @property
     def suffix(self) -> str:
@@ -261,7 +268,7 @@ def _check_gmsh_labels(labels, exclude) -> None:
 VTU = MeshFormat(
     "vtu", (".vtu",), "VTK XML unstructured grid (+ <stem>_facets.vtu)",
     files=lambda p: [p], write=_write_vtu, read=_meshio_reader("vtu"),
-    companion=lambda main, ndim: facets_companion(main))
+    companion=lambda main, ndim: facets_companion(main), fields=True)
 VTK = MeshFormat(
     "vtk", (".vtk",), "legacy VTK", files=lambda p: [p], write=_write_vtk,
     read=_meshio_reader("vtk"), facet_groups=False, label="legacy .vtk")
@@ -273,7 +280,7 @@ XDMF = MeshFormat(
     "xdmf", (".xdmf",), "XDMF with its HDF5 .h5 file (+ <stem>_xdmf_facets.vtu)",
     files=lambda p: [p, p.with_suffix(".h5")], write=_write_xdmf,
     read=_meshio_reader("xdmf"), companion=lambda main, ndim: facets_companion(main),
-    requires=_require_h5py)
+    requires=_require_h5py, fields=True, series=True)
 ABAQUS = MeshFormat(
     "abaqus", (".inp",), "Abaqus with element sets and facet surfaces", files=lambda p: [p],
     write=_write_abaqus, read=_meshio_reader("abaqus"),
