@@ -17,7 +17,7 @@ import numpy as np
 
 from .._cli_util import StepTimer, parse_material_names, print_json
 from .._validation import OptionError, normalize_spacing
-from .checks._checks import _check_mesh
+from .checks._checks import check_mesh
 from .formats._export import MESH_SUFFIXES
 from .formats._registry import mesh_format, mesh_formats
 from .mesher._subdivision import check_max_aspect
@@ -214,7 +214,7 @@ def _run_mesh(args: argparse.Namespace) -> int:
 
 def _timed_check(timer, mesh, labels, exclude, tree, full) -> dict:
     with timer("check"):
-        return _check_mesh(mesh, labels, exclude, tree, full=full).to_dict()
+        return check_mesh(mesh, labels, exclude=exclude, tree=tree, full=full).to_dict()
 
 
 def _check_resolution_args(args) -> None:
