@@ -183,7 +183,7 @@ def as_labels(
         )
     if arr.dtype.kind == "f":
         # compared as Python numbers: numpy would cast the bound to float16 (overflow)
-        return arr.astype(np.int32 if _plain(hi) <= np.iinfo(np.int32).max else np.int64)
+        return arr.astype(_dtype_for(0, _plain(hi), smallest=False))
     return arr
 
 
@@ -265,16 +265,61 @@ def normalize_spacing(spacing: float | Sequence[float] | None, ndim: int) -> tup
     return tuple(float(v) for v in values)
 
 
-def label_dtype(labels) -> np.dtype:
-    """int32 when every label fits it, else int64 (labels are 1 .. 2^63 - 1).
+def label_dtype(labels, *, smallest: bool = False, name: str = "labels") -> np.dtype:
+    """The dtype labels are held in: the one label-dtype policy of the package.
+
+    Labels computed on are int32, int64 when a value needs it (integer arrays that pass
+    :func:`as_labels` are kept as they come; whole-valued floats become this dtype).
+    Labels written to a file or shown (`smallest`) take the smallest integer dtype that
+    holds every value: uint8 .. uint64 when none is negative, else int8 .. int64
+    (:func:`~napari_swa_imesh.io.label_array`). Booleans count as 0 and 1.
+
+    Parameters
+    ----------
+    labels : array_like of int
+        The label values (an image, or the list of material ids).
+    smallest : bool
+        The file/display dtype instead of the compute dtype.
+    name : str
+        What to call `labels` in error messages.
+
+    Returns
+    -------
+    numpy.dtype
+
+    Raises
+    ------
+    ValueError
+        With `smallest`, for values that no 64-bit integer type holds.
 
     Examples
     --------
     >>> label_dtype([1, 2]), label_dtype([1, 2**40])
     (dtype('int32'), dtype('int64'))
+    >>> label_dtype([0, 3, 70000], smallest=True), label_dtype([-1, 5], smallest=True)
+    (dtype('uint32'), dtype('int8'))
     """
-    top = max((int(v) for v in labels), default=0)
-    return np.dtype(np.int32 if top <= np.iinfo(np.int32).max else np.int64)
+    arr = np.asarray(labels)
+    lo, hi = (int(arr.min()), int(arr.max())) if arr.size else (0, 0)
+    dtype = _dtype_for(lo, hi, smallest=smallest)
+    if dtype is None:
+        raise ValueError(f"{name} span {lo} .. {hi}, which no 64-bit integer type holds; "
+                         "relabel them first.")
+    return dtype
+
+
+def _dtype_for(lo, hi, *, smallest: bool) -> np.dtype | None:
+    """:func:`label_dtype` of values from `lo` to `hi` (Python numbers: exact compares);
+    None when `smallest` and no 64-bit integer type holds them."""
+    if not smallest:
+        return np.dtype(np.int32 if hi <= np.iinfo(np.int32).max else np.int64)
+    kinds = (np.uint8, np.uint16, np.uint32, np.uint64) if lo >= 0 else (
+        np.int8, np.int16, np.int32, np.int64)
+    for dtype in kinds:
+        info = np.iinfo(dtype)
+        if info.min <= lo and hi <= info.max:
+            return np.dtype(dtype)
+    return None
 
 
 def _plain_text(value) -> str:

@@ -19,7 +19,7 @@ import numpy as np
 
 from ._atomic import atomic_write, check_writable, is_store
 from ._headers import Refused, check_affine, complete_frame, load_nifti, load_npy, nifti_placement
-from ._validation import normalize_spacing
+from ._validation import label_dtype, normalize_spacing
 
 __all__ = ["read_image", "read_affine", "is_nifti", "grid_affine", "write_labels",
            "write_labels_to", "label_array", "check_label_format", "image_suffix",
@@ -205,9 +205,23 @@ def _read_tiff(p: Path):
 def label_array(labels, *, name: str = "labels") -> np.ndarray:
     """`labels` in the smallest integer dtype that holds every value exactly.
 
-    Unsigned (uint8 .. uint64) when no value is negative, else signed (int8 .. int64).
+    Unsigned (uint8 .. uint64) when no value is negative, else signed (int8 .. int64):
+    the file/display side of the one label-dtype policy,
+    :func:`~napari_swa_imesh._validation.label_dtype` with ``smallest=True``.
     Boolean and whole-number float arrays are accepted; anything that would change a
     value (fractions, NaN, values beyond 64 bits) is refused.
+
+    Parameters
+    ----------
+    labels : array_like of int, bool or whole-valued float
+        The label image.
+    name : str
+        What to call it in error messages.
+
+    Returns
+    -------
+    ndarray of int or uint
+        `labels` itself when already in that dtype, else a converted copy.
 
     Examples
     --------
@@ -232,17 +246,7 @@ def label_array(labels, *, name: str = "labels") -> np.ndarray:
         raise TypeError(f"{name} must be integers; got dtype {arr.dtype}.")
     if arr.size == 0:
         return arr.astype(np.uint8)
-    lo, hi = int(arr.min()), int(arr.max())
-    kinds = (np.uint8, np.uint16, np.uint32, np.uint64) if lo >= 0 else (
-        np.int8, np.int16, np.int32, np.int64)
-    for dtype in kinds:
-        info = np.iinfo(dtype)
-        if info.min <= lo and hi <= info.max:
-            return arr.astype(dtype, copy=False)
-    raise ValueError(f"{name} span {lo} .. {hi}, which no 64-bit integer type holds; "
-                     "relabel them first.")
-
-
+    return arr.astype(label_dtype(arr, smallest=True, name=name), copy=False)
 
 
 def check_label_format(path, labels: np.ndarray) -> None:

@@ -36,6 +36,7 @@ import os
 
 import numpy as np
 
+from .._validation import label_dtype
 from ._bias import (
     LOCAL_WINDOW,
     coarse_bias_field,
@@ -385,10 +386,8 @@ def _labels_block(work, model):
 
 
 def smallest_dtype(labels) -> np.dtype:
-    """The dtype labels are written in (as :func:`~napari_swa_imesh.io.label_array`)."""
-    from ..io import label_array
-
-    return label_array(np.asarray(labels + [0])).dtype
+    """The dtype labels are written in (the policy's file side, as ``io.label_array``)."""
+    return label_dtype(list(labels) + [0], smallest=True)
 
 
 def _bias_small(model, x, f, core, compute) -> np.ndarray:
