@@ -4,11 +4,11 @@ from __future__ import annotations
 
 import json
 import sys
-import time
-from contextlib import contextmanager
 from pathlib import Path
 
 import numpy as np
+
+from ._timing import StepTimer  # the library's timer, re-used by the sub-commands
 
 __all__ = ["StepTimer", "print_json", "to_jsonable", "parse_material_names"]
 
@@ -33,21 +33,6 @@ def to_jsonable(obj):
 def print_json(obj, file=None) -> None:
     """Print `obj` as one JSON object on a single line of stdout."""
     print(json.dumps(to_jsonable(obj)), file=file or sys.stdout)
-
-
-class StepTimer:
-    """Collects wall-clock seconds per named step: ``with timer("features"): ...``."""
-
-    def __init__(self) -> None:
-        self.seconds: dict[str, float] = {}
-
-    @contextmanager
-    def __call__(self, name: str):
-        t0 = time.perf_counter()
-        try:
-            yield
-        finally:
-            self.seconds[name] = self.seconds.get(name, 0.0) + time.perf_counter() - t0
 
 
 def parse_material_names(items) -> dict[int, str]:

@@ -18,7 +18,6 @@ makes one full-size float32 copy of the image, the reference one float64 copy.
 
 from __future__ import annotations
 
-import time
 import warnings
 from collections.abc import Generator
 from dataclasses import dataclass, field
@@ -26,6 +25,7 @@ from dataclasses import dataclass, field
 import numpy as np
 from scipy import ndimage as ndi
 
+from .._timing import StepTimer
 from .._validation import IMAGE_NDIM, as_image
 from ._features import n_features
 from ._model import SWAModel, check_scale
@@ -288,108 +288,102 @@ def segment_steps(image, samples: Samples | None = None, *, method: str = RECOMM
 
 
 def _recommended_steps(img, samples, *, scale, sieve, model, spacing):
-    seconds: dict[str, float] = {}
-    t0 = time.perf_counter()
+    timer = StepTimer()
     res = None
-    if model is None:
-        yield 0, STEPS, "tile statistics against scale (RES)"
-        res = res_statistics_unchecked(img, samples)
-        seconds["res"] = time.perf_counter() - t0
-        yield 1, STEPS, "fitting the multi-scale classifiers on the sample boxes"
-        t = time.perf_counter()
-        model = RecommendedModel(max_scale=scale).fit(
-            img, samples, spacing=spacing, res_scale=res.suggested_scale, check_input=False)
-        seconds["fit"] = time.perf_counter() - t
-    yield 2, STEPS, (f"classifying pixels at scales {model.scale}..{model.finest_scale} "
-                     f"with MRF smoothing")
-    t = time.perf_counter()
-    labels, level = model.predict(img, check_input=False, return_level=True)
-    seconds["classify"] = time.perf_counter() - t
-    yield 3, STEPS, "sieving and tiling"
-    t = time.perf_counter()
-    if sieve:
-        labels = sieve_labels(labels, int(sieve))
-    tiles = majority_tiles(labels, model.scale, model.labels)
-    seconds["output"] = time.perf_counter() - t
-    yield 4, STEPS, "material signatures"
-    t = time.perf_counter()
-    sig_scale = model.res_scale if model.res_scale else max(model.scale, 1)
-    sig_scale = min(sig_scale, int(np.floor(np.log2(max(img.shape)))))
-    moments, counts = tile_moments_worker(img, None, sig_scale)
-    signatures = material_signatures(moments, counts,
-                                     majority_tiles(labels, sig_scale, model.labels),
-                                     model.materials)
-    for row in signatures:
-        row["scale"] = sig_scale
-    seconds["signatures"] = time.perf_counter() - t
-    seconds["total"] = time.perf_counter() - t0
+    with timer("total"):
+        if model is None:
+            yield 0, STEPS, "tile statistics against scale (RES)"
+            with timer("res"):
+                res = res_statistics_unchecked(img, samples)
+            yield 1, STEPS, "fitting the multi-scale classifiers on the sample boxes"
+            with timer("fit"):
+                model = RecommendedModel(max_scale=scale).fit(
+                    img, samples, spacing=spacing, res_scale=res.suggested_scale,
+                    check_input=False)
+        yield 2, STEPS, (f"classifying pixels at scales {model.scale}..{model.finest_scale} "
+                         f"with MRF smoothing")
+        with timer("classify"):
+            labels, level = model.predict(img, check_input=False, return_level=True)
+        yield 3, STEPS, "sieving and tiling"
+        with timer("output"):
+            if sieve:
+                labels = sieve_labels(labels, int(sieve))
+            tiles = majority_tiles(labels, model.scale, model.labels)
+        yield 4, STEPS, "material signatures"
+        with timer("signatures"):
+            sig_scale = model.res_scale if model.res_scale else max(model.scale, 1)
+            sig_scale = min(sig_scale, int(np.floor(np.log2(max(img.shape)))))
+            moments, counts = tile_moments_worker(img, None, sig_scale)
+            signatures = material_signatures(moments, counts,
+                                             majority_tiles(labels, sig_scale, model.labels),
+                                             model.materials)
+            for row in signatures:
+                row["scale"] = sig_scale
     yield 5, STEPS, "done"
-    return SegmentationResult(labels, tiles, model.scale, model, signatures, res, seconds,
-                              method=RECOMMENDED_METHOD, scales=tuple(model.scales),
-                              level=level, notes=list(model.scores.get("notes", [])))
+    return SegmentationResult(labels, tiles, model.scale, model, signatures, res,
+                              timer.seconds, method=RECOMMENDED_METHOD,
+                              scales=tuple(model.scales), level=level,
+                              notes=list(model.scores.get("notes", [])))
 
 
 def _reference_steps(img, samples, *, scale, feature_set, classifier, sieve, model,
                      spacing):
-    seconds: dict[str, float] = {}
-    t0 = time.perf_counter()
-    img = np.asarray(img, np.float64)     # the feature workers compute in float64
+    timer = StepTimer()
     res = None
     notes: list[str] = []
-    if model is None:
-        if scale is None:
-            yield 0, STEPS, "tile statistics against scale (RES)"
-            res = res_statistics_unchecked(img, samples, method="reference")
-            scale = res.suggested_scale
+    with timer("total"):
+        img = np.asarray(img, np.float64)     # the feature workers compute in float64
+        if model is None:
             if scale is None:
-                raise ValueError(
-                    "no scale leaves every material two full tiles in its boxes; draw larger "
-                    "sample boxes.")
-            seconds["res"] = time.perf_counter() - t0
-            explicit = False
-        else:
-            explicit = True
-        check_scale(scale, img.shape)
-        if classifier.lower() == "gm":
-            # a class covariance needs more tiles than features; with fewer, GM fits a
-            # ridge and calls every pixel the other material (measured on small boxes)
-            need = n_features(feature_set.upper(), img.ndim, scale) + 1
-            limit = samples.tile_limit(scale, need)
-            if limit is not None:
-                if explicit or limit[0] < 0:
-                    raise ValueError(limit[1] + ".")
-                notes.append(f"{limit[1]}; using scale {limit[0]}.")
-                warnings.warn(notes[-1], UserWarning, stacklevel=2)
-                scale = limit[0]
-        yield 1, STEPS, f"fitting {classifier.upper()} on {feature_set.upper()} at scale {scale}"
-        t = time.perf_counter()
-        model = SWAModel(scale=scale, feature_set=feature_set, classifier=classifier)
-        model.fit(img, samples, spacing=spacing, check_input=False)
-        seconds["fit"] = time.perf_counter() - t
-    yield 2, STEPS, f"classifying tiles at scale {model.scale}"
-    t = time.perf_counter()
-    feats, counts = model.tile_features(img, check_input=False)
-    tiles = model.classify_features(feats)
-    seconds["classify"] = time.perf_counter() - t
-    yield 3, STEPS, "sieving and upsampling"
-    t = time.perf_counter()
-    if sieve:
-        tiles = sieve_labels(tiles, int(sieve))
-    labels = upsample_tiles(tiles, model.scale, img.shape)
-    seconds["output"] = time.perf_counter() - t
-    yield 4, STEPS, "material signatures"
-    t = time.perf_counter()
-    if set(MOMENT_NAMES) <= set(model.feature_names):   # the moments are features already
-        moments = feats[..., [model.feature_names.index(n) for n in MOMENT_NAMES]]
-    else:
-        moments, counts = tile_moments_worker(img, None, model.scale)
-    del feats
-    signatures = material_signatures(moments, counts, tiles, model.materials)
-    seconds["signatures"] = time.perf_counter() - t
-    seconds["total"] = time.perf_counter() - t0
+                yield 0, STEPS, "tile statistics against scale (RES)"
+                with timer("res"):
+                    res = res_statistics_unchecked(img, samples, method="reference")
+                scale = res.suggested_scale
+                if scale is None:
+                    raise ValueError(
+                        "no scale leaves every material two full tiles in its boxes; draw "
+                        "larger sample boxes.")
+                explicit = False
+            else:
+                explicit = True
+            check_scale(scale, img.shape)
+            if classifier.lower() == "gm":
+                # a class covariance needs more tiles than features; with fewer, GM fits a
+                # ridge and calls every pixel the other material (measured on small boxes)
+                need = n_features(feature_set.upper(), img.ndim, scale) + 1
+                limit = samples.tile_limit(scale, need)
+                if limit is not None:
+                    if explicit or limit[0] < 0:
+                        raise ValueError(limit[1] + ".")
+                    notes.append(f"{limit[1]}; using scale {limit[0]}.")
+                    warnings.warn(notes[-1], UserWarning, stacklevel=2)
+                    scale = limit[0]
+            yield 1, STEPS, (f"fitting {classifier.upper()} on {feature_set.upper()} at "
+                             f"scale {scale}")
+            with timer("fit"):
+                model = SWAModel(scale=scale, feature_set=feature_set, classifier=classifier)
+                model.fit(img, samples, spacing=spacing, check_input=False)
+        yield 2, STEPS, f"classifying tiles at scale {model.scale}"
+        with timer("classify"):
+            feats, counts = model.tile_features(img, check_input=False)
+            tiles = model.classify_features(feats)
+        yield 3, STEPS, "sieving and upsampling"
+        with timer("output"):
+            if sieve:
+                tiles = sieve_labels(tiles, int(sieve))
+            labels = upsample_tiles(tiles, model.scale, img.shape)
+        yield 4, STEPS, "material signatures"
+        with timer("signatures"):
+            if set(MOMENT_NAMES) <= set(model.feature_names):   # the moments are features
+                moments = feats[..., [model.feature_names.index(n) for n in MOMENT_NAMES]]
+            else:
+                moments, counts = tile_moments_worker(img, None, model.scale)
+            del feats
+            signatures = material_signatures(moments, counts, tiles, model.materials)
     yield 5, STEPS, "done"
-    return SegmentationResult(labels, tiles, model.scale, model, signatures, res, seconds,
-                              method=REFERENCE_METHOD, scales=(model.scale,), notes=notes)
+    return SegmentationResult(labels, tiles, model.scale, model, signatures, res,
+                              timer.seconds, method=REFERENCE_METHOD, scales=(model.scale,),
+                              notes=notes)
 
 
 def segment(image, samples: Samples | None = None, *, method: str = RECOMMENDED_METHOD,
