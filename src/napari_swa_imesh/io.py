@@ -206,8 +206,8 @@ def label_array(labels, *, name: str = "labels") -> np.ndarray:
     """`labels` in the smallest integer dtype that holds every value exactly.
 
     Unsigned (uint8 .. uint64) when no value is negative, else signed (int8 .. int64):
-    the file/display side of the one label-dtype policy,
-    :func:`~napari_swa_imesh._validation.label_dtype` with ``smallest=True``.
+    the file/display side of the one label-dtype policy (``label_dtype(labels,
+    smallest=True)`` in ``_validation``).
     Boolean and whole-number float arrays are accepted; anything that would change a
     value (fractions, NaN, values beyond 64 bits) is refused.
 

@@ -458,7 +458,7 @@ def _run_bounds(args: argparse.Namespace) -> int:
     if args.json:
         out = {"command": "bounds", "dim": args.dim, "simplices": rows,
                "by_residual_aspect": aspects}
-        if lattice is not None:
+        if lattice is not None and choices is not None:     # both given by --spacing
             out["lattice"] = lattice.describe()
             out["choices"] = [{**r, "factors": list(r["factors"])} for r in choices]
         print_json(out)

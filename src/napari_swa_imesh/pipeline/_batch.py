@@ -379,16 +379,17 @@ def run_batch(images: Sequence, model_path, outdir, *, client, force: bool = Fal
                              retries=retries, pure=False,
                              key=f"segment-{Path(p).name}-{uuid.uuid4().hex[:12]}"): i
                for i, (p, out, m) in enumerate(zip(images, outputs, meshes))}
-    rows: list[dict | None] = [None] * len(outputs)
+    rows: list[dict] = [{} for _ in outputs]        # every one filled as its task ends
     for done, fut in enumerate(as_completed(futures), 1):
         i = futures[fut]
         try:
-            rows[i] = fut.result()
+            row = fut.result()
         except Exception as exc:  # the task's own sentence (bad image, full disk...)
-            rows[i] = {"error": f"{exc}"}
-        if "error" in rows[i]:
-            rows[i] = {"image": str(images[i]), "output": str(outputs[i]),
-                       "error": _sentence(rows[i]["error"])}
+            row = {"error": f"{exc}"}
+        if "error" in row:
+            row = {"image": str(images[i]), "output": str(outputs[i]),
+                   "error": _sentence(row["error"])}
+        rows[i] = row
         if progress is not None:
-            progress(done, len(outputs), rows[i])
+            progress(done, len(outputs), row)
     return rows

@@ -40,6 +40,7 @@ Conventions
 
 from __future__ import annotations
 
+from collections import deque
 from collections.abc import Iterator
 
 import numpy as np
@@ -258,9 +259,8 @@ def tile_moments_worker(x: np.ndarray, valid: np.ndarray | None,
     """`tile_moments` on checked input (not modified)."""
     if scale == 0:
         return _pixel_moments(x, valid)
-    level = None
-    for level in _iter_moment_levels(x, valid, scale):  # noqa: B007 (run to the last level)
-        pass
+    # run to the last level, keeping only it
+    (level,) = deque(_iter_moment_levels(x, valid, scale), maxlen=1)
     return _finalize(*level)
 
 

@@ -153,13 +153,17 @@ def conductivity_tensors(conductivity: Mapping, materials, ndim: int,
     return np.ascontiguousarray(xyz[:, ::-1, ::-1])
 
 
-def parse_conductivity_args(items: list[str]) -> dict[str, float | list[float]]:
+#: one material's conductivity as the command line gives it: a number, a diagonal, a tensor
+_Given = float | list[float] | list[list[float]]
+
+
+def parse_conductivity_args(items: list[str]) -> dict[str, _Given]:
     """``['1=1', 'bone=10', '3=0.1,0.2,0.3']`` -> ``{'1': 1.0, 'bone': 10.0, '3': [...]}``.
 
     A comma list is the diagonal in x, y(, z) order; ``d*d`` numbers are a full tensor
     row by row.
     """
-    out: dict[str, float | list[float]] = {}
+    out: dict[str, _Given] = {}
     for item in items:
         key, sep, text = item.partition("=")
         if not sep or not key or not text:

@@ -110,7 +110,7 @@ def check_face_facets(cell_vertices: np.ndarray, dof_coordinates: np.ndarray,
                 found.append(reduced[verts[:, on[verts].all(axis=0)]].T)
             facets = np.sort(np.concatenate(found), axis=1)
             sides.append(facets[np.lexsort(facets.T[::-1])])
-        if sides[0].shape != sides[1].shape or not np.array_equal(*sides):
+        if sides[0].shape != sides[1].shape or not np.array_equal(sides[0], sides[1]):
             name = "xyz"[d - 1 - axis] if d <= 3 else f"axis {axis}"
             raise ValueError(
                 f"the mesh's faces at {name}min and {name}max have their nodes in the same "

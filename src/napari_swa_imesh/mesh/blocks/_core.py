@@ -192,9 +192,9 @@ def _leaves_near(plan: BlockPlan, index, grids: list):
     origins, levels = [], []
     for k in range(top + 1):
         if k == 0:
-            off1, g1 = grids[1] if top >= 1 else (None, None)
-            if g1 is None:
+            if top < 1 or grids[1][1] is None:
                 continue
+            off1, g1 = grids[1]
             # voxels in split level-1 cells: the 2^d children of each split cell
             cells = np.argwhere(g1) + off1
             kids = np.array(list(itertools.product((0, 1), repeat=d)), np.int64)

@@ -299,6 +299,7 @@ def mesh_blocks(labels, output, *, block: int | None = None, memory: int | None 
         return source
 
     own_client = cluster = None
+    runner: _Dask | _Local
     if client is not None:
         runner = _Dask(client)
     elif scheduler or workers > 0:

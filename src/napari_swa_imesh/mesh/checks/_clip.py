@@ -81,7 +81,7 @@ def clip_cells(points: np.ndarray, cells: np.ndarray, axis: int, position: float
     points = np.asarray(points, dtype=np.float64)
     axis = _check_axis(axis, points.shape[1])
     above = _check_keep(keep)
-    return _on_side(points[:, axis][cells], float(position), above).any(axis=1)
+    return np.asarray(_on_side(points[:, axis][cells], float(position), above).any(axis=1))
 
 
 class MeshClipper:
@@ -128,7 +128,7 @@ class MeshClipper:
         if axis not in self._ranges:
             x = self.mesh.points[:, axis]
             corner = x[self._cells]                            # (M, d+1)
-            out = (corner.min(axis=1), corner.max(axis=1))
+            out: tuple[np.ndarray, ...] = (corner.min(axis=1), corner.max(axis=1))
             if self.mesh.ndim == 3:
                 face = x[self._boundary]                       # (B, 3)
                 out += (face.min(axis=1), face.max(axis=1))

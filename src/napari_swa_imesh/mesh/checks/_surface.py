@@ -13,6 +13,8 @@ left out).
 
 from __future__ import annotations
 
+from typing import Any
+
 import numpy as np
 
 from ._facets import paired_facets
@@ -81,7 +83,7 @@ def per_triangle_surface(points: np.ndarray, faces: np.ndarray, face_values: np.
     return vertices, triangles, np.repeat(np.asarray(face_values, dtype=np.float64), 3)
 
 
-def mesh_surface(mesh) -> dict[str, np.ndarray]:
+def mesh_surface(mesh) -> dict[str, Any]:
     """Everything a Surface layer needs to show `mesh`, in both colourings.
 
     Parameters

@@ -129,8 +129,8 @@ def abaqus_materials(path: Path, m, keep: list[int], n_cells: int):
             if not line.startswith("**"):
                 break
             if line.startswith(_NAME_NOTE):
-                mat, name = line[len(_NAME_NOTE) :].split()
-                ids[name] = int(mat)
+                number, name = line[len(_NAME_NOTE) :].split()
+                ids[name] = int(number)
     if not ids and not m.cell_sets:
         return {}, None
     material = np.zeros(n_cells, dtype=np.int64)

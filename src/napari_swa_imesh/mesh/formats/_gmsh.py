@@ -209,7 +209,7 @@ def _element_data(out: _Out, name: str, values: np.ndarray, order: np.ndarray) -
         if out.binary:
             block = np.empty(len(rows), record)
             block["tag"], block["value"] = tags, values[rows]
-            out.fh.write(memoryview(block).cast("B"))
+            out.fh.write(block.data.cast("B"))
         elif values.dtype.kind in "biu":
             write_rows(out.fh, np.column_stack([tags, values[rows]]), encode=True)
         else:

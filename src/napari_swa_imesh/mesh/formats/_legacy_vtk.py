@@ -33,8 +33,8 @@ def _meshio_of(ex: ExportMesh):
         # every writer takes int64/float64; some reject int8 or bool (XDMF as XML)
         kind = values.dtype.kind
         cell_data[key] = [values.astype(np.int64 if kind in "biu" else np.float64)]
-    kind = (CELL_TYPE if ex.order == 1 else CELL_TYPE_2)[ex.ndim]
-    return meshio.Mesh(ex.points, [(kind, ex.all_cells())], cell_data=cell_data)
+    cell_type = (CELL_TYPE if ex.order == 1 else CELL_TYPE_2)[ex.ndim]
+    return meshio.Mesh(ex.points, [(cell_type, ex.all_cells())], cell_data=cell_data)
 
 
 def _padded(m):

@@ -13,7 +13,7 @@ import numpy as np
 
 from ..model._types import Mesh
 from ._common import orient_positive
-from ._registry import UnknownSuffixError, mesh_format
+from ._registry import MeshFormat, UnknownSuffixError, mesh_format
 
 __all__ = ["read_mesh"]
 
@@ -42,15 +42,19 @@ def read_mesh(path) -> Mesh:
         from ..blocks import read_pvtu
 
         return read_pvtu(p)
+    found: MeshFormat | UnknownSuffixError
     try:
-        fmt, unknown = mesh_format(p, action="read"), None
+        found = mesh_format(p, action="read")
     except UnknownSuffixError as exc:
-        fmt, unknown = None, exc
+        found = exc
     # a format named by either of its files (.node/.ele) reads the pair, whichever is given
-    if not p.exists() and (fmt is None or len(fmt.suffixes) == 1):
+    if not p.exists() and (isinstance(found, UnknownSuffixError) or len(found.suffixes) == 1):
         raise FileNotFoundError(f"no mesh file at {p}; check the path.")
-    if unknown is not None:
-        raise unknown
+    if isinstance(found, UnknownSuffixError):
+        raise found
+    fmt = found
+    if fmt.read is None:
+        raise ValueError(f"{fmt.called} files are written, not read; give another mesh file.")
     if fmt.requires is not None:
         fmt.requires("read")
     points, cells, material, cell_data, names = fmt.read(p)

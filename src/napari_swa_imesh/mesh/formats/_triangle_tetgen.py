@@ -92,19 +92,20 @@ def write_rows(fh, ints: np.ndarray, floats: np.ndarray | None = None, *, sep: s
     f = 0 if floats is None else np.shape(floats)[1]
     line = sep.join(["%d"] * k + [float_format] * f) + "\n"
     fast_floats = f and k == 1 and float_format == "%.12e"
+    fl = np.zeros((len(ints), 0)) if floats is None else floats    # read only when f
     for start in range(0, len(ints), _ROWS_PER_BLOCK):
         block = ints[start : start + _ROWS_PER_BLOCK]
         data = None
         if not f:
             data = int_rows(block, sep.encode())
         elif fast_floats:
-            data = sci_rows(block, floats[start : start + _ROWS_PER_BLOCK], sep.encode())
+            data = sci_rows(block, fl[start : start + _ROWS_PER_BLOCK], sep.encode())
         if data is not None:
             _write_bytes(fh, data, encode)
             continue
         if f:
             block = np.column_stack([block.astype(np.float64),
-                                     floats[start : start + _ROWS_PER_BLOCK]])
+                                     fl[start : start + _ROWS_PER_BLOCK]])
         text = (line * len(block)) % tuple(block.ravel().tolist())
         fh.write(text.encode() if encode else text)
 
@@ -258,6 +259,6 @@ def read_node_ele(pair) -> tuple[np.ndarray, np.ndarray, dict[str, np.ndarray]]:
     elif n_attr == 1:  # a lone attribute is a region attribute: the material
         names = ("material",)
     else:
-        names = [f"attribute_{k + 1}" for k in range(n_attr)]
+        names = tuple(f"attribute_{k + 1}" for k in range(n_attr))
     attributes = {name: rows[:, 1 + per_cell + k].copy() for k, name in enumerate(names)}
     return points, cells, attributes

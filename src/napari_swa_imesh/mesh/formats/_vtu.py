@@ -15,10 +15,12 @@ worst quality sqrt(5)/2 up, past its bound. VTK (ParaView, pyvista) and meshio r
 from __future__ import annotations
 
 import sys
+from collections.abc import Mapping
 from pathlib import Path
 from xml.sax.saxutils import quoteattr
 
 import numpy as np
+from numpy.typing import ArrayLike
 
 from ..model._quality import _corner_det
 
@@ -93,7 +95,7 @@ def _connectivity(points: np.ndarray, cells: np.ndarray, dtype, orient: bool):
         yield chunk
 
 
-def _field_data(arrays: dict) -> str:
+def _field_data(arrays: Mapping) -> str:
     """``<FieldData>`` of small integer arrays, inline as text (names escaped)."""
     if not arrays:
         return ""
@@ -108,7 +110,7 @@ def _field_data(arrays: dict) -> str:
 def write_vtu(path, points: np.ndarray, cells: np.ndarray, *,
               cell_data: dict[str, np.ndarray] | None = None,
               point_data: dict[str, np.ndarray] | None = None,
-              field_data: dict[str, np.ndarray] | None = None,
+              field_data: Mapping[str, ArrayLike] | None = None,
               cell_type: int | None = None, orient: bool = False) -> None:
     """Write a mesh of one cell type (triangles or tetrahedra by default) as a ``.vtu`` file.
 
@@ -154,7 +156,7 @@ def write_vtu(path, points: np.ndarray, cells: np.ndarray, *,
             yield np.full(min(_CHUNK, n_cells - start), cell_type or VTK_CELL_TYPE[corners],
                           dtype=np.uint8)
 
-    arrays: list[tuple[str, str, object]] = [
+    arrays: list[tuple[str, str, np.ndarray | _Chunked]] = [
         ("Points", "", _vtk_array(np.column_stack([points, np.zeros(n_points)])
                                   if points.shape[1] == 2 else points)),
         ("Cells", "connectivity", _Chunked(id_type, n_cells * corners,

@@ -21,6 +21,7 @@ temporary's name, which is the target's (see ``io.atomic_write``).
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from pathlib import Path
 from xml.etree import ElementTree as ET
 
@@ -61,6 +62,7 @@ def write_xdmf_blocks(ex, xdmf_path, h5_path) -> None:
     kind = (CELL_TYPE if ex.order == 1 else CELL_TYPE_2)[ex.ndim]
     # (name, shape, dtype, block(rows) -> array); per-cell arrays widened as meshio's
     # writers need them (some reject int8 or bool)
+    arrays: list[tuple[str, tuple[int, ...], np.dtype, Callable[[slice], np.ndarray]]]
     arrays = [("points", ex.points.shape, np.dtype(np.float64),
                lambda rows: ex.points[rows]),
               ("cells", (n, ex.nodes_per_cell), np.dtype(np.int64),
@@ -69,15 +71,15 @@ def write_xdmf_blocks(ex, xdmf_path, h5_path) -> None:
     for key, values in ex.mesh.cell_data.items():
         values = np.asarray(values)
         wide = np.dtype(np.int64 if values.dtype.kind in "biu" else np.float64)
-        arrays.append((str(key), values.shape, wide, lambda rows, v=values: v[rows]))
+        arrays.append((str(key), values.shape, wide, values.__getitem__))
 
     grid = ET.Element("Grid", Name="Grid")
     h5_name = Path(h5_path).name
     with hdf5_file(h5_path) as h5:
         for k, (name, shape, dtype, block) in enumerate(arrays):
-            rows = max(1, shape[0])
+            n_rows = max(1, shape[0])
             ds = h5.create_dataset(f"data{k}", shape=shape, dtype=dtype,
-                                   chunks=(min(BLOCK, rows),) + tuple(shape[1:]),
+                                   chunks=(min(BLOCK, n_rows),) + tuple(shape[1:]),
                                    compression="gzip", compression_opts=_GZIP,
                                    shuffle=True)
             for start in range(0, shape[0], BLOCK):

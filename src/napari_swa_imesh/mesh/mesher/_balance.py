@@ -39,7 +39,7 @@ def _any_children(grid: np.ndarray) -> np.ndarray:
     """(2n0, 2n1, ...) bool -> (n0, n1, ...) bool: is any of the 2^d children true."""
     coarse = tuple(n // 2 for n in grid.shape)
     view = grid.reshape(sum(((c, 2) for c in coarse), ()))
-    return view.any(axis=tuple(range(1, 2 * grid.ndim, 2)))
+    return np.asarray(view.any(axis=tuple(range(1, 2 * grid.ndim, 2))))
 
 
 def _upsample(grid: np.ndarray) -> np.ndarray:

@@ -55,6 +55,8 @@ def record_coarsening(mesh: Mesh, report: dict) -> None:
     """Say on `mesh` that its labels were coarsened first (``recipe.coarsen``, the volume
     changes in ``info["coarsen"]``) and warn about materials the coarsening removed."""
     mesh.info["coarsen"] = report
+    if mesh.recipe is None:
+        raise ValueError("record_coarsening takes a mesh made by the mesher (with a recipe).")
     mesh.recipe = dataclasses.replace(mesh.recipe, coarsen=int(report["level"]))
     # warnings.warn <- here <- MeshPlan.steps <- run <- mesh_labels <- the caller
     warn_lost_materials(report, mesh.material_names, stacklevel=6)

@@ -262,7 +262,8 @@ def lattice_choices(spacing, *, max_rows: int = 8) -> list[dict]:
     """
     ratios = _rational_ratios(spacing)
     d = len(ratios)
-    rows, below = [], None
+    rows: list[dict] = []
+    below: float | None = None
     bound = max(ratios) / min(ratios)
     strict = False
     while len(rows) < max_rows:

@@ -92,14 +92,12 @@ def _symmetries(d: int):
 
 def _canonical(points: np.ndarray, symmetries) -> tuple:
     """Canonical form of a set of lattice points in [0, 2]^d under the cube's symmetries."""
-    best = None
-    for perm, flips in symmetries:
+    def key(perm, flips) -> tuple:
         q = points[..., list(perm)].copy()
         q[..., list(flips)] = 2 - q[..., list(flips)]
-        key = tuple(sorted(map(tuple, q.reshape(-1, q.shape[-1]).tolist())))
-        if best is None or key < best:
-            best = key
-    return best
+        return tuple(sorted(map(tuple, q.reshape(-1, q.shape[-1]).tolist())))
+
+    return min(key(perm, flips) for perm, flips in symmetries)
 
 
 def _count_up_to_symmetry(configs: np.ndarray, d: int, symmetries) -> int:

@@ -205,6 +205,8 @@ def estimate_mesh_memory(shape, dtype=np.uint8, *, n_boundary: int | None = None
 
     worst_leaves = n_pad
     worst_elements = math.factorial(d) * n_pad
+    leaves: float
+    elements: float
     if n_boundary is None:
         leaves, elements = worst_leaves, worst_elements
     else:

@@ -203,9 +203,9 @@ def triangle_angles(points, cells) -> tuple[np.ndarray, np.ndarray]:
                 cos = np.einsum("mi,mi->m", u, v) / np.sqrt(
                     np.einsum("mi,mi->m", u, u) * np.einsum("mi,mi->m", v, v))
             angles.append(np.degrees(np.arccos(np.clip(cos, -1, 1))))
-        angles = np.stack(angles, axis=1)
-        lo[start:start + len(p)] = angles.min(axis=1)
-        hi[start:start + len(p)] = angles.max(axis=1)
+        stacked = np.stack(angles, axis=1)
+        lo[start:start + len(p)] = stacked.min(axis=1)
+        hi[start:start + len(p)] = stacked.max(axis=1)
     return lo, hi
 
 
