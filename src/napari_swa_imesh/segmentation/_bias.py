@@ -207,7 +207,7 @@ def _poly_basis(centres: list[np.ndarray], shape: tuple[int, ...], degree: int
 def _checkerboard(shape: tuple[int, ...]) -> np.ndarray:
     """Fold 0/1 of every cell: a checkerboard of blocks, :data:`CV_BLOCKS` per side."""
     idx = np.meshgrid(*[np.arange(n) * CV_BLOCKS // n for n in shape], indexing="ij")
-    return (sum(idx) % 2).ravel()
+    return (np.sum(idx, axis=0) % 2).ravel()
 
 
 def _robust_fit(A: np.ndarray, y: np.ndarray, w: np.ndarray
@@ -229,7 +229,7 @@ def _cv_degree(basis, y, w, fold, ndim: int, max_degree: int) -> int:
     """Degree whose fit on one fold best predicts the other (weighted Huber loss, both
     ways), among those that beat the flat field by :data:`EVIDENCE` standard errors of
     the paired per-cell loss differences (a one-sided z-test; 0 when none does)."""
-    losses = []
+    losses: list[np.ndarray] = []
     for degree in range(max_degree + 1):
         cols = _n_terms(ndim, degree)
         loss = np.empty_like(y)
