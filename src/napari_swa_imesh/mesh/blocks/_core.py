@@ -64,13 +64,21 @@ class BlockPlan:
     Attributes
     ----------
     shape : tuple of int
-        The label volume's shape.
+        The shape of the lattice meshed: the label volume's, times `factors`.
     block : int
-        Block side in voxels, ``2**top``.
+        Block side in lattice cells, ``2**top``.
+    factors : tuple of int
+        Lattice cells per voxel along each axis (anisotropic voxels subdivided as the
+        in-memory mesher does; empty: one).
+    max_level : int, optional
+        Largest leaf level (a size cap: every cell above it is split, as
+        ``_lattice.lattice_tree``'s ``max_size`` does).
     """
 
     shape: tuple[int, ...]
     block: int
+    factors: tuple[int, ...] = ()
+    max_level: int | None = None
 
     @property
     def top(self) -> int:
@@ -110,25 +118,46 @@ class BlockPlan:
             pads.append((int(start - (lo[a] - 1)), int(hi[a] + 1 - max(stop, start))))
         return tuple(slices), tuple(pads)
 
+    def voxel_window(self, index) -> tuple[tuple[slice, ...], tuple[slice, ...]]:
+        """The voxels to read for block `index` (its :meth:`window` in voxels) and the
+        slices of those voxels, repeated by :attr:`factors`, that give the window."""
+        vox, crop = [], []
+        for s, f in zip(self.window(index)[0], self.factors or (1,) * len(self.shape)):
+            a = s.start // f
+            vox.append(slice(a, -(-s.stop // f)))
+            crop.append(slice(s.start - a * f, s.stop - a * f))
+        return tuple(vox), tuple(crop)
+
+    def to_lattice(self, voxels: np.ndarray, index) -> np.ndarray:
+        """The window of block `index` from its :meth:`voxel_window` voxels."""
+        for axis, f in enumerate(self.factors):
+            if f > 1:
+                voxels = np.repeat(voxels, f, axis=axis)
+        return voxels[self.voxel_window(index)[1]] if self.factors else voxels
+
 
 def default_top(shape) -> int:
     """``mesh_labels``'s root level for `shape` (``_tree.default_top_level``)."""
     return max(0, int(np.floor(np.log2(max(1, min(shape))))))
 
 
-def plan_blocks(shape, block: int | None = None) -> BlockPlan:
+def plan_blocks(shape, block: int | None = None, *, factors=(),
+                max_level: int | None = None) -> BlockPlan:
     """The block plan of a volume: `block` a power of two, at most the default root.
 
-    Raises ValueError for a block that is not a power of two of at least 2 voxels.
+    `shape` is the volume's; with `factors` (cells per voxel) the plan is on its lattice,
+    of ``shape * factors`` cells. Raises ValueError for a block that is not a power of
+    two of at least 2 cells.
     """
-    shape = tuple(int(n) for n in shape)
+    factors = tuple(int(f) for f in factors) if any(int(f) != 1 for f in factors) else ()
+    shape = tuple(int(n) * (factors[a] if factors else 1) for a, n in enumerate(shape))
     cap = 1 << default_top(shape)
     if block is None:
         block = cap
     block = int(block)
     if block < 2 or block & (block - 1):
         raise ValueError(f"block must be a power of two of at least 2 voxels; got {block}.")
-    return BlockPlan(shape, min(block, max(2, cap)))
+    return BlockPlan(shape, min(block, max(2, cap)), factors, max_level)
 
 
 def _window_labels(plan: BlockPlan, index, data: np.ndarray) -> np.ndarray:
@@ -167,7 +196,9 @@ def balance_grids(plan: BlockPlan, mixed_of: dict) -> list[np.ndarray | None]:
         for index, mixed in mixed_of.items():
             grid[tuple(slice(i * side, (i + 1) * side) for i in index)] = mixed[k - 1]
         below = split[k - 1]
-        if below is not None and below.any():
+        if plan.max_level is not None and k > plan.max_level:
+            grid[...] = True                                     # the size cap
+        elif below is not None and below.any():
             grid |= _any_children(_dilate(below, max(1, d - 1)))
         split.append(grid)
     return split
