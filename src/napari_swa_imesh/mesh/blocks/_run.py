@@ -385,7 +385,7 @@ def _check_folder(folder: Path, out: Path, force: bool) -> None:
                               "it (--force on the command line).")
     stem = out.stem
     foreign = [p.name for p in folder.iterdir() if not folder.is_dir() or not (
-        p.name.startswith(f"{stem}_") and p.suffix in PARTITIONED.values())] \
+        p.name.startswith(f"{stem}_") and p.suffix in (*PARTITIONED.values(), XDMF_INDEX))] \
         if folder.is_dir() else [folder.name]
     if foreign:
         raise FileExistsError(f"{folder} exists and holds files that are not pieces of "
