@@ -4,8 +4,9 @@ Layout of ``OUT.pvtu`` (partitioned VTK, ParaView's convention): the index ``OUT
 and a folder ``OUT/`` beside it holding ``OUT_<i>.vtu`` (the piece of block ``i``) and
 ``OUT_<i>_facets.vtu`` (its facet groups, the ``_facet_vtu`` layout: same points, one
 triangle per facet, cell data ``group`` and ``owner``, names in ``<FieldData>``). For
-``OUT.xdmf`` the folder holds ``OUT_<i>.h5`` instead and the index is an XDMF spatial
-collection of one grid per piece.
+``OUT.xdmf`` the folder holds ``OUT_<i>.h5`` (the piece and its groups as
+``facets/<name>``, ``owners/<name>``) and ``OUT_<i>.xdmf`` (that piece as one grid)
+instead, and the index is an XDMF spatial collection of one grid per piece.
 
 Every piece carries: points in the files' frame (x = column, y = row, z = plane, times the
 spacing); cell data ``material``, ``quality`` (radius-to-edge) and ``level``; point data
@@ -15,11 +16,14 @@ points, else Float64, exact to 2**53, so every piece declares one type). Blocks 
 meshed element have no piece.
 
 Who reads the pieces: VTK's ``XMLPUnstructuredGridReader`` reads the ``.pvtu`` (pyvista,
-ParaView; under MPI, ``pvbatch`` gives each rank its pieces); an MPI solver reads its
-rank's pieces with any ``.vtu``/HDF5 reader and joins shared vertices by ``global_id``,
-no renumbering or halo exchange needed to assemble. FEniCSx/dolfinx partitions a mesh it
-reads from one XDMF grid itself: for it, merge (``read_mesh`` then ``write_mesh``) while
-the mesh fits one process. Only the reading by pyvista and meshio is tested here.
+ParaView; under MPI, ``pvbatch`` gives each rank its pieces) and VTK's ``vtkXdmfReader``
+(ParaView) the XDMF index, as a multiblock; meshio reads one grid per file, so it reads
+each piece (``.vtu`` or the piece's own ``.xdmf``), not an index, and :func:`read_pvtu`
+(``read_mesh``) joins the pieces of either index. An MPI solver reads its rank's pieces
+with any ``.vtu``/HDF5 reader and joins shared vertices by ``global_id``, no renumbering
+or halo exchange needed to assemble. FEniCSx/dolfinx partitions a mesh it reads from one
+XDMF grid itself: for it, merge (``read_mesh`` then ``write_mesh``) while the mesh fits
+one process. The reading by pyvista, VTK's XDMF reader and meshio is tested.
 """
 
 from __future__ import annotations
