@@ -100,9 +100,11 @@ def run_blocks(args: argparse.Namespace, names: dict[int, str]) -> int:
         print(json.dumps(report))   # plain ints, floats, strings and lists
     else:
         vols = ", ".join(f"{m}: {v:g}" for m, v in report["volumes"].items())
+        cells = report["lattice"]["cells_per_voxel"]
+        unit = "voxels" if set(cells) == {1} else f"lattice cells, {cells} per voxel"
         print(f"wrote {report['output']} ({report['pieces']} pieces in "
               f"{report['pieces_folder']}, blocks of {report['block']}^{len(report['shape'])}"
-              f" voxels): {report['n_elements']} elements, worst radius-to-edge "
+              f" {unit}): {report['n_elements']} elements, worst radius-to-edge "
               f"{report['worst_ratio']:.4f} (bound {report['quality_bound']:.4f}); seams "
               f"conforming; volumes exact ({vols})"
               + ("" if memory is None else f"; {format_bytes(memory)} per worker"))

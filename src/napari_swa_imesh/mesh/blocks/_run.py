@@ -228,7 +228,8 @@ def mesh_blocks(labels, output, *, block: int | None = None, memory: int | None 
         ``OUT.pvtu`` (VTK pieces) or ``OUT.xdmf`` (HDF5 pieces); the pieces go in the
         folder ``OUT/`` beside it (``_blocks_files`` gives the layout).
     block : int, optional
-        Block side in voxels, a power of two (default: the largest whose task fits
+        Block side in lattice cells (voxels, unless anisotropic voxels are subdivided), a
+        power of two (default: the largest whose task fits
         `memory`, at most ``mesh_labels``'s root, then the mesh is the in-memory one).
     memory : int, optional
         Bytes each worker may use (also the local workers' limit).
