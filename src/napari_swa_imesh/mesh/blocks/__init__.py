@@ -3,7 +3,8 @@
 * :func:`mesh_blocks`: a label volume (Zarr, ``.npy`` or array) meshed block by block into
   a partitioned mesh, ``OUT.pvtu`` (VTK pieces) or ``OUT.xdmf`` (HDF5 pieces), with the
   folder ``OUT/`` of pieces; every check of the whole passes or nothing is written;
-* :func:`read_pvtu` (also through ``mesh.read_mesh``): the pieces joined into one
+* :func:`read_pvtu` (also through ``mesh.read_mesh``): the pieces of a ``.pvtu`` or an
+  XDMF index (:func:`is_xdmf_index`) joined into one
   :class:`~napari_swa_imesh.mesh.Mesh` where it fits in memory; :func:`read_pvtu_groups`:
   their facet groups by global vertex ids;
 * :func:`choose_block`, :func:`block_memory`: the block side a worker's memory allows.
@@ -12,7 +13,7 @@
 ``_files`` the file layout, ``_run`` the rounds of tasks, ``_cli`` the command-line path.
 """
 
-from ._files import read_pvtu, read_pvtu_groups
+from ._files import is_xdmf_index, read_pvtu, read_pvtu_groups
 from ._run import (
     BLOCK_SUFFIXES,
     BlockMeshError,
@@ -26,6 +27,7 @@ __all__ = [
     "BlockMeshError",
     "block_memory",
     "choose_block",
+    "is_xdmf_index",
     "mesh_blocks",
     "read_pvtu",
     "read_pvtu_groups",

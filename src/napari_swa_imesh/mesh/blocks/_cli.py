@@ -37,9 +37,8 @@ def add_commands(subparsers) -> None:
     p.set_defaults(func=run)
 
 #: options of the in-memory path the block path does not take, with their defaults
-_NOT_HERE = {"refine": 0, "max_size": None, "coarsen": 0, "periodic": False,
-             "no_subdivide": False, "method": "template", "order": "1", "msh_ascii": False,
-             "index_space": False, "max_aspect": None, "full_check": False,
+_NOT_HERE = {"refine": 0, "coarsen": 0, "periodic": False, "method": "template",
+             "order": "1", "msh_ascii": False, "index_space": False, "full_check": False,
              "facet_groups": "all"}
 
 
@@ -75,8 +74,9 @@ def run_blocks(args: argparse.Namespace, names: dict[int, str]) -> int:
     used = [k for k, v in _NOT_HERE.items() if getattr(args, k, v) != v]
     if used:
         raise ValueError(f"--{used[0].replace('_', '-')} is not available for block-wise "
-                         "meshing (cubic voxels, first order); leave it out, or mesh in "
-                         "memory with another output suffix.")
+                         "meshing (first order, template method, no refinement, coarsening "
+                         "or periodic faces); leave it out, or mesh in memory with another "
+                         "output suffix.")
     memory = parse_memory_size(args.memory) if args.memory else None
     if args.workers is not None and args.scheduler:
         raise ValueError("give --workers or --scheduler, not both: a scheduler has its own "
@@ -93,15 +93,18 @@ def run_blocks(args: argparse.Namespace, names: dict[int, str]) -> int:
         report = mesh_blocks(args.labels, args.output, block=args.block, memory=memory,
                              workers=workers, scheduler=args.scheduler,
                              exclude=tuple(args.exclude), spacing=args.spacing,
-                             material_names=names,
+                             material_names=names, subdivide=not args.no_subdivide,
+                             max_aspect=args.max_aspect, max_size=args.max_size,
                              force=args.force, progress=progress)
     if args.json:
         print(json.dumps(report))   # plain ints, floats, strings and lists
     else:
         vols = ", ".join(f"{m}: {v:g}" for m, v in report["volumes"].items())
+        cells = report["lattice"]["cells_per_voxel"]
+        unit = "voxels" if set(cells) == {1} else f"lattice cells, {cells} per voxel"
         print(f"wrote {report['output']} ({report['pieces']} pieces in "
               f"{report['pieces_folder']}, blocks of {report['block']}^{len(report['shape'])}"
-              f" voxels): {report['n_elements']} elements, worst radius-to-edge "
+              f" {unit}): {report['n_elements']} elements, worst radius-to-edge "
               f"{report['worst_ratio']:.4f} (bound {report['quality_bound']:.4f}); seams "
               f"conforming; volumes exact ({vols})"
               + ("" if memory is None else f"; {format_bytes(memory)} per worker"))

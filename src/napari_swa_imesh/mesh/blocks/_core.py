@@ -15,7 +15,8 @@ around it. Steps:
    labels from the block's voxels and a one-voxel halo, and the template mesh of the
    leaves the block owns, in a local frame shifted by a multiple of ``B`` whose parity
    sum is even (the diagonal rule is unchanged). Global vertex ids are lattice keys of
-   the image's corner lattice: no communication.
+   the image's corner lattice: no communication. Its facet groups, seams, volumes and
+   own checks come from the template tables (``_piece``), not from a sort of facets.
 
 The pieces are exactly the in-memory mesh of the same tree cut by blocks: same points,
 same elements, same facet groups (``tests/mesh/test_blocks.py``). The tree's roots are
@@ -36,9 +37,11 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from ..._region_tree import PAD_LABEL, RegionTree, _fold_pairs
-from ..formats._common import FACE_CORNERS, material_names
+from ..formats._common import material_names
 from ..mesher._balance import _any_children, _dilate
+from ..mesher._packed import pack_points
 from ..mesher._templates import template_mesh, template_quality
+from . import _piece as pc
 
 __all__ = [
     "BlockPlan",
@@ -61,13 +64,21 @@ class BlockPlan:
     Attributes
     ----------
     shape : tuple of int
-        The label volume's shape.
+        The shape of the lattice meshed: the label volume's, times `factors`.
     block : int
-        Block side in voxels, ``2**top``.
+        Block side in lattice cells, ``2**top``.
+    factors : tuple of int
+        Lattice cells per voxel along each axis (anisotropic voxels subdivided as the
+        in-memory mesher does; empty: one).
+    max_level : int, optional
+        Largest leaf level (a size cap: every cell above it is split, as
+        ``_lattice.lattice_tree``'s ``max_size`` does).
     """
 
     shape: tuple[int, ...]
     block: int
+    factors: tuple[int, ...] = ()
+    max_level: int | None = None
 
     @property
     def top(self) -> int:
@@ -107,25 +118,46 @@ class BlockPlan:
             pads.append((int(start - (lo[a] - 1)), int(hi[a] + 1 - max(stop, start))))
         return tuple(slices), tuple(pads)
 
+    def voxel_window(self, index) -> tuple[tuple[slice, ...], tuple[slice, ...]]:
+        """The voxels to read for block `index` (its :meth:`window` in voxels) and the
+        slices of those voxels, repeated by :attr:`factors`, that give the window."""
+        vox, crop = [], []
+        for s, f in zip(self.window(index)[0], self.factors or (1,) * len(self.shape)):
+            a = s.start // f
+            vox.append(slice(a, -(-s.stop // f)))
+            crop.append(slice(s.start - a * f, s.stop - a * f))
+        return tuple(vox), tuple(crop)
+
+    def to_lattice(self, voxels: np.ndarray, index) -> np.ndarray:
+        """The window of block `index` from its :meth:`voxel_window` voxels."""
+        for axis, f in enumerate(self.factors):
+            if f > 1:
+                voxels = np.repeat(voxels, f, axis=axis)
+        return voxels[self.voxel_window(index)[1]] if self.factors else voxels
+
 
 def default_top(shape) -> int:
     """``mesh_labels``'s root level for `shape` (``_tree.default_top_level``)."""
     return max(0, int(np.floor(np.log2(max(1, min(shape))))))
 
 
-def plan_blocks(shape, block: int | None = None) -> BlockPlan:
+def plan_blocks(shape, block: int | None = None, *, factors=(),
+                max_level: int | None = None) -> BlockPlan:
     """The block plan of a volume: `block` a power of two, at most the default root.
 
-    Raises ValueError for a block that is not a power of two of at least 2 voxels.
+    `shape` is the volume's; with `factors` (cells per voxel) the plan is on its lattice,
+    of ``shape * factors`` cells. Raises ValueError for a block that is not a power of
+    two of at least 2 cells.
     """
-    shape = tuple(int(n) for n in shape)
+    factors = tuple(int(f) for f in factors) if any(int(f) != 1 for f in factors) else ()
+    shape = tuple(int(n) * (factors[a] if factors else 1) for a, n in enumerate(shape))
     cap = 1 << default_top(shape)
     if block is None:
         block = cap
     block = int(block)
     if block < 2 or block & (block - 1):
         raise ValueError(f"block must be a power of two of at least 2 voxels; got {block}.")
-    return BlockPlan(shape, min(block, max(2, cap)))
+    return BlockPlan(shape, min(block, max(2, cap)), factors, max_level)
 
 
 def _window_labels(plan: BlockPlan, index, data: np.ndarray) -> np.ndarray:
@@ -164,7 +196,9 @@ def balance_grids(plan: BlockPlan, mixed_of: dict) -> list[np.ndarray | None]:
         for index, mixed in mixed_of.items():
             grid[tuple(slice(i * side, (i + 1) * side) for i in index)] = mixed[k - 1]
         below = split[k - 1]
-        if below is not None and below.any():
+        if plan.max_level is not None and k > plan.max_level:
+            grid[...] = True                                     # the size cap
+        elif below is not None and below.any():
             grid |= _any_children(_dilate(below, max(1, d - 1)))
         split.append(grid)
     return split
@@ -323,7 +357,8 @@ def mesh_block(plan: BlockPlan, index, data: np.ndarray, grids: list, *,
         return empty
     shift, extent = _frame(origin, level, meshed)
     local = RegionTree(origin - shift, level, label, extent, extent, plan.top)
-    pts, cells, leaf_of, template_id, _, _, _ = template_mesh(local, meshed, rule="parity")
+    pts, cells, leaf_of, template_id, _, packed, _ = template_mesh(local, meshed,
+                                                                   rule="parity")
     points = pts.astype(np.int64) + shift
     del pts
     table = template_quality(d, tuple(spacing) if spacing is not None else (1.0,) * d)
@@ -332,78 +367,36 @@ def mesh_block(plan: BlockPlan, index, data: np.ndarray, grids: list, *,
     piece = Piece(tuple(index), points, points @ strides, cells.astype(np.intp, copy=False),
                   label[leaf_of], table["quality"][template_id], level[leaf_of])
     _piece_facets(piece, plan, win, exclude, present, material_names_ or {},
-                  origin[leaf_of], level[leaf_of])
-    _piece_volumes(piece)
+                  template_id, leaf_of, origin, level, label, meshed, packed)
     return piece
 
 
-def _signed6(points: np.ndarray, cells: np.ndarray) -> np.ndarray:
-    """D! times the signed volume of each simplex (exact integers)."""
-    p0 = points[cells[:, 0]]
-    m = np.stack([points[cells[:, j]] - p0 for j in range(1, cells.shape[1])], axis=1)
-    if m.shape[1] == 2:
-        return m[:, 0, 0] * m[:, 1, 1] - m[:, 0, 1] * m[:, 1, 0]
-    return (m[:, 0, 0] * (m[:, 1, 1] * m[:, 2, 2] - m[:, 1, 2] * m[:, 2, 1])
-            - m[:, 0, 1] * (m[:, 1, 0] * m[:, 2, 2] - m[:, 1, 2] * m[:, 2, 0])
-            + m[:, 0, 2] * (m[:, 1, 0] * m[:, 2, 1] - m[:, 1, 1] * m[:, 2, 0]))
-
-
-def _piece_volumes(piece: Piece) -> None:
-    vol = _signed6(piece.points, piece.cells)
-    if (vol <= 0).any():
-        piece.problems.append(f"{int((vol <= 0).sum())} elements without positive volume")
-    mats, inv = np.unique(piece.material, return_inverse=True)
-    sums = np.zeros(len(mats), np.int64)
-    np.add.at(sums, inv, vol.astype(np.int64))
-    piece.volumes = {int(m): int(s) for m, s in zip(mats, sums)}
-
-
-def _leaf_face_facets(piece: Piece, leaf_origin: np.ndarray, leaf_level: np.ndarray):
-    """The element facets that lie on a face of their element's leaf (the only ones that
-    can bound a group or meet another leaf): (element, opposite corner, axis, outward
-    sign), each (F,). A facet inside its leaf is shared by two elements of that leaf."""
-    d = piece.points.shape[1]
-    cells = piece.cells
-    lo = leaf_origin                                               # (M, d)
-    hi = lo + (np.int64(1) << leaf_level.astype(np.int64))[:, None]
-    elem, corner, axis, sign = [], [], [], []
-    for a in range(d):
-        coord = piece.points[cells, a]                             # (M, d+1)
-        at_lo, at_hi = coord == lo[:, a, None], coord == hi[:, a, None]
-        n_lo, n_hi = at_lo.sum(axis=1), at_hi.sum(axis=1)
-        for on, count, out in ((at_lo, n_lo, -1), (at_hi, n_hi, 1)):
-            # d corners on the face: the facet is the one opposite the corner that is not
-            e = np.flatnonzero(count == d)
-            elem.append(e)
-            corner.append(np.argmin(on[e], axis=1))
-            axis.append(np.full(len(e), a))
-            sign.append(np.full(len(e), out))
-    return tuple(np.concatenate(x) for x in (elem, corner, axis, sign))
-
-
 def _piece_facets(piece: Piece, plan: BlockPlan, win: np.ndarray, exclude: np.ndarray,
-                  present, names: dict, leaf_origin: np.ndarray,
-                  leaf_level: np.ndarray) -> None:
-    """The piece's facet groups and seams, and its conformity at leaf faces inside the
-    block (every facet there is seen from both sides, or the piece has a hole or a
-    hanging vertex)."""
+                  present, names: dict, template_id, leaf_of, origin, level, label,
+                  meshed, packed) -> None:
+    """The piece's facet groups, seams, exact volumes and its own checks: positive
+    volumes, and the chain of its facets less the box sides, exteriors and seams
+    vanishing (no hanging vertex, hole or doubled facet inside the block)."""
     d = len(plan.shape)
     lo, hi = plan.box(piece.index)
-    cells, material, pts = piece.cells, piece.material, piece.points
+    cells, material, gid = piece.cells, piece.material, piece.gid
     nm = material_names(names, np.asarray(sorted(int(m) for m in present), np.int64))
-    ob, qb, axis, out = _leaf_face_facets(piece, leaf_origin, leaf_level)
-    fb = cells[ob[:, None], FACE_CORNERS[d][qb]]                   # (F, d) outward of ob
-    coords = pts[fb]                                               # (F, d, d)
-    rows = np.arange(len(ob))
-    plane = coords[rows, 0, axis]
-    across = coords.sum(axis=1) // d                # floor of the centroid: a voxel of the
-    across[rows, axis] = np.where(out > 0, plane, plane - 1)       # neighbour's face
-    del coords
+    values = pc.vertex_values(gid)
+    if packed is None:                    # a frame too wide for 63 bits: pack the points
+        packed = pack_points(piece.points - piece.points.min(axis=0))
+    per_leaf, bad, chain = pc.piece_pass(packed, cells, values, leaf_of, len(origin),
+                                         plan.block)
+    if bad:
+        piece.problems.append(f"{bad} elements without positive volume")
+    mats, inv = np.unique(label[meshed], return_inverse=True)
+    sums = np.zeros(len(mats), np.int64)
+    np.add.at(sums, inv.ravel(), per_leaf[meshed])
+    piece.volumes = {int(m): int(v) for m, v in zip(mats, sums)}
+    ob, qb, axis, out, value, inside_image, in_block = pc.probe_facets(
+        win, lo, hi, plan.shape, cells, template_id, leaf_of, origin, level, label, meshed)
     mine = material[ob]
-    inside_image = np.all((across >= 0) & (across < np.asarray(plan.shape)), axis=1)
-    value = win[tuple((np.clip(across, lo - 1, hi) - (lo - 1)).T)]
-    in_block = np.all((across >= lo) & (across < hi), axis=1)
     groups: dict[str, list] = {}
+    fb = pc.outward_facets(cells, ob, qb)                            # (F, d) outward of ob
 
     def add(name, sel):
         if sel.any():
@@ -420,21 +413,15 @@ def _piece_facets(piece: Piece, plan: BlockPlan, win: np.ndarray, exclude: np.nd
     owns = meshed_across & (value > mine)        # interfaces, from the lower material
     for a, b in set(zip(mine[owns].tolist(), value[owns].tolist())):
         add(f"interface_{nm[a]}_{nm[b]}", owns & (mine == a) & (value == b))
-    gid = piece.gid
-    inner = np.sort(fb[meshed_across & in_block], axis=1)    # piece ids: as good, smaller
-    if len(inner):
-        inner = inner[np.lexsort(inner.T[::-1])]
-        change = np.any(inner[1:] != inner[:-1], axis=1)
-        runs = np.diff(np.flatnonzero(np.concatenate([[True], change, [True]])))
-        if (runs != 2).any():
-            piece.problems.append(f"{int((runs != 2).sum())} facets inside the block are "
-                                  "not shared by exactly two elements (a hanging vertex or "
-                                  "a hole)")
     seam = meshed_across & ~in_block
     for a in range(d):
         for sign in (-1, 1):
             ids = np.sort(gid[fb[seam & (axis == a) & (out == sign)]], axis=1)
             piece.seams[(a, sign)] = ids[np.lexsort(ids.T[::-1])] if len(ids) else ids
+    single = fb[~meshed_across | ~in_block]                      # box, exteriors, seams
+    if (chain - pc.facet_chain(single, values)) & ((1 << 64) - 1):
+        piece.problems.append("its facets do not pair up inside the block (a hanging vertex, "
+                              "a hole or a facet seen twice from one side)")
     piece.groups = {name: (np.concatenate([f for f, _ in parts]),
                            np.concatenate([o for _, o in parts]))
                     for name, parts in groups.items()}

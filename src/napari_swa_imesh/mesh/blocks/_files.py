@@ -4,8 +4,9 @@ Layout of ``OUT.pvtu`` (partitioned VTK, ParaView's convention): the index ``OUT
 and a folder ``OUT/`` beside it holding ``OUT_<i>.vtu`` (the piece of block ``i``) and
 ``OUT_<i>_facets.vtu`` (its facet groups, the ``_facet_vtu`` layout: same points, one
 triangle per facet, cell data ``group`` and ``owner``, names in ``<FieldData>``). For
-``OUT.xdmf`` the folder holds ``OUT_<i>.h5`` instead and the index is an XDMF spatial
-collection of one grid per piece.
+``OUT.xdmf`` the folder holds ``OUT_<i>.h5`` (the piece and its groups as
+``facets/<name>``, ``owners/<name>``) and ``OUT_<i>.xdmf`` (that piece as one grid)
+instead, and the index is an XDMF spatial collection of one grid per piece.
 
 Every piece carries: points in the files' frame (x = column, y = row, z = plane, times the
 spacing); cell data ``material``, ``quality`` (radius-to-edge) and ``level``; point data
@@ -15,11 +16,14 @@ points, else Float64, exact to 2**53, so every piece declares one type). Blocks 
 meshed element have no piece.
 
 Who reads the pieces: VTK's ``XMLPUnstructuredGridReader`` reads the ``.pvtu`` (pyvista,
-ParaView; under MPI, ``pvbatch`` gives each rank its pieces); an MPI solver reads its
-rank's pieces with any ``.vtu``/HDF5 reader and joins shared vertices by ``global_id``,
-no renumbering or halo exchange needed to assemble. FEniCSx/dolfinx partitions a mesh it
-reads from one XDMF grid itself: for it, merge (``read_mesh`` then ``write_mesh``) while
-the mesh fits one process. Only the reading by pyvista and meshio is tested here.
+ParaView; under MPI, ``pvbatch`` gives each rank its pieces) and VTK's ``vtkXdmfReader``
+(ParaView) the XDMF index, as a multiblock; meshio reads one grid per file, so it reads
+each piece (``.vtu`` or the piece's own ``.xdmf``), not an index, and :func:`read_pvtu`
+(``read_mesh``) joins the pieces of either index. An MPI solver reads its rank's pieces
+with any ``.vtu``/HDF5 reader and joins shared vertices by ``global_id``, no renumbering
+or halo exchange needed to assemble. FEniCSx/dolfinx partitions a mesh it reads from one
+XDMF grid itself: for it, merge (``read_mesh`` then ``write_mesh``) while the mesh fits
+one process. The reading by pyvista, VTK's XDMF reader and meshio is tested.
 """
 
 from __future__ import annotations
@@ -34,6 +38,7 @@ from ..formats._vtu import write_vtu
 
 __all__ = [
     "id_dtype",
+    "is_xdmf_index",
     "piece_names",
     "read_pvtu",
     "read_pvtu_groups",
@@ -117,6 +122,12 @@ def write_piece_h5(folder: Path, output, number: int, piece, spacing, group_ids:
             h5[f"facets/{name}"] = f[:, flip].astype(np.int64)
             h5[f"owners/{name}"] = o.astype(np.int64)
             h5[f"facets/{name}"].attrs["group_id"] = group_ids[name]
+    # the piece alone as one grid: what meshio (one grid per file) and solvers reading
+    # their rank's pieces open
+    (folder / Path(h5_name).with_suffix(XDMF_INDEX)).write_text(
+        '<?xml version="1.0"?>\n<Xdmf Version="3.0"><Domain>'
+        + _grid_xml("", h5_name, len(pts), len(cells), d, ids, mat)
+        + "</Domain></Xdmf>\n")
 
 
 def _pdata(section: str, arrays: dict) -> str:
@@ -138,66 +149,102 @@ def write_pvtu(path, folder_name: str, sources: list[str], ids: np.dtype, mat: n
     Path(path).write_text(text)
 
 
-def write_xdmf_index(path, folder_name: str, pieces: list[tuple[str, int, int]], d: int,
-                     ids: np.dtype, mat: np.dtype) -> None:
-    """Write the XDMF index: a spatial collection of one grid per (h5 name, n_points,
-    n_cells)."""
+def _grid_xml(prefix: str, h5: str, n_pts: int, n_cells: int, d: int, ids: np.dtype,
+              mat: np.dtype) -> str:
+    """One XDMF ``<Grid>`` of the piece in `h5` (named ``prefix + h5`` from the file)."""
     topo = "Tetrahedron" if d == 3 else "Triangle"
     geo = "XYZ" if d == 3 else "XY"
     num = {np.dtype(np.int32): ('Int', 4), np.dtype(np.float64): ('Float', 8),
            np.dtype(np.int8): ('Char', 1)}
 
-    def item(h5, name, dims, dtype):
+    def item(name, dims, dtype):
         kind, prec = num[np.dtype(dtype)]
         return (f'<DataItem Dimensions="{dims}" NumberType="{kind}" Precision="{prec}" '
-                f'Format="HDF">{folder_name}/{h5}:/{name}</DataItem>')
+                f'Format="HDF">{prefix}{h5}:/{name}</DataItem>')
 
-    grids = []
-    for h5, n_pts, n_cells in pieces:
-        attrs = "".join(
-            f'<Attribute Name="{n}" AttributeType="Scalar" Center="{c}">'
-            f'{item(h5, n, m, t)}</Attribute>'
-            for n, c, m, t in (("material", "Cell", n_cells, mat),
-                               ("quality", "Cell", n_cells, np.float64),
-                               ("level", "Cell", n_cells, np.int8),
-                               ("global_id", "Node", n_pts, ids)))
-        cells_item = (f'<DataItem Dimensions="{n_cells} {d + 1}" NumberType="Int" '
-                      f'Precision="8" Format="HDF">{folder_name}/{h5}:/cells</DataItem>')
-        grids.append(f'<Grid Name="{Path(h5).stem}" GridType="Uniform">'
-                     f'<Topology TopologyType="{topo}" NumberOfElements="{n_cells}">'
-                     f'{cells_item}</Topology><Geometry GeometryType="{geo}">'
-                     f'{item(h5, "points", f"{n_pts} {d}", np.float64)}</Geometry>'
-                     f'{attrs}</Grid>')
+    attrs = "".join(
+        f'<Attribute Name="{n}" AttributeType="Scalar" Center="{c}">'
+        f'{item(n, m, t)}</Attribute>'
+        for n, c, m, t in (("material", "Cell", n_cells, mat),
+                           ("quality", "Cell", n_cells, np.float64),
+                           ("level", "Cell", n_cells, np.int8),
+                           ("global_id", "Node", n_pts, ids)))
+    cells_item = (f'<DataItem Dimensions="{n_cells} {d + 1}" NumberType="Int" '
+                  f'Precision="8" Format="HDF">{prefix}{h5}:/cells</DataItem>')
+    return (f'<Grid Name="{Path(h5).stem}" GridType="Uniform">'
+            f'<Topology TopologyType="{topo}" NumberOfElements="{n_cells}">'
+            f'{cells_item}</Topology><Geometry GeometryType="{geo}">'
+            f'{item("points", f"{n_pts} {d}", np.float64)}</Geometry>'
+            f'{attrs}</Grid>')
+
+
+def write_xdmf_index(path, folder_name: str, pieces: list[tuple[str, int, int]], d: int,
+                     ids: np.dtype, mat: np.dtype) -> None:
+    """Write the XDMF index: a spatial collection of one grid per (h5 name, n_points,
+    n_cells). VTK's ``vtkXdmfReader`` (ParaView) reads it as a multiblock; meshio reads
+    one grid per file, so each piece also has its own ``.xdmf`` beside its ``.h5``."""
+    grids = [_grid_xml(f"{folder_name}/", h5, n_pts, n_cells, d, ids, mat)
+             for h5, n_pts, n_cells in pieces]
     Path(path).write_text('<?xml version="1.0"?>\n<Xdmf Version="3.0"><Domain>'
                           '<Grid Name="pieces" GridType="Collection" CollectionType="Spatial">'
                           + "".join(grids) + "</Grid></Domain></Xdmf>\n")
 
 
+def is_xdmf_index(path) -> bool:
+    """Whether `path` is the XDMF index of a block-wise mesh (a spatial collection of
+    pieces), which :func:`read_pvtu` reads, not meshio.
+
+    Parameters
+    ----------
+    path : str or Path
+
+    Returns
+    -------
+    bool
+    """
+    try:
+        with open(path, "rb") as f:
+            head = f.read(400)
+    except OSError:
+        return False
+    return b'<Grid Name="pieces" GridType="Collection" CollectionType="Spatial">' in head
+
+
 def _sources(path: Path) -> list[Path]:
+    """The files of the pieces an index names: the ``.vtu`` pieces of a ``.pvtu``, the
+    one-grid ``.xdmf`` beside each ``.h5`` of an XDMF index."""
     import xml.etree.ElementTree as ET
 
     try:
         root = ET.parse(path).getroot()
     except ET.ParseError as exc:
-        raise ValueError(f"cannot read {path} as a .pvtu index: {exc}; write it again "
-                         "with swa-imesh mesh.") from exc
-    return [path.parent / p.attrib["Source"] for p in root.iter("Piece")]
+        raise ValueError(f"cannot read {path} as a block-wise mesh index: {exc}; write it "
+                         "again with swa-imesh mesh.") from exc
+    if path.suffix.lower() == PVTU:
+        return [path.parent / p.attrib["Source"] for p in root.iter("Piece")]
+    out = []
+    for grid in root.iter("Grid"):
+        if grid.attrib.get("GridType") == "Uniform":
+            h5 = grid.find("./Geometry/DataItem").text.strip().split(":")[0]
+            out.append((path.parent / h5).with_suffix(XDMF_INDEX))
+    return out
 
 
 def _read_piece(p: Path):
     import meshio
 
     if not p.is_file():
-        raise FileNotFoundError(f"the piece {p} named by the .pvtu index is missing; "
-                                "copy the whole folder with the index.")
-    m = meshio.read(p, file_format="vtu")
+        raise FileNotFoundError(f"the piece {p} named by the index is missing; copy the "
+                                "whole folder with the index.")
+    m = meshio.read(p, file_format="vtu" if p.suffix.lower() != XDMF_INDEX else "xdmf")
     cells = np.concatenate([c.data for c in m.cells])
     return m, cells
 
 
 def read_pvtu(path):
-    """Read a ``.pvtu`` of this package's pieces as one :class:`Mesh` (vertices joined
-    by ``global_id``, in id order; elements piece by piece).
+    """Read a block-wise mesh (its ``.pvtu`` or XDMF index) as one :class:`Mesh`
+    (vertices joined by ``global_id``, in id order; elements piece by piece), each piece
+    read by meshio.
 
     Parameters
     ----------
@@ -225,15 +272,16 @@ def read_pvtu(path):
         pts.append(m.points)
         cells.append(c + offset)
         offset += len(m.points)
-        mats.append(np.concatenate(m.cell_data["material"]))
+        mats.append(np.concatenate(m.cell_data["material"]).ravel())
         for k, values in data.items():
-            values.append(np.concatenate(m.cell_data[k]))
+            values.append(np.concatenate(m.cell_data[k]).ravel())
     if not gids:
         raise ValueError(f"{path} names no piece; the mesh is empty.")
     gid = np.concatenate(gids)
     _, first, inverse = np.unique(gid, return_index=True, return_inverse=True)
     points = np.concatenate(pts)[first]
-    d = 3 if np.any(points[:, 2] != 0) or np.concatenate(cells).shape[1] == 4 else 2
+    d = 3 if points.shape[1] == 3 and (np.any(points[:, 2] != 0)
+                                       or np.concatenate(cells).shape[1] == 4) else 2
     points = np.ascontiguousarray(points[:, :d][:, ::-1], dtype=np.float64)
     cells = orient_positive(points, inverse[np.concatenate(cells)])
     return Mesh(points, cells, np.concatenate(mats).astype(np.int64),
@@ -242,12 +290,33 @@ def read_pvtu(path):
 
 
 def read_pvtu_groups(path) -> dict[str, np.ndarray]:
-    """The facet groups of a ``.pvtu`` mesh: name -> (F, d) global vertex ids, each row
-    sorted (orientation dropped), from the pieces' facet companions."""
+    """The facet groups of a block-wise mesh: name -> (F, d) global vertex ids, each row
+    sorted (orientation dropped), from the pieces' facet companions (``.pvtu``) or the
+    ``facets/<name>`` datasets of their HDF5 files (XDMF index).
+
+    Parameters
+    ----------
+    path : str or Path
+
+    Returns
+    -------
+    dict of str to ndarray
+    """
     import meshio
 
     out: dict[str, list] = {}
-    for src in _sources(Path(path)):
+    path = Path(path)
+    if path.suffix.lower() == XDMF_INDEX:
+        import h5py
+
+        for src in _sources(path):
+            with h5py.File(src.with_suffix(PARTITIONED[XDMF_INDEX]), "r") as h5:
+                gid = h5["global_id"][()].astype(np.int64).ravel()
+                for name in h5.get("facets", {}):
+                    out.setdefault(name, []).append(
+                        np.sort(gid[h5[f"facets/{name}"][()]], axis=1))
+        return {k: np.concatenate(v) for k, v in out.items()}
+    for src in _sources(path):
         comp = facets_companion(src)
         m = meshio.read(comp, file_format="vtu")
         gid = np.asarray(meshio.read(src, file_format="vtu").point_data["global_id"]

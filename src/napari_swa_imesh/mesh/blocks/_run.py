@@ -76,15 +76,14 @@ def choose_block(shape, memory: int | None, block: int | None = None) -> int:
 
 # ----------------------------------------------------------------------------- tasks
 def _read(source, plan: bk.BlockPlan, index) -> np.ndarray:
-    """The block's window: from a path (opened here, on the worker) or the array slice
-    the caller handed over."""
-    slices, _ = plan.window(index)
-    if isinstance(source, np.ndarray):
-        return source
-    from ..._zarr_io import open_lazy
+    """The block's window on the lattice: its voxels from a path (opened here, on the
+    worker) or the array slice the caller handed over, repeated by the plan's factors."""
+    if not isinstance(source, np.ndarray):
+        from ..._zarr_io import open_lazy
 
-    image, _ = open_lazy(source)
-    return np.asarray(image[slices].compute(scheduler="sync"))
+        image, _ = open_lazy(source)
+        source = np.asarray(image[plan.voxel_window(index)[0]].compute(scheduler="sync"))
+    return plan.to_lattice(source, index)
 
 
 def _check_labels(data: np.ndarray, index) -> None:
@@ -216,7 +215,8 @@ def _open_source(labels):
 def mesh_blocks(labels, output, *, block: int | None = None, memory: int | None = None,
                 workers: int = 2, scheduler: str | None = None, client=None,
                 exclude=(), spacing=None, material_names: dict | None = None,
-                force: bool = False, retries: int = 2,
+                subdivide: bool = True, max_aspect: float | None = None,
+                max_size: float | None = None, force: bool = False, retries: int = 2,
                 progress: Callable[[str, int, int], None] | None = None) -> dict:
     """Mesh a label volume block by block into a partitioned mesh (``.pvtu`` or ``.xdmf``).
 
@@ -228,7 +228,8 @@ def mesh_blocks(labels, output, *, block: int | None = None, memory: int | None 
         ``OUT.pvtu`` (VTK pieces) or ``OUT.xdmf`` (HDF5 pieces); the pieces go in the
         folder ``OUT/`` beside it (``_blocks_files`` gives the layout).
     block : int, optional
-        Block side in voxels, a power of two (default: the largest whose task fits
+        Block side in lattice cells (voxels, unless anisotropic voxels are subdivided), a
+        power of two (default: the largest whose task fits
         `memory`, at most ``mesh_labels``'s root, then the mesh is the in-memory one).
     memory : int, optional
         Bytes each worker may use (also the local workers' limit).
@@ -241,9 +242,15 @@ def mesh_blocks(labels, output, *, block: int | None = None, memory: int | None 
     exclude : sequence of int
         Materials not meshed.
     spacing : float or sequence of float, optional
-        Voxel size (default: the store's, else 1). Must be cubic: the block path meshes
-        the voxel lattice.
+        Voxel size (default: the store's, else 1). Anisotropic voxels are cut into lattice
+        cells as :func:`~napari_swa_imesh.mesh.mesh_labels` cuts them (the same mesh).
     material_names : dict of int to str, optional
+    subdivide, max_aspect : optional
+        As for :func:`~napari_swa_imesh.mesh.mesh_labels`: whether (and to which residual
+        aspect) anisotropic voxels are subdivided.
+    max_size : float, optional
+        Longest element edge (physical units): leaves are split as the in-memory mesher
+        splits them (a cap per level, so local to every block).
     force : bool
         Replace existing outputs.
     retries : int
@@ -265,6 +272,7 @@ def mesh_blocks(labels, output, *, block: int | None = None, memory: int | None 
     """
     from ..._atomic import atomic_write, check_writable
     from ..._validation import normalize_spacing
+    from ..mesher._door import resolution_arguments
     from ..mesher._imesh import _exclude_array
     from ..mesher._templates import template_quality
 
@@ -285,17 +293,25 @@ def mesh_blocks(labels, output, *, block: int | None = None, memory: int | None 
     source, shape, file_spacing, _ = _open_source(labels)
     d = len(shape)
     sp = normalize_spacing(spacing if spacing is not None else file_spacing, d)
-    if len(set(sp)) != 1:
-        raise ValueError(f"block-wise meshing takes cubic voxels; the spacing is {sp}. Mesh "
-                         "in memory (which subdivides anisotropic voxels) or resample.")
+    lattice, max_size, _ = resolution_arguments(sp, method="template", refine=0,
+                                                max_size=max_size, subdivide=subdivide,
+                                                coarsen=0, max_aspect=max_aspect)
+    step = tuple(float(h) for h in lattice.step)
+    max_level = None
+    if max_size is not None:
+        # lattice_tree splits a leaf of 2^k cells while 2^k diagonals exceed max_size
+        diagonal, max_level = float(np.linalg.norm(lattice.step)), 0
+        while not (1 << (max_level + 1)) * diagonal > max_size and max_level < 62:
+            max_level += 1
     exclude_arr = _exclude_array(exclude)
-    b = choose_block(shape, memory, block)
-    plan = bk.plan_blocks(shape, b)
+    cells = tuple(n * f for n, f in zip(shape, lattice.factors))
+    b = choose_block(cells, memory, block)
+    plan = bk.plan_blocks(shape, b, factors=lattice.factors, max_level=max_level)
     blocks = plan.blocks()
 
     def src(index):
         if isinstance(source, np.ndarray):
-            return source[plan.window(index)[0]]
+            return source[plan.voxel_window(index)[0]]
         return source
 
     own_client = cluster = None
@@ -320,12 +336,12 @@ def mesh_blocks(labels, output, *, block: int | None = None, memory: int | None 
                              f"exclude={exclude_arr.tolist()}); nothing is left to mesh.")
         split = bk.balance_grids(plan, {i: c[0] for i, c in zip(blocks, coarse)})
         del coarse
-        n_lattice = math.prod(n + 1 for n in shape)
+        n_lattice = math.prod(n + 1 for n in plan.shape)
         ids = bf.id_dtype(n_lattice)
         mat = np.dtype(np.int32) if max(present) < 2**31 else np.dtype(np.float64)
         group_ids = bk.group_table(d, present, material_names)
         options = {"exclude": exclude_arr, "present": present, "names": material_names or {},
-                   "spacing": sp, "kind": kind, "group_ids": group_ids, "ids": ids.str,
+                   "spacing": step, "kind": kind, "group_ids": group_ids, "ids": ids.str,
                    "mat": mat.str}
         with atomic_write([out, folder], force=force, folders=[folder]) as (tmp_out,
                                                                           tmp_folder):
@@ -334,10 +350,10 @@ def mesh_blocks(labels, output, *, block: int | None = None, memory: int | None 
                 mesh_task, [(src(i), plan, i, bk.block_slices(plan, split, i), n,
                              str(tmp_folder), str(out), options)
                             for n, i in enumerate(blocks)], retries, progress, "mesh")
-            report = _check_whole(plan, summaries, counts, present, sp,
-                                  # every element is a scaled template: the worst template
-                                  # is the proven bound (quality_bounds, cubic voxels)
-                                  float(template_quality(d, sp)["quality"].max()))
+            report = _check_whole(plan, summaries, counts, present, step,
+                                  # every element is a template scaled by the lattice
+                                  # step: the worst such template is the proven bound
+                                  float(template_quality(d, step)["quality"].max()))
             written = [s for s in summaries if s["n_cells"]]
             if kind == PVTU:
                 bf.write_pvtu(tmp_out, folder.name, [bf.piece_names(out, s["number"])[0]
@@ -353,8 +369,10 @@ def mesh_blocks(labels, output, *, block: int | None = None, memory: int | None 
             cluster.close()
     report.update({"output": str(out), "pieces_folder": str(folder), "block": plan.block,
                    "blocks": plan.n_blocks, "pieces": len(written),
-                   "equals_in_memory": plan.block == 1 << bk.default_top(shape),
-                   "spacing": list(sp), "shape": list(shape)})
+                   "equals_in_memory": plan.block == 1 << bk.default_top(plan.shape),
+                   "spacing": list(sp), "shape": list(shape),
+                   "lattice": {"cells_per_voxel": list(lattice.factors), "step": list(step)},
+                   "max_size": max_size})
     return report
 
 
@@ -369,7 +387,7 @@ def _check_folder(folder: Path, out: Path, force: bool) -> None:
                               "it (--force on the command line).")
     stem = out.stem
     foreign = [p.name for p in folder.iterdir() if not folder.is_dir() or not (
-        p.name.startswith(f"{stem}_") and p.suffix in PARTITIONED.values())] \
+        p.name.startswith(f"{stem}_") and p.suffix in (*PARTITIONED.values(), XDMF_INDEX))] \
         if folder.is_dir() else [folder.name]
     if foreign:
         raise FileExistsError(f"{folder} exists and holds files that are not pieces of "

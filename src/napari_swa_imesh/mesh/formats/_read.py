@@ -13,7 +13,7 @@ import numpy as np
 
 from ..model._types import Mesh
 from ._common import orient_positive
-from ._registry import MeshFormat, UnknownSuffixError, mesh_format
+from ._registry import PARTITIONED, PVTU, MeshFormat, UnknownSuffixError, mesh_format
 
 __all__ = ["read_mesh"]
 
@@ -38,10 +38,11 @@ def read_mesh(path) -> Mesh:
         (Gmsh groups cells by material). A second-order file gives its corners only.
     """
     p = Path(path)
-    if p.suffix.lower() == ".pvtu":             # block-wise pieces (issue 27)
-        from ..blocks import read_pvtu
+    if p.suffix.lower() in PARTITIONED:          # block-wise pieces (issue 27)
+        from ..blocks import is_xdmf_index, read_pvtu
 
-        return read_pvtu(p)
+        if p.suffix.lower() == PVTU or is_xdmf_index(p):
+            return read_pvtu(p)
     found: MeshFormat | UnknownSuffixError
     try:
         found = mesh_format(p, action="read")
