@@ -119,6 +119,10 @@ def test_a_material_can_stay_fixed_and_the_others_need_signatures():
     rows = _rows((0.0, 0.5), (float("nan"), float("nan")))
     with pytest.raises(ValueError, match="no finite mean_mean and mean_std"):
         stochastic_k_eff(labels, rows, samples=2, correlation=4.0)
+    rows = _rows((0.0, 0.5), (1.0, 0.0))
+    rows[1]["tiles"] = 1                      # a std of one tile is no spread
+    with pytest.raises(ValueError, match="1 tile in the signatures, too few"):
+        stochastic_k_eff(labels, rows, samples=2, correlation=4.0)
 
 
 @pytest.mark.parametrize(("kwargs", "match"), [

@@ -217,15 +217,22 @@ def _materials(signatures, mesh: Mesh, conductivity, prop: PropertyMap) -> tuple
                              f"conductivity (--conductivity {label}=K) or use the "
                              "signatures of these labels.")
         mean, std = row.get(MEAN), row.get(STD)
-        ok = all(isinstance(v, Real) and math.isfinite(v) for v in (mean, std))
-        if not ok or std < 0:
+        mean = float(mean) if isinstance(mean, Real) else math.nan
+        std = float(std) if isinstance(std, Real) else math.nan
+        if not (math.isfinite(mean) and math.isfinite(std) and std >= 0):
             raise ValueError(f"{what} has no finite {MEAN} and {STD} in the signatures "
-                             f"(got {mean!r}, {std!r}: no full tile was classified as it?); "
+                             f"(got {row.get(MEAN)!r}, {row.get(STD)!r}: no full tile "
+                             "was classified as it?); "
                              f"give it a fixed conductivity (--conductivity {label}=K).")
-        log_mean, log_std = prop.log_moments(float(mean), float(std))
+        tiles = row.get("tiles")
+        if isinstance(tiles, Real) and tiles < 2:
+            raise ValueError(f"{what} has {tiles:g} tile in the signatures, too few for a "
+                             f"standard deviation; give it a fixed conductivity "
+                             f"(--conductivity {label}=K) or segment at a finer scale.")
+        log_mean, log_std = prop.log_moments(mean, std)
         random.append((int(label), log_mean, log_std))
         rows[int(label)] = {"name": names.get(label, str(row.get("name") or "")),
-                            "intensity_mean": float(mean), "intensity_std": float(std),
+                            "intensity_mean": mean, "intensity_std": std,
                             "log_k_mean": log_mean, "log_k_std": log_std}
     tensors = np.zeros((mesh.n_cells, mesh.ndim, mesh.ndim))
     if fixed:
@@ -334,7 +341,7 @@ def stochastic_steps(mesh_or_labels, signatures, *, samples: int, correlation,
     yield done, total, f"solving {samples} samples"
     for i, block_values in run_blocks(_solve_block, problem, blocks, workers=workers,
                                       scheduler=scheduler, client=client):
-        values[blocks[i]] = block_values
+        values[blocks[i]] = np.asarray(block_values)
         done += len(blocks[i])
         yield done, total, f"{done - 2} of {samples} samples solved"
     seconds["samples"] = time.perf_counter() - t0
