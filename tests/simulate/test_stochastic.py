@@ -100,8 +100,9 @@ def test_the_number_of_workers_does_not_change_the_samples():
     labels[8:] = 2
     run = {"samples": 9, "correlation": 4.0, "seed": 4}
     here = stochastic_k_eff(labels, _rows((0.0, 1.0), (1.0, 0.5)), **run)
-    with distributed.Client(processes=False, n_workers=2, threads_per_worker=1,
-                            dashboard_address=None) as client:
+    with distributed.LocalCluster(processes=False, n_workers=2, threads_per_worker=1,
+                                  dashboard_address=None) as cluster, \
+            distributed.Client(cluster) as client:
         there = stochastic_k_eff(labels, _rows((0.0, 1.0), (1.0, 0.5)), client=client,
                                  workers=2, **run)
     for axis in ("x", "y"):
@@ -114,6 +115,13 @@ def test_a_material_can_stay_fixed_and_the_others_need_signatures():
     r = stochastic_k_eff(labels, _rows((0.0, 0.5)), samples=2, correlation=4.0,
                          conductivity={2: 3.0}, axes="x")
     assert list(r.materials) == [1]
+    named = stochastic_k_eff(labels, _rows((0.0, 0.5), (0.0, 0.5)), samples=2,
+                             correlation=4.0, conductivity={"m2": 3.0}, axes="x")
+    assert list(named.materials) == [1]                  # by the signatures' name
+    assert np.array_equal(named.samples["x"], r.samples["x"])
+    with pytest.raises(ValueError, match="names material 'bone', which is not meshed"):
+        stochastic_k_eff(labels, _rows((0.0, 0.5), (0.0, 0.5)), samples=2,
+                         correlation=4.0, conductivity={"bone": 3.0})
     with pytest.raises(ValueError, match="material 2 .* no row in the signatures"):
         stochastic_k_eff(labels, _rows((0.0, 0.5)), samples=2, correlation=4.0)
     rows = _rows((0.0, 0.5), (float("nan"), float("nan")))

@@ -36,7 +36,7 @@ import numpy as np
 
 from ..mesh import Mesh, mesh_labels
 from ._assembly import cell_fluxes, fe_space, p1_embedding, stiffness_matrix
-from ._conductivity import conductivity_tensors
+from ._conductivity import conductivity_tensors, material_label
 from ._protocols import check_within_bounds, mixed_boundary, voigt_reuss
 from ._random_field import gaussian_field
 from ._report import match_signatures, read_signatures
@@ -203,12 +203,20 @@ def _materials(signatures, mesh: Mesh, conductivity, prop: PropertyMap) -> tuple
         signatures = read_signatures(signatures)
     by_label, _ = match_signatures(signatures, mesh.material_names)
     conductivity = dict(conductivity or {})
-    names = mesh.material_names
+    # the signatures' names serve `conductivity` too (they agree with the mesh's)
+    names = {**{k: str(r["name"]) for k, r in by_label.items() if r.get("name")},
+             **mesh.material_names}
+    present = np.unique(mesh.material).tolist()
+    chosen = {material_label(k, names): k for k in conductivity}
+    unknown = [k for label, k in chosen.items() if label not in present]
+    if unknown:
+        raise ValueError(f"the fixed conductivity names material {unknown[0]!r}, which is "
+                         f"not meshed (materials {', '.join(map(str, present))}); give a "
+                         "meshed label or a name from the signatures.")
     random, fixed, rows = [], [], {}
-    for label in np.unique(mesh.material).tolist():
-        given = label in conductivity or names.get(label) in conductivity
+    for label in present:
         row = by_label.get(label)
-        if given:
+        if label in chosen:
             fixed.append(label)
             continue
         what = f"material {label}" + (f" ({names[label]})" if names.get(label) else "")
