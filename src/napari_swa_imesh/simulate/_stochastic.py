@@ -246,8 +246,8 @@ def _materials(signatures, mesh: Mesh, conductivity, prop: PropertyMap) -> tuple
     if fixed:
         table = conductivity_tensors(conductivity, fixed, mesh.ndim, names)
         where = np.searchsorted(fixed, mesh.material)
-        chosen = np.isin(mesh.material, fixed)
-        tensors[chosen] = table[where[chosen]]
+        held = np.isin(mesh.material, fixed)
+        tensors[held] = table[where[held]]
     return tuple(random), tensors, rows
 
 
