@@ -103,3 +103,21 @@ def test_an_existing_output_is_refused_before_any_work(inputs, capsys):
                       tmp / "samples.csv")
     assert rc == 2 and "exists" in err
     assert (tmp / "samples.csv").read_text() == "keep"
+
+
+def test_the_tile_size_defaults_to_the_signatures_scale(inputs, capsys):
+    tmp, _ = inputs
+    text = (tmp / "sig.csv").read_text().splitlines()
+    (tmp / "scaled.csv").write_text("\n".join([text[0] + ",scale"] + [t + ",2" for t in text[1:]]))
+    run = ["simulate", tmp / "labels.npy", "--samples", 3, "--map", "log-linear:-2,0.05",
+           "--axes", "x", "--json"]
+    rc, out, err = _run(capsys, *run, "--stochastic", tmp / "scaled.csv")
+    assert rc == 0, err
+    rc, same, err = _run(capsys, *run, "--stochastic", tmp / "sig.csv", "--tile-size", 4)
+    assert rc == 0, err
+    a, b = json.loads(out)["stochastic"], json.loads(same)["stochastic"]
+    assert a["correlation"] == [4.0, 4.0] and a["k_eff"] == b["k_eff"]
+    (tmp / "mixed.csv").write_text(
+        "\n".join([text[0] + ",scale", text[1] + ",2", text[2] + ",3"]))
+    rc, _, err = _run(capsys, *run, "--stochastic", tmp / "mixed.csv")
+    assert rc == 2 and "not one whole number" in err

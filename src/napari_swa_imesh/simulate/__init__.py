@@ -30,7 +30,13 @@ from ._remesh import mesh_refine, needs_remesh, remesh
 from ._report import SimulationReport, read_signatures, simulation_report, write_report
 from ._simulate import SimulationResult, simulate, simulate_steps
 from ._solve import SolverInfo
-from ._stochastic import PropertyMap, parse_property_map, stochastic_k_eff, stochastic_steps
+from ._stochastic import (
+    PropertyMap,
+    parse_property_map,
+    signature_tile_size,
+    stochastic_k_eff,
+    stochastic_steps,
+)
 from ._stochastic_result import StochasticResult, check_stochastic_paths, write_stochastic
 from ._transient import TransientResult, simulate_transient, transient_steps
 
@@ -43,5 +49,5 @@ __all__ = ["BoundaryResult", "SimulationReport", "SimulationResult", "SolverInfo
            "P1_GROWTH", "material_label", "mesh_refine", "needs_remesh", "remesh"]
 # the stochastic step (issue 28, part 2)
 __all__ += ["GaussianField", "PropertyMap", "StochasticResult", "check_stochastic_paths",
-            "gaussian_field", "parse_property_map", "stochastic_k_eff", "stochastic_steps",
-            "write_stochastic"]
+            "gaussian_field", "parse_property_map", "signature_tile_size",
+            "stochastic_k_eff", "stochastic_steps", "write_stochastic"]

@@ -46,7 +46,8 @@ from ._stochastic_dask import run_blocks
 from ._stochastic_result import StochasticResult
 
 __all__ = ["MAPS", "POINTS_PER_LENGTH", "PropertyMap", "StochasticResult",
-           "parse_property_map", "stochastic_k_eff", "stochastic_steps"]
+           "parse_property_map", "signature_tile_size", "stochastic_k_eff",
+           "stochastic_steps"]
 
 MAPS = ("log-linear",)
 POINTS_PER_LENGTH = 4          # field grid points per correlation length
@@ -106,6 +107,40 @@ def parse_property_map(text) -> PropertyMap:
                          f"intensity, two finite numbers such as log-linear:0,0.01), not "
                          f"{text!r}.")
     return PropertyMap(kind, a, b)
+
+
+def signature_tile_size(signatures) -> float | None:
+    """The RES tile side, ``2**scale`` voxels, from the signatures' ``scale`` column.
+
+    Parameters
+    ----------
+    signatures : sequence of mapping
+        Rows as :func:`~._report.read_signatures` returns them.
+
+    Returns
+    -------
+    float or None
+        None when no row has a scale (an older or hand-made table).
+
+    Raises
+    ------
+    ValueError
+        Rows at different scales, or a scale that is not a whole number of 0 or more.
+
+    Examples
+    --------
+    >>> signature_tile_size([{"label": 1, "scale": 3}, {"label": 2, "scale": 3}])
+    8.0
+    """
+    scales = {row.get("scale") for row in signatures} - {None}
+    scales = {v for v in scales if not (isinstance(v, float) and math.isnan(v))}
+    if not scales:
+        return None
+    bad = [v for v in scales if not isinstance(v, Integral) or v < 0]
+    if bad or len(scales) > 1:
+        raise ValueError(f"the signatures' scale column holds {sorted(map(str, scales))}, "
+                         "not one whole number: give the RES tile side with --tile-size.")
+    return float(2 ** int(next(iter(scales))))
 
 
 def _check_count(value, what: str, low: int) -> int:

@@ -9,7 +9,7 @@ from __future__ import annotations
 import argparse
 
 from ._report import read_signatures
-from ._stochastic import parse_property_map
+from ._stochastic import parse_property_map, signature_tile_size
 from ._stochastic_result import check_stochastic_paths
 
 __all__ = ["DEFAULT_SAMPLES", "add_stochastic_arguments", "stochastic_options"]
@@ -43,9 +43,9 @@ def add_stochastic_arguments(parser: argparse.ArgumentParser) -> None:
                    help="intensity to conductivity: log k = A + B * intensity (a Gaussian "
                         "intensity gives a log-normal k); required")
     s.add_argument("--tile-size", type=float, default=None, metavar="T",
-                   help="the RES tile side (2^scale; swa-imesh segment --json prints "
-                        "tile_size): the correlation length, in voxels for a label image, "
-                        "in the mesh's units for a mesh file; required")
+                   help="the RES tile side: the correlation length, in voxels for a label "
+                        "image, in the mesh's units for a mesh file (default: 2^scale from "
+                        "the signatures' scale column, which swa-imesh segment writes)")
     s.add_argument("--seed", type=int, default=None, metavar="S",
                    help="seed of the fields (default 0): the same seed, the same samples "
                         "whatever the workers")
@@ -101,10 +101,14 @@ def stochastic_options(args: argparse.Namespace) -> dict | None:
     if args.map is None:
         raise ValueError("--stochastic needs --map log-linear:A,B (log k = A + B * "
                          "intensity), the law from the signatures' intensities to k.")
-    if args.tile_size is None or not args.tile_size > 0:
+    signatures = read_signatures(args.stochastic)
+    tile_size = args.tile_size
+    if tile_size is None:
+        tile_size = signature_tile_size(signatures)
+    if tile_size is None or not tile_size > 0:
         raise ValueError("--stochastic needs --tile-size T, the RES tile side (the "
                          "correlation length; swa-imesh segment --json prints tile_size), "
-                         "a positive number.")
+                         "a positive number, when the signatures have no scale column.")
     samples = DEFAULT_SAMPLES if args.samples is None else args.samples
     if samples < 2:
         raise ValueError(f"--samples must be 2 or more, not {samples}.")
@@ -121,7 +125,7 @@ def stochastic_options(args: argparse.Namespace) -> dict | None:
         raise ValueError(f"--order must be auto, 1 or 2, not {args.order}.")
     prop = parse_property_map(args.map)
     check_stochastic_paths(args.sample_table, args.histogram, force=args.force)
-    return {"signatures": read_signatures(args.stochastic), "samples": samples,
-            "property_map": prop, "seed": seed, "tile_size": float(args.tile_size),
+    return {"signatures": signatures, "samples": samples,
+            "property_map": prop, "seed": seed, "tile_size": float(tile_size),
             "workers": args.workers or 1, "scheduler": args.scheduler, "order": order,
             "histogram": args.histogram, "table": args.sample_table}
