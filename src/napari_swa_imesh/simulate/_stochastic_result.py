@@ -139,11 +139,13 @@ class StochasticResult:
         fig.clear()
         ax = fig.add_subplot()
         colours = ("tab:blue", "tab:orange", "tab:green")
-        bins = max(5, min(40, int(np.sqrt(self.n)) + 1))
+        every = np.concatenate(list(self.samples.values()))
+        bins = np.histogram_bin_edges(every, bins=max(5, min(40, int(np.sqrt(self.n)) + 1))
+                                      * len(self.samples))   # one set of edges for all
         for colour, a in zip(colours, self.samples):
             s = self.statistics(a)
             ax.hist(self.samples[a], bins=bins, alpha=0.55, color=colour,
-                    label=f"{a}: {s['mean']:.4g} +- {s['sem']:.2g}")
+                    label=f"{a}: mean {s['mean']:.4g} +- {s['sem']:.2g} (s.e.)")
             ax.axvline(s["mean"], color=colour, lw=1.5)
             for edge in (s["low"], s["high"]):
                 ax.axvline(edge, color=colour, lw=1, ls="--")
