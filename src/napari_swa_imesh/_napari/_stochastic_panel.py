@@ -22,6 +22,7 @@ from qtpy.QtWidgets import QFileDialog
 
 from ..simulate import read_signatures, signature_tile_size, stochastic_steps
 from ._dock import Fold, button, side_by_side, wrapped_label
+from ._layers import MESH_KEY
 from ._plots import ThemedFigure
 from ._tasks import TaskPanel, notify_error
 
@@ -32,9 +33,19 @@ if TYPE_CHECKING:
 
     from ..simulate import StochasticResult
 
-__all__ = ["StochasticPanel"]
+__all__ = ["StochasticPanel", "source_of"]
 
 DEFAULT_MAP = "log-linear:0,1"
+
+
+def source_of(mesh_layer, labels_layer) -> tuple:
+    """``(mesh, labels)`` for a run: the layer's mesh (or None) and the labels' array when
+    they are the mesh's image (same shape), else None."""
+    mesh = None if mesh_layer is None else mesh_layer.metadata[MESH_KEY]
+    labels = None if labels_layer is None else np.asarray(labels_layer.data)
+    if labels is not None and mesh is not None and tuple(labels.shape) != tuple(mesh.shape):
+        labels = None
+    return mesh, labels
 
 
 class StochasticPanel:
