@@ -375,8 +375,10 @@ def stochastic_steps(mesh_or_labels, signatures, *, samples: int, correlation,
     t0 = time.perf_counter()
     mean_field = _solve_block(problem, [None])[0]
     seconds["mean"] = time.perf_counter() - t0
-    # blocks of a few samples: some per worker for balance, each building the FE space once
-    size = max(1, min(16, samples // (4 * max(workers, 1))))
+    # here, one sample per step (Cancel answers after one solve); on Dask, blocks of a few
+    # samples, some per worker for balance, each building the FE space once
+    here = client is None and scheduler is None and workers <= 1
+    size = 1 if here else max(1, min(16, samples // (4 * workers)))
     blocks = [list(range(i, min(i + size, samples))) for i in range(0, samples, size)]
     values = np.empty((samples, len(names) + 2))
     done = 2
