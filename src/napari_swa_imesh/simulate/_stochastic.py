@@ -456,7 +456,7 @@ def stochastic_k_eff(mesh_or_labels, signatures, *, samples: int, correlation,
 
     >>> rows = [{"label": 1, "name": "a", "mean_mean": 0.0, "mean_std": 0.0}]
     >>> r = stochastic_k_eff(np.ones((4, 4), dtype=int), rows, samples=2, correlation=2.0)
-    >>> [round(v, 9) for v in r.samples["x"]]
+    >>> r.samples["x"].round(9).tolist()
     [1.0, 1.0]
     """
     steps = stochastic_steps(mesh_or_labels, signatures, samples=samples,
