@@ -10,6 +10,8 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
 
 from napari_swa_imesh.mesh import mesh_labels
 from napari_swa_imesh.simulate import (
@@ -152,3 +154,21 @@ def test_a_mesh_coarser_than_the_correlation_length_is_refused():
     mesh = mesh_labels(np.ones((16, 16), dtype=np.uint8))      # one coarse quadtree leaf
     with pytest.raises(ValueError, match="correlation lengths long.*--max-size"):
         stochastic_k_eff(mesh, _rows((0.0, 1.0)), samples=2, correlation=2.0)
+
+
+@settings(max_examples=6, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@given(seed=st.integers(0, 2**32 - 1), first=st.integers(2, 4), more=st.integers(1, 3),
+       shift=st.floats(-3, 3))
+def test_samples_depend_on_seed_and_index_only_and_scale_with_the_map(seed, first, more,
+                                                                      shift):
+    labels = np.ones((8, 8), dtype=np.uint8)
+    labels[4:] = 2
+    rows = _rows((0.0, 1.0), (0.5, 0.3))
+    run = {"correlation": 2.0, "seed": seed, "axes": "x"}
+    short = stochastic_k_eff(labels, rows, samples=first, **run)
+    long = stochastic_k_eff(labels, rows, samples=first + more, **run)
+    assert np.array_equal(long.samples["x"][:first], short.samples["x"])
+    # log k = a + b I: a shift of a multiplies every k, hence every k_eff, by e^shift
+    moved = stochastic_k_eff(labels, rows, samples=first,
+                             property_map=f"log-linear:{shift!r},1", **run)
+    assert moved.samples["x"] == pytest.approx(np.exp(shift) * short.samples["x"], rel=1e-7)

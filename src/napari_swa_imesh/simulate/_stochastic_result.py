@@ -81,7 +81,7 @@ class StochasticResult:
         std = float(v.std(ddof=1))
         low, high = np.percentile(v, [2.5, 97.5])
         return {"mean": float(v.mean()), "std": std, "low": float(low), "high": float(high),
-                "sem": std / np.sqrt(len(v))}
+                "sem": float(std / np.sqrt(len(v)))}
 
     def summary(self) -> dict:
         """A JSON-ready account: statistics per axis, the materials and the settings."""
