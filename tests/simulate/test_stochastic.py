@@ -143,6 +143,8 @@ def test_a_material_can_stay_fixed_and_the_others_need_signatures():
     ({"property_map": "linear:1,2"}, "must be log-linear:a,b"),
     ({"property_map": "log-linear:1"}, "must be log-linear:a,b"),
     ({"order": 3}, "order must be 1 or 2"),
+    ({"memory": 0}, "memory must be a positive number"),
+    ({"memory": 1e5, "workers": 2}, "2 solve.s. at once on .* above the memory budget"),
 ])
 def test_bad_arguments_are_refused_with_a_sentence(kwargs, match):
     run = {"samples": 2, "correlation": 4.0, **kwargs}

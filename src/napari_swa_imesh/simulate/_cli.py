@@ -419,7 +419,8 @@ def _run_stochastic(args: argparse.Namespace, options: dict) -> int:
         property_map=options["property_map"], seed=options["seed"],
         conductivity=conductivity, spacing=spacing, exclude=tuple(args.exclude),
         material_names=names, refine=args.refine, order=options["order"], axes=args.axes,
-        tol=args.tol, workers=options["workers"], scheduler=options["scheduler"])
+        tol=args.tol, workers=options["workers"], scheduler=options["scheduler"],
+        memory=options["memory"])
     written = []
     if options["table"] or options["histogram"]:
         with timer("write"):

@@ -36,6 +36,8 @@ import numpy as np
 
 from ..mesh import Mesh, mesh_labels
 from ._assembly import cell_fluxes, fe_space, p1_embedding, stiffness_matrix
+from ._budget import DEFAULT_MEMORY, estimate_memory, format_bytes
+from ._certify import check_memory_budget
 from ._conductivity import conductivity_tensors, material_label
 from ._protocols import check_within_bounds, mixed_boundary, voigt_reuss
 from ._random_field import gaussian_field
@@ -292,7 +294,8 @@ def stochastic_steps(mesh_or_labels, signatures, *, samples: int, correlation,
                      material_names: Mapping[int, str] | None = None, refine: int = 0,
                      max_size: float | None = None, order: int = 1, axes=None,
                      tol: float = DEFAULT_TOLERANCE, workers: int = 1,
-                     scheduler: str | None = None, client=None
+                     scheduler: str | None = None, client=None,
+                     memory: float = DEFAULT_MEMORY
                      ) -> Generator[tuple[int, int, str], None, StochasticResult]:
     """Run :func:`stochastic_k_eff` step by step, for a progress bar.
 
@@ -300,7 +303,7 @@ def stochastic_steps(mesh_or_labels, signatures, *, samples: int, correlation,
     ----------
     mesh_or_labels, signatures, samples, correlation, property_map, seed, conductivity,
     spacing, exclude, material_names, refine, max_size, order, axes, tol, workers,
-    scheduler, client
+    scheduler, client, memory
         As for :func:`stochastic_k_eff`.
 
     Yields
@@ -318,6 +321,7 @@ def stochastic_steps(mesh_or_labels, signatures, *, samples: int, correlation,
     seed = _check_count(seed, "seed", 0)
     prop = parse_property_map(property_map)
     check_tolerance(tol)
+    check_memory_budget(memory)
     if isinstance(order, bool) or order not in (1, 2):
         raise ValueError(f"order must be 1 or 2 (P1 or P2 elements), not {order!r}.")
     t0 = time.perf_counter()
@@ -355,6 +359,13 @@ def stochastic_steps(mesh_or_labels, signatures, *, samples: int, correlation,
                          "the field would be averaged away within them; mesh with "
                          f"swa-imesh mesh --max-size {ell.min() / ELEMENTS_PER_LENGTH:.3g} "
                          "(or simulate the labels).")
+    at_once = workers if client is None and scheduler is None else 1
+    need = estimate_memory(mesh, order, False) * at_once
+    if need > memory:
+        raise ValueError(f"{at_once} solve(s) at once on {mesh.n_cells} elements need about "
+                         f"{format_bytes(need)}, above the memory budget of "
+                         f"{format_bytes(memory)}: use fewer workers, a longer tile size, "
+                         "or raise --memory.")
     random, fixed, rows = _materials(signatures, mesh, conductivity, prop)
     if not random:
         raise ValueError("every material has a fixed conductivity: nothing is random; leave "
@@ -405,7 +416,8 @@ def stochastic_k_eff(mesh_or_labels, signatures, *, samples: int, correlation,
                      material_names: Mapping[int, str] | None = None, refine: int = 0,
                      max_size: float | None = None, order: int = 1, axes=None,
                      tol: float = DEFAULT_TOLERANCE, workers: int = 1,
-                     scheduler: str | None = None, client=None) -> StochasticResult:
+                     scheduler: str | None = None, client=None,
+                     memory: float = DEFAULT_MEMORY) -> StochasticResult:
     """Monte-Carlo k_eff of random conductivity fields drawn from the material signatures.
 
     Parameters
@@ -445,6 +457,10 @@ def stochastic_k_eff(mesh_or_labels, signatures, *, samples: int, correlation,
         Address of a running Dask scheduler to use instead.
     client : distributed.Client, optional
         An open client to use instead (left open).
+    memory : float
+        Budget in bytes (default 4 GiB) of the solves running at once here or on the
+        local workers (one sample each at a time), checked from the mesh before any
+        solve; on a scheduler, of one solve.
 
     Returns
     -------
@@ -464,7 +480,8 @@ def stochastic_k_eff(mesh_or_labels, signatures, *, samples: int, correlation,
                              conductivity=conductivity, spacing=spacing, exclude=exclude,
                              material_names=material_names, refine=refine,
                              max_size=max_size, order=order, axes=axes, tol=tol,
-                             workers=workers, scheduler=scheduler, client=client)
+                             workers=workers, scheduler=scheduler, client=client,
+                             memory=memory)
     while True:
         try:
             next(steps)

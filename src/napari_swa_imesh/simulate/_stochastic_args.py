@@ -71,7 +71,7 @@ def stochastic_options(args: argparse.Namespace) -> dict | None:
     -------
     dict or None
         ``signatures`` (rows), ``samples``, ``property_map``, ``seed``, ``tile_size``,
-        ``workers``, ``scheduler``, ``order``, ``histogram``, ``table``.
+        ``workers``, ``scheduler``, ``order``, ``histogram``, ``table``, ``memory``.
 
     Raises
     ------
@@ -124,8 +124,11 @@ def stochastic_options(args: argparse.Namespace) -> dict | None:
     if order is None:
         raise ValueError(f"--order must be auto, 1 or 2, not {args.order}.")
     prop = parse_property_map(args.map)
+    from ._budget import parse_memory
+
+    memory = parse_memory(args.memory)
     check_stochastic_paths(args.sample_table, args.histogram, force=args.force)
     return {"signatures": signatures, "samples": samples,
             "property_map": prop, "seed": seed, "tile_size": float(tile_size),
             "workers": args.workers or 1, "scheduler": args.scheduler, "order": order,
-            "histogram": args.histogram, "table": args.sample_table}
+            "histogram": args.histogram, "table": args.sample_table, "memory": memory}
