@@ -1,7 +1,6 @@
 """The Simulate tab's stochastic box: signatures in, k_eff mean +- interval and histogram out."""
 
 import numpy as np
-import pytest
 from swa_napari_helpers import Notifications, wait_idle
 
 from napari_swa_imesh._napari._mesh_widget import MeshWidget
@@ -42,6 +41,7 @@ def test_the_box_runs_the_library_and_shows_mean_interval_and_histogram(make_nap
     expected = stochastic_k_eff(labels, ROWS, samples=4, correlation=4.0, seed=3,
                                 spacing=(1.0, 1.0), material_names={1: "a", 2: "b"})
     assert np.array_equal(box.result.samples["x"], expected.samples["x"])
+    assert box.result.correlation == (4.0, 4.0)          # tile size 0: 2^scale of the rows
     s = expected.statistics("x")
     assert f"k_eff x = {s['mean']:.5g}" in box.summary.value
     assert "95 % of samples in" in box.summary.value
@@ -84,18 +84,16 @@ def test_cancel_stops_the_samples(make_napari_viewer, qtbot):
     assert box.tasks.status.text().endswith("cancelled")
 
 
-@pytest.mark.parametrize(("tile", "length"), [(0.0, 4.0), (3.0, 3.0)])
-def test_the_tile_size_comes_from_the_signatures_or_the_box(make_napari_viewer, qtbot, tile,
-                                                            length):
+def test_a_tile_size_in_the_box_overrides_the_signatures(make_napari_viewer, qtbot):
     viewer = make_napari_viewer()
     widget, _ = _tab(viewer, qtbot)
     box = widget.stochastic
     box.set_signatures(ROWS, "test")
     box.samples_spin.value = 2
-    box.tile_spin.value = tile
+    box.tile_spin.value = 3.0
     box.run()
     wait_idle(qtbot, box, timeout=120_000)
-    assert box.result.correlation == (length, length)     # 0: 2^scale of the signatures
+    assert box.result.correlation == (3.0, 3.0)
 
 
 def test_the_unfolded_box_fits_the_laptop_dock(make_napari_viewer):
