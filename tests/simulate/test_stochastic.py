@@ -103,10 +103,11 @@ def test_the_number_of_workers_does_not_change_the_samples():
     run = {"samples": 9, "correlation": 4.0, "seed": 4}
     here = stochastic_k_eff(labels, _rows((0.0, 1.0), (1.0, 0.5)), **run)
     with distributed.LocalCluster(processes=False, n_workers=2, threads_per_worker=1,
-                                  dashboard_address=None) as cluster, \
-            distributed.Client(cluster) as client:
-        there = stochastic_k_eff(labels, _rows((0.0, 1.0), (1.0, 0.5)), client=client,
-                                 workers=2, **run)
+                                  dashboard_address=None,
+                                  worker_dashboard_address=None) as cluster:
+        # through the address, as --scheduler gives it: connect, submit, close
+        there = stochastic_k_eff(labels, _rows((0.0, 1.0), (1.0, 0.5)),
+                                 scheduler=cluster.scheduler_address, **run)
     for axis in ("x", "y"):
         assert np.array_equal(here.samples[axis], there.samples[axis])
 
@@ -174,3 +175,19 @@ def test_samples_depend_on_seed_and_index_only_and_scale_with_the_map(seed, firs
     moved = stochastic_k_eff(labels, rows, samples=first,
                              property_map=f"log-linear:{shift!r},1", **run)
     assert moved.samples["x"] == pytest.approx(np.exp(shift) * short.samples["x"], rel=1e-7)
+
+
+def test_the_signatures_are_checked_before_the_labels_are_meshed(monkeypatch):
+    from napari_swa_imesh.simulate import _stochastic
+
+    def no_meshing(*args, **kwargs):
+        raise AssertionError("meshed before the door")
+
+    monkeypatch.setattr(_stochastic, "mesh_labels", no_meshing)
+    labels = np.ones((8, 8), dtype=np.uint8)
+    labels[:, 4:] = 2
+    with pytest.raises(ValueError, match="material 2 .* no row"):
+        stochastic_k_eff(labels, _rows((0.0, 0.5)), samples=2, correlation=4.0)
+    with pytest.raises(ValueError, match="axes must be"):
+        stochastic_k_eff(labels, _rows((0.0, 0.5), (0.0, 0.5)), samples=2, correlation=4.0,
+                         axes="z")

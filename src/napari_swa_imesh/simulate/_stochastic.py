@@ -234,16 +234,20 @@ def _solve_samples(problem: _Problem, indices) -> np.ndarray:
     return out
 
 
-def _materials(signatures, mesh: Mesh, conductivity, prop: PropertyMap) -> tuple:
-    """Per meshed material: random (label, log mean, log std) or a fixed tensor."""
+def _laws(signatures, present: list[int], mesh_names: Mapping[int, str], conductivity,
+          prop: PropertyMap, ndim: int) -> tuple:
+    """Per material of `present`: random ``(label, log mean, log std)`` or fixed.
+
+    Returns the random laws, the fixed labels with their (n, d, d) tensors, and the rows
+    of the result's material table; checked from the labels before any meshing.
+    """
     if isinstance(signatures, (str, Path)):
         signatures = read_signatures(signatures)
-    by_label, _ = match_signatures(signatures, mesh.material_names)
+    by_label, _ = match_signatures(signatures, mesh_names)
     conductivity = dict(conductivity or {})
     # the signatures' names serve `conductivity` too (they agree with the mesh's)
     names = {**{k: str(r["name"]) for k, r in by_label.items() if r.get("name")},
-             **mesh.material_names}
-    present = np.unique(mesh.material).tolist()
+             **mesh_names}
     chosen = {material_label(k, names): k for k in conductivity}
     unknown = [k for label, k in chosen.items() if label not in present]
     if unknown:
@@ -279,13 +283,18 @@ def _materials(signatures, mesh: Mesh, conductivity, prop: PropertyMap) -> tuple
         rows[int(label)] = {"name": names.get(label, str(row.get("name") or "")),
                             "intensity_mean": mean, "intensity_std": std,
                             "log_k_mean": log_mean, "log_k_std": log_std}
+    table = conductivity_tensors(conductivity, fixed, ndim, names) if fixed else None
+    return tuple(random), fixed, table, rows
+
+
+def _fixed_tensors(mesh: Mesh, fixed: list[int], table) -> np.ndarray:
+    """(M, d, d) the fixed materials' tensors per element, zero elsewhere."""
     tensors = np.zeros((mesh.n_cells, mesh.ndim, mesh.ndim))
     if fixed:
-        table = conductivity_tensors(conductivity, fixed, mesh.ndim, names)
         where = np.searchsorted(fixed, mesh.material)
         held = np.isin(mesh.material, fixed)
         tensors[held] = table[where[held]]
-    return tuple(random), tensors, rows
+    return tensors
 
 
 def stochastic_steps(mesh_or_labels, signatures, *, samples: int, correlation,
@@ -340,6 +349,21 @@ def stochastic_steps(mesh_or_labels, signatures, *, samples: int, correlation,
     longest = float(ell.min()) / ELEMENTS_PER_LENGTH
     if max_size is not None and not (math.isfinite(max_size) and max_size > 0):
         raise ValueError(f"max_size must be a positive length, not {max_size!r}.")
+    if isinstance(mesh_or_labels, Mesh) and (spacing is not None or tuple(exclude) or refine
+                                             or max_size is not None):
+        raise ValueError("spacing, exclude, refine and max_size apply to a label image; a "
+                         "mesh already has them.")
+    names = _check_axes(axes, d)
+    if isinstance(mesh_or_labels, Mesh):
+        present, mesh_names = np.unique(mesh.material).tolist(), mesh.material_names
+    else:                      # the materials checked from the labels, before meshing
+        present = sorted(set(np.unique(np.asarray(mesh_or_labels)).tolist())
+                         - {int(e) for e in exclude})
+        mesh_names = {int(k): str(v) for k, v in dict(material_names or {}).items()}
+    random, fixed, table, rows = _laws(signatures, present, mesh_names, conductivity, prop, d)
+    if not random:
+        raise ValueError("every material has a fixed conductivity: nothing is random; leave "
+                         "--conductivity out for the materials the signatures describe.")
     if not isinstance(mesh_or_labels, Mesh):
         yield 0, samples + 2, "meshing the labels"
         # no shorter than a voxel's diagonal: the field is then resolved voxel by voxel
@@ -348,10 +372,6 @@ def stochastic_steps(mesh_or_labels, signatures, *, samples: int, correlation,
         mesh = mesh_labels(mesh_or_labels, spacing=spacing, exclude=exclude,
                            material_names=dict(material_names or {}), refine=refine,
                            max_size=max(voxel, min(longest, max_size or longest)))
-    elif spacing is not None or tuple(exclude) or refine or max_size is not None:
-        raise ValueError("spacing, exclude, refine and max_size apply to a label image; a "
-                         "mesh already has them.")
-    names = _check_axes(axes, mesh.ndim)
     edges = mesh.points[mesh.cells]                                    # (M, d + 1, d)
     span = (edges.max(axis=1) - edges.min(axis=1)) / ell               # (M, d) in lengths
     if float(span.max()) > 1 + 1e-9:
@@ -366,10 +386,7 @@ def stochastic_steps(mesh_or_labels, signatures, *, samples: int, correlation,
                          f"{format_bytes(need)}, above the memory budget of "
                          f"{format_bytes(memory)}: use fewer workers, a longer tile size, "
                          "or raise --memory.")
-    random, fixed, rows = _materials(signatures, mesh, conductivity, prop)
-    if not random:
-        raise ValueError("every material has a fixed conductivity: nothing is random; leave "
-                         "--conductivity out for the materials the signatures describe.")
+    fixed_tensors = _fixed_tensors(mesh, fixed, table)
     lo, hi = mesh.image_box()
     if not mesh.records_box:
         _check_box_faces(mesh, names, lo, hi)
@@ -378,7 +395,7 @@ def stochastic_steps(mesh_or_labels, signatures, *, samples: int, correlation,
     centroids = edges.mean(axis=1)
     nearest = np.clip(np.rint((centroids - lo) / h).astype(np.int64), 0, np.array(grid) - 1)
     problem = _Problem(mesh, grid, h, ell, np.ravel_multi_index(nearest.T, grid), random,
-                       fixed, names, order, float(tol), seed)
+                       fixed_tensors, names, order, float(tol), seed)
     gaussian_field(grid, h, ell)                # refuse an embedding too large, here
     seconds["mesh"] = time.perf_counter() - t0
     total = samples + 2
