@@ -107,3 +107,18 @@ def test_the_unfolded_box_fits_the_laptop_dock(make_napari_viewer):
     width = area.widget().minimumSizeHint().width()
     print(f"Simulate tab content: {folded} px folded, {width} px with the stochastic box open")
     assert width <= max(folded, 384)      # the dock's width on a 1280x800 screen
+
+
+def test_the_box_follows_the_labels_classification(make_napari_viewer):
+    from napari_swa_imesh._napari._classify_widget import SEGMENTATION_KEY
+
+    viewer = make_napari_viewer()
+    widget = SimulateWidget(viewer)
+    classified = viewer.add_labels(np.ones((8, 8), dtype=np.uint8), name="classified",
+                                   metadata={SEGMENTATION_KEY: {"signatures": ROWS}})
+    plain = viewer.add_labels(np.ones((8, 8), dtype=np.uint8), name="plain")
+    widget.labels_combo.value = classified
+    assert widget.stochastic.signatures == ROWS
+    assert "classification of 'classified'" in widget.stochastic.source_label.value
+    widget.labels_combo.value = plain
+    assert widget.stochastic.signatures is None          # not these labels' signatures

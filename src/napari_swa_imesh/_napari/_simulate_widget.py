@@ -188,9 +188,9 @@ class SimulateWidget(QWidget):
     def _on_labels_changed(self, *_) -> None:
         layer = self.labels_combo.value
         rows = classification_signatures(layer)
+        self.stochastic.follow_labels(rows, layer)
         if rows:
             self.report.set_signatures(rows, f"classification of {layer.name!r}")
-            self.stochastic.set_signatures(rows, f"classification of {layer.name!r}")
         elif self.report.source.startswith("classification of"):
             self.report.set_signatures(None, "")        # another image's: not these labels'
         self._update_note()

@@ -101,6 +101,14 @@ class StochasticPanel:
         self.signatures, self.source_name = rows, source if rows else ""
         self._show_source()
 
+    def follow_labels(self, rows: list[dict] | None, layer) -> None:
+        """The picked labels' classification signatures, if any; another image's
+        classification is dropped (a loaded CSV stays)."""
+        if rows:
+            self.set_signatures(rows, f"classification of {layer.name!r}")
+        elif self.source_name.startswith("classification of"):
+            self.set_signatures(None, "")
+
     def load_signatures(self, path) -> bool:
         """Read a signatures CSV; a file that is not one is refused with a notification."""
         try:
