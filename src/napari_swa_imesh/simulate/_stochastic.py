@@ -18,7 +18,9 @@ per element; a label image is meshed with elements at most ``l / 2`` long (the f
 varies over ``l``; no shorter than a voxel's diagonal), a mesh with elements longer than
 ``l`` along an axis is refused. Every realisation is
 solved by the steady mixed-boundary protocol of :func:`~._simulate.simulate` (per-element
-conductivity, P1 by default, no adaptation or interval), in blocks on Dask or here.
+conductivity, P2 by default, no adaptation or interval), in blocks on Dask or here. P1 is
+biased high by the element-wise field: +2.3 % for a 2-D log-normal field of log k std 1 at
+two elements per correlation length, where P2 is within 0.3 % (0.6 % Monte-Carlo error).
 Sample ``i`` draws its noise from ``SeedSequence(seed, spawn_key=(i,))``, so a run is
 reproducible from its seed whatever the number of workers.
 """
@@ -301,7 +303,7 @@ def stochastic_steps(mesh_or_labels, signatures, *, samples: int, correlation,
                      property_map="log-linear:0,1", seed: int = 0,
                      conductivity: Mapping | None = None, spacing=None, exclude=(),
                      material_names: Mapping[int, str] | None = None, refine: int = 0,
-                     max_size: float | None = None, order: int = 1, axes=None,
+                     max_size: float | None = None, order: int = 2, axes=None,
                      tol: float = DEFAULT_TOLERANCE, workers: int = 1,
                      scheduler: str | None = None, client=None,
                      memory: float = DEFAULT_MEMORY
@@ -431,7 +433,7 @@ def stochastic_k_eff(mesh_or_labels, signatures, *, samples: int, correlation,
                      property_map="log-linear:0,1", seed: int = 0,
                      conductivity: Mapping | None = None, spacing=None, exclude=(),
                      material_names: Mapping[int, str] | None = None, refine: int = 0,
-                     max_size: float | None = None, order: int = 1, axes=None,
+                     max_size: float | None = None, order: int = 2, axes=None,
                      tol: float = DEFAULT_TOLERANCE, workers: int = 1,
                      scheduler: str | None = None, client=None,
                      memory: float = DEFAULT_MEMORY) -> StochasticResult:
@@ -463,7 +465,8 @@ def stochastic_k_eff(mesh_or_labels, signatures, *, samples: int, correlation,
     max_size : float, optional
         Labels only: longest element edge, if shorter than half the correlation length.
     order : {1, 2}
-        Lagrange element degree.
+        Lagrange element degree (default 2: P1's conforming solution on element-wise
+        constant conductivity is biased high, about 2 % at a log k std of 1).
     axes : sequence of {"x", "y", "z"}, optional
         Axes to solve along (default all).
     tol : float

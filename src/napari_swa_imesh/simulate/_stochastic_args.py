@@ -120,7 +120,7 @@ def stochastic_options(args: argparse.Namespace) -> dict | None:
     if args.workers is not None and args.scheduler:
         raise ValueError("--workers starts local workers; with --scheduler the cluster has "
                          "its own: give one of them.")
-    order = {"auto": 1, "1": 1, "2": 2}.get(str(args.order))
+    order = {"auto": 2, "1": 1, "2": 2}.get(str(args.order))   # auto: P2 (docs/stochastic)
     if order is None:
         raise ValueError(f"--order must be auto, 1 or 2, not {args.order}.")
     prop = parse_property_map(args.map)
