@@ -34,6 +34,7 @@ from ._help import explain_terms, set_tooltip
 from ._layers import MESH_KEY, layer_picker, pick
 from ._plots import ThemedFigure
 from ._report_panel import ReportPanel, classification_signatures, fill_table
+from ._stochastic_panel import StochasticPanel, source_of
 from ._tasks import TaskPanel, notify_error, notify_info
 
 if TYPE_CHECKING:
@@ -107,6 +108,8 @@ class SimulateWidget(QWidget):
         self.clip = ClipPanel(self.show_field)
         self.clip.status.value = "simulate to clip the field"
         self.report = ReportPanel()
+        self.stochastic = StochasticPanel(self.viewer, lambda: source_of(
+            self.mesh_combo.value, self.labels_combo.value))
 
         layout = scroll_body(self)
         layout.addWidget(Container(widgets=[self.mesh_combo, self.labels_combo]).native)
@@ -127,6 +130,8 @@ class SimulateWidget(QWidget):
         layout.addWidget(self.clip_box)
         self.report_box = self.report.widget()
         layout.addWidget(self.report_box)
+        self.stochastic_box = self.stochastic.widget()
+        layout.addWidget(self.stochastic_box)
         layout.addWidget(self.export_button.native)
         fit_dock(self)
         self.mesh_combo.changed.connect(self._on_mesh_changed)
@@ -183,6 +188,7 @@ class SimulateWidget(QWidget):
     def _on_labels_changed(self, *_) -> None:
         layer = self.labels_combo.value
         rows = classification_signatures(layer)
+        self.stochastic.follow_labels(rows, layer)
         if rows:
             self.report.set_signatures(rows, f"classification of {layer.name!r}")
         elif self.report.source.startswith("classification of"):

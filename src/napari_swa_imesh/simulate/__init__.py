@@ -15,6 +15,8 @@
   substance released from a material, the mesh and the time steps chosen for an asked
   error and the error estimated (:mod:`._transient_space`, :mod:`._time_steps`);
 * :func:`conductivity_tensors`, :func:`parse_conductivity_args`: the conductivity table;
+* :func:`stochastic_k_eff` (and :func:`stochastic_steps`): k_eff of random conductivity
+  fields drawn from the signatures (the up-scaled stochastic step), in parallel on Dask;
 * :func:`simulation_report` (with :func:`read_signatures`, :func:`write_report`): the
   per-material signatures of the segmentation and k_eff in one table.
 """
@@ -23,10 +25,19 @@ from ._adapt import P1_GROWTH
 from ._boundary import BoundaryResult, solve_boundary_value
 from ._conductivity import conductivity_tensors, material_label, parse_conductivity_args
 from ._output import write_field, write_series
+from ._random_field import GaussianField, gaussian_field
 from ._remesh import mesh_refine, needs_remesh, remesh
 from ._report import SimulationReport, read_signatures, simulation_report, write_report
 from ._simulate import SimulationResult, simulate, simulate_steps
 from ._solve import SolverInfo
+from ._stochastic import (
+    PropertyMap,
+    parse_property_map,
+    signature_tile_size,
+    stochastic_k_eff,
+    stochastic_steps,
+)
+from ._stochastic_result import StochasticResult, check_stochastic_paths, write_stochastic
 from ._transient import TransientResult, simulate_transient, transient_steps
 
 __all__ = ["BoundaryResult", "SimulationReport", "SimulationResult", "SolverInfo",
@@ -36,3 +47,7 @@ __all__ = ["BoundaryResult", "SimulationReport", "SimulationResult", "SolverInfo
            "write_report", "write_series",
            # for the widgets and the pipeline (issue 24)
            "P1_GROWTH", "material_label", "mesh_refine", "needs_remesh", "remesh"]
+# the stochastic step (issue 28, part 2)
+__all__ += ["GaussianField", "PropertyMap", "StochasticResult", "check_stochastic_paths",
+            "gaussian_field", "parse_property_map", "signature_tile_size",
+            "stochastic_k_eff", "stochastic_steps", "write_stochastic"]

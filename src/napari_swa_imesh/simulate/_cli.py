@@ -28,7 +28,7 @@ def add_commands(subparsers) -> None:
     p.add_argument("input", metavar="LABELS_OR_MESH",
                    help=f"label image ({', '.join(IMAGE_SUFFIXES)}) or mesh "
                         "(.vtu, .vtk, .msh, .xdmf, .inp, .node/.ele)")
-    p.add_argument("--conductivity", "-k", nargs="+", action="extend", required=True,
+    p.add_argument("--conductivity", "-k", nargs="+", action="extend", default=None,
                    metavar="MATERIAL=K",
                    help="conductivity per material, by label or name: 1=1 2=10 bone=0.1; "
                         "K1,K2[,K3] is a diagonal tensor in x, y(, z) order, d*d numbers "
@@ -130,6 +130,9 @@ def add_commands(subparsers) -> None:
                         "can be used in --conductivity")
     r.add_argument("--report", default=None, metavar="REPORT",
                    help="write the material table and k_eff (.csv, .json or .md)")
+    from ._stochastic_args import add_stochastic_arguments
+
+    add_stochastic_arguments(p)
     p.add_argument("--force", action="store_true", help="replace an existing output file")
     p.add_argument("--json", action="store_true", help="print one JSON object on stdout")
     p.set_defaults(func=_run_simulate)
@@ -150,8 +153,12 @@ def _run_simulate(args: argparse.Namespace) -> int:
         write_report,
     )
     from ._simulate import simulate
+    from ._stochastic_args import stochastic_options
 
     # the door: every argument and the output path before any work
+    stochastic = stochastic_options(args)
+    if stochastic is not None:
+        return _run_stochastic(args, stochastic)
     conductivity = parse_conductivity_args(args.conductivity)
     names = parse_material_names(args.material_names)
     order = {"auto": "auto", "1": 1, "2": 2}.get(str(args.order))
@@ -379,3 +386,52 @@ def _numbers(items: list[str], flag: str, default: float) -> dict | float:
             raise ValueError(f"{flag} gives material {key} twice.")
         out[key] = value
     return out
+
+
+def _run_stochastic(args: argparse.Namespace, options: dict) -> int:
+    """``simulate --stochastic``: k_eff of random fields from the signatures (issue 28)."""
+    from .._cli_util import parse_material_names
+    from ..io import read_image
+    from ..mesh import check_refine, read_mesh
+    from ._conductivity import parse_conductivity_args
+    from ._stochastic import stochastic_k_eff
+    from ._stochastic_result import write_stochastic
+
+    names = parse_material_names(args.material_names)
+    conductivity = parse_conductivity_args(args.conductivity) if args.conductivity else None
+    is_image = image_suffix(args.input) in IMAGE_SUFFIXES
+    if not is_image and (args.spacing or args.exclude or args.refine):
+        raise ValueError("--spacing, --exclude and --refine apply to a label image; a mesh "
+                         "file already has its coordinates, materials and elements.")
+    check_refine(args.refine)
+    timer = StepTimer()
+    with timer("read"):
+        if is_image:
+            source, file_spacing = read_image(args.input)
+            spacing = np.broadcast_to(np.asarray(args.spacing or file_spacing or 1.0,
+                                                 dtype=np.float64), (source.ndim,))
+        else:
+            source, spacing = read_mesh(args.input), None
+    # the tile side is in voxels for labels: the correlation length per axis in physical units
+    correlation = options["tile_size"] * (spacing if spacing is not None else 1.0)
+    result = stochastic_k_eff(
+        source, options["signatures"], samples=options["samples"], correlation=correlation,
+        property_map=options["property_map"], seed=options["seed"],
+        conductivity=conductivity, spacing=spacing, exclude=tuple(args.exclude),
+        material_names=names, refine=args.refine, order=options["order"], axes=args.axes,
+        tol=args.tol, workers=options["workers"], scheduler=options["scheduler"],
+        memory=options["memory"])
+    written = []
+    if options["table"] or options["histogram"]:
+        with timer("write"):
+            written = write_stochastic(result, table=options["table"],
+                                       histogram=options["histogram"], force=args.force)
+    if args.json:
+        print_json({"command": "simulate", "input": str(args.input), "stochastic":
+                    result.summary(), "output": [str(p) for p in written],
+                    "seconds": {**timer.seconds, **result.seconds}})
+    else:
+        print(result.describe())
+        if written:
+            print(f"wrote {', '.join(map(str, written))}")
+    return 0

@@ -24,10 +24,10 @@ import functools
 
 import numpy as np
 
+from ..._region_tree import PAD_LABEL
 from ..formats._common import FACE_CORNERS
 from ..mesher import _templates_luts as luts
 from ..mesher._packed import unpack
-from ..._region_tree import PAD_LABEL
 from ..model._quality import _edge_det
 
 __all__ = ["face_tables", "facet_chain", "outward_facets", "piece_pass", "probe_facets",
