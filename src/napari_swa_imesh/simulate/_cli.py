@@ -12,6 +12,7 @@ import numpy as np
 from .._cli_util import StepTimer, print_json
 from ..io import IMAGE_SUFFIXES, image_suffix
 from ._output import FIELD_SUFFIXES
+from .reaction._cli import add_growth_arguments, run_growth
 
 __all__ = ["add_commands"]
 
@@ -28,7 +29,7 @@ def add_commands(subparsers) -> None:
     p.add_argument("input", metavar="LABELS_OR_MESH",
                    help=f"label image ({', '.join(IMAGE_SUFFIXES)}) or mesh "
                         "(.vtu, .vtk, .msh, .xdmf, .inp, .node/.ele)")
-    p.add_argument("--conductivity", "-k", nargs="+", action="extend", required=True,
+    p.add_argument("--conductivity", "-k", nargs="+", action="extend", default=[],
                    metavar="MATERIAL=K",
                    help="conductivity per material, by label or name: 1=1 2=10 bone=0.1; "
                         "K1,K2[,K3] is a diagonal tensor in x, y(, z) order, d*d numbers "
@@ -132,6 +133,7 @@ def add_commands(subparsers) -> None:
                    help="write the material table and k_eff (.csv, .json or .md)")
     p.add_argument("--force", action="store_true", help="replace an existing output file")
     p.add_argument("--json", action="store_true", help="print one JSON object on stdout")
+    add_growth_arguments(p)
     p.set_defaults(func=_run_simulate)
 
 
@@ -151,6 +153,11 @@ def _run_simulate(args: argparse.Namespace) -> int:
     )
     from ._simulate import simulate
 
+    if args.model != "conductivity":           # reaction-diffusion (issue 28)
+        return run_growth(args)
+    if not args.conductivity:
+        raise ValueError("simulate needs --conductivity MATERIAL=K (such as -k 1=1 2=10), "
+                         "or --model fisher-kpp/drug with -D.")
     # the door: every argument and the output path before any work
     conductivity = parse_conductivity_args(args.conductivity)
     names = parse_material_names(args.material_names)

@@ -318,7 +318,8 @@ source, saves, spacing, exclude, material_names, error, front_cells
     if not size["met"]:
         notes.append(f"elements the front reaches are up to {size['max_ratio']:.2g} times "
                      f"the size its width allows ({size['reason']}): the front speed may be "
-                     "off; give a label image (it is refined) or a finer mesh.")
+                     + ("off; give the label image (it is refined) or a finer mesh."
+                        if is_mesh else "off; ask fewer front cells or a shorter duration."))
     t_mesh = time.perf_counter()
     result = yield from _run(mesh, table, fixed_faces, fixed_materials, flux, sources,
                              Reaction(model, rate, decay, kill), centre, radius, duration,

@@ -86,8 +86,8 @@ def front_mesh(labels, *, spacing, exclude, material_names, sizes: dict[int, flo
         cap = max(finite)
         # mesh_labels' cap is on a leaf's Kuhn diagonal: side times |step| / max(step)
         max_size = cap * float(np.linalg.norm(spacing_arr) / spacing_arr.max())
-        if max_size <= float(np.linalg.norm(spacing_arr)):
-            max_size = None              # finer than the voxels: the splits do it
+        # finer than the voxels: the voxels, then the splits do the rest
+        max_size = max(max_size, float(np.linalg.norm(spacing_arr)) * (1 + 1e-9))
     mesh = mesh_labels(labels, spacing=spacing, exclude=exclude,
                        material_names=dict(material_names or {}), max_size=max_size)
     budget = min(VERTEX_BUDGET, max(vertex_budget(labels), VERTEX_FLOOR))
