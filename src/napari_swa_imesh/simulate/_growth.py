@@ -398,7 +398,7 @@ def _run(mesh, table, fixed_faces, fixed_materials, flux, sources, reaction, cen
     record = None
     for record in imex_steps(lumped, stiffness, u, free, reaction, stops=stops, tol=error,
                              scale=scale, load=load, first_step=first,
-                             upper=1.0 if fisher else None):
+                             upper=1.0 if fisher else None, ndim=mesh.ndim):
         if record.stop:
             times.append(record.time)
             values.append(record.values.copy())

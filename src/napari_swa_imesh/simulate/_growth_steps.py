@@ -42,10 +42,11 @@ __all__ = ["BALANCE_TERMS", "GrowthStep", "Reaction", "imex_steps"]
 
 #: The terms of the amount's balance, in the order the tables print them.
 BALANCE_TERMS = ("growth", "kill", "decay", "sources", "boundary", "clipping")
-#: Free unknowns up to which each step is solved by a sparse LU factorisation; beyond,
-#: by conjugate gradients preconditioned by the diagonal (the systems are well
-#: conditioned at the step lengths a front allows: ``dt D / h^2`` of order 1).
-DIRECT_LIMIT = 40_000
+#: Free unknowns up to which each step is solved by a sparse LU factorisation, per
+#: dimension (2-D fill-in grows mildly, 3-D steeply); beyond, by conjugate gradients
+#: preconditioned by the diagonal (the systems are well conditioned at the step lengths
+#: a front allows: ``dt D / h^2`` of order 1).
+DIRECT_LIMIT = {2: 400_000, 3: 40_000}
 #: Most accepted plus rejected steps of one run.
 MAX_STEPS = 200_000
 
@@ -107,8 +108,9 @@ class GrowthStep:
 class _System:
     """The free block of the stiffness and one step's solve."""
 
-    def __init__(self, stiffness: sparse.csr_matrix, free: np.ndarray):
+    def __init__(self, stiffness: sparse.csr_matrix, free: np.ndarray, ndim: int):
         self.free = free
+        self.direct = DIRECT_LIMIT.get(ndim, DIRECT_LIMIT[3])
         k_free = stiffness[free][:, free].tocsr()
         k_free.sort_indices()
         self.k_free = k_free
@@ -127,7 +129,7 @@ class _System:
         matrix = self.k_free.copy()
         matrix.data[self.diagonal] += diag[free]
         b = rhs[free] - self.coupling @ fixed_values if fixed_values.size else rhs[free]
-        if matrix.shape[0] <= DIRECT_LIMIT:
+        if matrix.shape[0] <= self.direct:
             x = splinalg.splu(matrix.tocsc()).solve(b)
         else:
             inv = 1.0 / matrix.diagonal()
@@ -170,7 +172,7 @@ def _one_step(system: _System, m: np.ndarray, load: np.ndarray, reaction: Reacti
 def imex_steps(mass: np.ndarray, stiffness: sparse.csr_matrix, u: np.ndarray,
                free: np.ndarray, reaction: Reaction, *, stops: list[float], tol: float,
                scale: float, load: np.ndarray | None = None, first_step: float | None = None,
-               upper: float | None = None) -> Iterator[GrowthStep]:
+               upper: float | None = None, ndim: int = 3) -> Iterator[GrowthStep]:
     """Adaptive steps from t = 0 through the times `stops`, one record per accepted step.
 
     Parameters
@@ -196,13 +198,15 @@ def imex_steps(mass: np.ndarray, stiffness: sparse.csr_matrix, u: np.ndarray,
         Length of the first try.
     upper : float, optional
         Upper bound the field is clipped to (1 for Fisher-KPP); 0 is always the lower.
+    ndim : int
+        The mesh's dimension (chooses the solver, :data:`DIRECT_LIMIT`).
 
     Yields
     ------
     GrowthStep
     """
     m = np.asarray(mass, dtype=np.float64)
-    system = _System(stiffness.tocsr(), free)
+    system = _System(stiffness.tocsr(), free, ndim)
     load = np.zeros_like(m) if load is None else np.where(free, load, 0.0)
     fixed_values = np.asarray(u, dtype=np.float64)[~free].copy()
     u = np.array(u, dtype=np.float64)
