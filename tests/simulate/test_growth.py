@@ -176,3 +176,23 @@ def test_bad_arguments_say_what_to_do(kwargs, match):
     args = {"rate": 1.0, "seed": ((2.0, 2.0), 1.0), **kwargs}
     with pytest.raises(ValueError, match=match):
         simulate_growth(np.ones((4, 4), dtype=np.uint8), {1: 1.0}, duration=1.0, **args)
+
+
+def test_a_face_flux_brings_its_amount_and_a_fixed_material_holds_its_value():
+    labels = np.ones((4, 10), dtype=np.uint8)
+    # no decay: the amount is the flux times the face's length times the time
+    r = simulate_growth(labels, {1: 1.0}, model="drug", flux={"xmin": 0.5}, duration=3.0,
+                        saves=3, front_cells=1.0)
+    # (the extrapolation's undershoot ahead of the entering front is clipped: its own term)
+    assert r.amount - r.balance["clipping"] == pytest.approx(0.5 * 4.0 * r.times, rel=1e-9,
+                                                             abs=1e-12)
+    assert 0 <= r.balance["clipping"][-1] < 1e-6
+    assert r.balance["sources"][-1] == pytest.approx(6.0, rel=1e-9)
+    # a vessel (material 2) held at 1 feeds the tissue around it against the decay
+    labels[1:3, 4:6] = 2
+    r = simulate_growth(labels, {1: 1.0, 2: 1.0}, model="drug", decay=0.5,
+                        fixed={2: 1.0}, duration=2.0, saves=1, front_cells=1.0)
+    vessel = np.unique(r.mesh.cells[r.mesh.material == 2])
+    assert np.all(r.values[:, vessel] == 1.0)
+    assert 0 < r.values[-1].min() < 1 and r.balance["boundary"][-1] > 0
+    assert np.abs(r.balance_residual).max() < 1e-9 * r.amount.max()
