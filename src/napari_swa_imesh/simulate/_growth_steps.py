@@ -9,8 +9,9 @@ where the reaction is split into a part taken at the new time and a part at the 
 one: Fisher-KPP ``rho u (1 - u) - k(t) u`` has ``a = rho u + k``, ``g = rho u`` (so
 ``rho u (1 - u')``, linear in ``u'``), the drug model ``-lambda u - k(t) u + s`` has
 ``a = lambda + k``, ``g = 0`` and the sources in ``f``. The matrix is symmetric positive
-definite, and with a stiffness of non-positive off-diagonal entries (every IMESH element
-of isotropic voxels) an M-matrix: ``u' >= 0`` for ``u >= 0``, and for Fisher-KPP
+definite, and with a stiffness of non-positive off-diagonal entries (IMESH triangles of
+square pixels; 3-D transition templates have obtuse dihedral angles, and the run says
+so) an M-matrix: ``u' >= 0`` for ``u >= 0``, and for Fisher-KPP
 ``1 - u'`` solves the same system with a right-hand side ``m (1 - u) / dt + k m >= 0``,
 so ``u'`` stays within ``[0, 1]`` for every step length (an implicit-explicit scheme
 whose explicit part cannot overshoot).
