@@ -117,7 +117,7 @@ def test_time_error_falls_with_the_asked_error():
         return simulate_growth(labels, {1: 1.0}, rate=1.0, seed=((0.0, 0.25), 2.0),
                                duration=5.0, saves=1, spacing=(0.25, 0.25),
                                error=error).values[-1]
-    reference = run(1e-6)
+    reference = run(1e-5)
     errors = [np.abs(run(e) - reference).max() for e in (1e-2, 1e-3, 1e-4)]
     assert errors[0] > errors[1] > errors[2]
     assert errors[2] < errors[0] / 10
