@@ -88,10 +88,12 @@ def test_sections_fold_away_and_unfold(make_napari_viewer):
 
     widget = SimulateWidget(make_napari_viewer())
     folds = widget.findChildren(Fold)
-    assert {fold.toggle.text() for fold in folds} == {"see inside",
-                                                      "signatures and k_eff report",
-                                                      "stochastic k_eff from the signatures"}
+    assert {fold.toggle.text() for fold in folds} == {
+        "see inside", "signatures and k_eff report",
+        "stochastic k_eff from the signatures",
+        "reaction-diffusion (tumour growth, drug)"}
     assert not widget.stochastic_box.is_open            # folded: below the fold stays short
+    assert not widget.growth.fold.is_open               # folded: the k_eff run stays in view
     clip = widget.clip_box
     assert not clip.is_open and not clip.body.isVisibleTo(widget)
     clip.toggle.click()

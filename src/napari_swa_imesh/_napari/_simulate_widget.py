@@ -30,6 +30,7 @@ from ..simulate import P1_GROWTH, mesh_refine, needs_remesh, remesh, simulate_st
 from ._clip_panel import ClipPanel
 from ._conductivity_table import Conductivity, ConductivityTable, parse_conductivity
 from ._dock import fit_dock, scroll_body, side_by_side, wrapped_label
+from ._growth_panel import GrowthPanel
 from ._help import explain_terms, set_tooltip
 from ._layers import MESH_KEY, layer_picker, pick
 from ._plots import ThemedFigure
@@ -133,6 +134,8 @@ class SimulateWidget(QWidget):
         self.stochastic_box = self.stochastic.widget()
         layout.addWidget(self.stochastic_box)
         layout.addWidget(self.export_button.native)
+        self.growth = GrowthPanel(self)           # reaction-diffusion (issue 28)
+        layout.addWidget(self.growth.fold)
         fit_dock(self)
         self.mesh_combo.changed.connect(self._on_mesh_changed)
         self.labels_combo.changed.connect(self._on_labels_changed)

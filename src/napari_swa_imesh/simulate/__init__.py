@@ -14,6 +14,10 @@
 * :func:`simulate_transient` (and :func:`transient_steps`): a heat front from a face or a
   substance released from a material, the mesh and the time steps chosen for an asked
   error and the error estimated (:mod:`._transient_space`, :mod:`._time_steps`);
+* :func:`simulate_growth` (and :func:`growth_steps`): reaction-diffusion, tumour growth
+  (Fisher-KPP) or drug delivery, with a diffusivity per material, bounded adaptive
+  IMEX steps and the amount's balance; :func:`write_growth` and :func:`growth_table`
+  for the series, the volume and front table and its plot;
 * :func:`conductivity_tensors`, :func:`parse_conductivity_args`: the conductivity table;
 * :func:`stochastic_k_eff` (and :func:`stochastic_steps`): k_eff of random conductivity
   fields drawn from the signatures (the up-scaled stochastic step), in parallel on Dask;
@@ -24,6 +28,8 @@
 from ._adapt import P1_GROWTH
 from ._boundary import BoundaryResult, solve_boundary_value
 from ._conductivity import conductivity_tensors, material_label, parse_conductivity_args
+from ._growth import GROWTH_MODELS, GrowthResult, growth_steps, simulate_growth
+from ._growth_output import growth_table, write_growth
 from ._output import write_field, write_series
 from ._random_field import GaussianField, gaussian_field
 from ._remesh import mesh_refine, needs_remesh, remesh
@@ -46,7 +52,10 @@ __all__ = ["BoundaryResult", "SimulationReport", "SimulationResult", "SolverInfo
            "simulation_report", "solve_boundary_value", "transient_steps", "write_field",
            "write_report", "write_series",
            # for the widgets and the pipeline (issue 24)
-           "P1_GROWTH", "material_label", "mesh_refine", "needs_remesh", "remesh"]
+           "P1_GROWTH", "material_label", "mesh_refine", "needs_remesh", "remesh",
+           # reaction-diffusion (issue 28)
+           "GROWTH_MODELS", "GrowthResult", "growth_steps", "growth_table", "simulate_growth",
+           "write_growth"]
 # the stochastic step (issue 28, part 2)
 __all__ += ["GaussianField", "PropertyMap", "StochasticResult", "check_stochastic_paths",
             "gaussian_field", "parse_property_map", "signature_tile_size",

@@ -12,6 +12,7 @@ import numpy as np
 from .._cli_util import StepTimer, print_json
 from ..io import IMAGE_SUFFIXES, image_suffix
 from ._output import FIELD_SUFFIXES
+from .reaction._cli import add_growth_arguments, run_growth
 
 __all__ = ["add_commands"]
 
@@ -135,6 +136,7 @@ def add_commands(subparsers) -> None:
     add_stochastic_arguments(p)
     p.add_argument("--force", action="store_true", help="replace an existing output file")
     p.add_argument("--json", action="store_true", help="print one JSON object on stdout")
+    add_growth_arguments(p)
     p.set_defaults(func=_run_simulate)
 
 
@@ -155,6 +157,8 @@ def _run_simulate(args: argparse.Namespace) -> int:
     from ._simulate import simulate
     from ._stochastic_args import stochastic_options
 
+    if args.model != "conductivity":           # reaction-diffusion (issue 28)
+        return run_growth(args)
     # the door: every argument and the output path before any work
     stochastic = stochastic_options(args)
     if stochastic is not None:

@@ -1,0 +1,135 @@
+"""What a reaction-diffusion run reports: tumour volume and front distance per material
+over time, the amount's balance, as a table (CSV), a plot (PNG) and the field's time
+series (XDMF/HDF5, read by ParaView and meshio's ``TimeSeriesReader``).
+
+The volume above the threshold counts each element whose mean of ``c`` over its vertices
+exceeds it (so it is exact to within the elements the front crosses, a band of width
+``h``); the front distance of a material is the largest distance from the seed centre of
+its elements above the threshold (NaN while none is, or without a seed).
+"""
+
+from __future__ import annotations
+
+import csv
+import io
+from pathlib import Path
+
+import numpy as np
+
+from ..io import atomic_write, check_writable
+from ..mesh import signed_volumes
+from ._growth_steps import BALANCE_TERMS
+from ._output import check_series_path, write_series
+
+__all__ = ["growth_outputs", "growth_table", "write_growth"]
+
+#: Default threshold of c for the tumour volume (the travelling wave's midpoint).
+DEFAULT_THRESHOLD = 0.5
+
+
+def growth_table(result, *, threshold: float = DEFAULT_THRESHOLD) -> dict[str, np.ndarray]:
+    """Columns over the saved times: ``time``, ``volume_<m>`` and ``front_<m>`` per
+    material, ``volume``, ``amount``, the balance terms and ``balance_residual``.
+
+    Parameters
+    ----------
+    result : GrowthResult
+    threshold : float
+        ``c`` above which an element counts as tumour (0 < threshold < 1).
+
+    Returns
+    -------
+    dict of str to (T,) ndarray
+    """
+    if not 0 < threshold < 1:
+        raise ValueError(f"threshold must lie between 0 and 1, not {threshold!r}.")
+    mesh = result.mesh
+    volumes = signed_volumes(mesh.points, mesh.cells)
+    means = result.values[:, mesh.cells].mean(axis=2)                  # (T, M)
+    above = means > threshold
+    table: dict[str, np.ndarray] = {"time": np.asarray(result.times, dtype=float)}
+    centroid = mesh.points[mesh.cells].mean(axis=1)
+    distance = (np.linalg.norm(centroid - result.seed[0], axis=1)
+                if result.seed is not None else np.full(mesh.n_cells, np.nan))
+    for m in np.unique(mesh.material):
+        own = mesh.material == m
+        table[f"volume_{m}"] = (above[:, own] * volumes[own]).sum(axis=1)
+        far = np.where(above[:, own], distance[own], -np.inf).max(axis=1, initial=-np.inf)
+        table[f"front_{m}"] = np.where(np.isfinite(far), far, np.nan)
+    table["volume"] = (above * volumes).sum(axis=1)
+    table["amount"] = np.asarray(result.amount, dtype=float)
+    for term in BALANCE_TERMS:
+        table[term] = np.asarray(result.balance[term], dtype=float)
+    table["balance_residual"] = np.asarray(result.balance_residual, dtype=float)
+    return table
+
+
+def growth_outputs(path, *, force: bool = False) -> list[Path]:
+    """The files :func:`write_growth` writes for `path` (``.xdmf``, its ``.h5``, the table
+    ``<stem>.csv`` and the plot ``<stem>.png``), checked before any work."""
+    series = check_series_path(path, force=force)
+    p = Path(path)
+
+    return series + [check_writable(p.with_suffix(s), force=force) for s in (".csv", ".png")]
+
+
+def _csv_text(table: dict[str, np.ndarray]) -> str:
+    out = io.StringIO()
+    writer = csv.writer(out, lineterminator="\n")
+    writer.writerow(list(table))
+    for row in zip(*table.values()):
+        writer.writerow(["" if not np.isfinite(v) else f"{float(v):.10g}" for v in row])
+    return out.getvalue()
+
+
+def _plot(table: dict[str, np.ndarray], path: Path, names: dict, threshold: float) -> None:
+    import matplotlib
+
+    matplotlib.use("Agg", force=False)
+    from matplotlib.figure import Figure
+
+    fig = Figure(figsize=(6, 4), dpi=100)
+    ax = fig.add_subplot(1, 1, 1)
+    for key in table:
+        if key.startswith("volume_"):
+            label = key.removeprefix("volume_")
+            ax.plot(table["time"], table[key], marker=".",
+                    label=str(names.get(int(label), f"material {label}")))
+    ax.plot(table["time"], table["volume"], color="k", lw=2, label="all")
+    ax.set_xlabel("time")
+    ax.set_ylabel(f"volume with c > {threshold:g}")
+    ax.legend(loc="upper left")
+    ax.grid(alpha=0.3)
+    fig.tight_layout()
+    fig.savefig(path, format="png")
+
+
+def write_growth(result, path, *, threshold: float = DEFAULT_THRESHOLD,
+                 force: bool = False) -> list[Path]:
+    """Write the time series, the table and the plot of a :class:`GrowthResult`, all or
+    none.
+
+    Parameters
+    ----------
+    result : GrowthResult
+    path : str or Path
+        The ``.xdmf`` of the series (field ``c``); the ``.h5`` beside it, the table
+        ``<stem>.csv`` (:func:`growth_table`) and the volume curve ``<stem>.png``.
+    threshold : float
+        As for :func:`growth_table`.
+    force : bool
+        Replace existing files.
+
+    Returns
+    -------
+    list of Path
+        The files written.
+    """
+    targets = growth_outputs(path, force=force)
+    table = growth_table(result, threshold=threshold)
+    with atomic_write(targets, force=force) as temps:
+        # the series' own writer, into the temporary folder (its files keep their names)
+        write_series(result, temps[0], force=True, name="c")
+        temps[2].write_text(_csv_text(table), encoding="utf-8")
+        _plot(table, temps[3], dict(result.mesh.material_names), threshold)
+    return targets
