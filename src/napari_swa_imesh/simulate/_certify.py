@@ -9,9 +9,12 @@ import numpy as np
 
 from ..mesh import Mesh
 from ._adapt import MAX_REFINE
+from ._assembly import Space
+from ._dual import DualBound, FacetTable, dual_bound
+from ._stream import StreamBound, stream_bound
 
 __all__ = ["CERTIFY_UNKNOWNS", "GAP_TARGET", "cannot_refine", "check_gap",
-           "check_memory_budget", "flux_scale", "relative_gaps"]
+           "check_memory_budget", "flux_scale", "lower_bound", "relative_gaps"]
 
 #: Default relative width ``(upper - lower) / lower`` of the certified interval: wider, the
 #: run refines where the gap is (while the refine levels and the memory budget allow).
@@ -59,3 +62,35 @@ def cannot_refine(mesh: Mesh, labels, level: int) -> str | None:
     return None
 
 
+
+
+def lower_bound(mesh: Mesh, space: Space, p1_space: Space, tensors: np.ndarray,
+                cell_material: np.ndarray, axis: int, lo: np.ndarray, hi: np.ndarray, *,
+                tol: float, facets: FacetTable | None = None) -> DualBound | StreamBound:
+    """The sharpest lower bound of k_eff along `axis` this mesh allows.
+
+    2-D: the stream function on the primal's elements (:mod:`._stream`; with P2 the mixed
+    RT1 bound, as sharp as the primal's P2 upper bound). 3-D, or a 2-D mesh whose
+    boundary the stream function cannot take: the Crouzeix-Raviart / RT0 flux
+    (:mod:`._dual`). Both results have ``k_lower``, ``info`` and ``hypercircle``.
+
+    Parameters
+    ----------
+    mesh : Mesh
+    space : Space
+        The primal's space (P1 or P2).
+    p1_space : Space
+        The P1 space of `mesh` (the Crouzeix-Raviart bound's geometry).
+    tensors, cell_material, axis, lo, hi, tol, facets
+        As for :func:`._dual.dual_bound`.
+
+    Returns
+    -------
+    DualBound or StreamBound
+    """
+    bound = stream_bound(mesh, space, tensors, cell_material, axis, lo, hi, tol=tol,
+                         facets=facets)
+    if bound is not None:
+        return bound
+    return dual_bound(mesh, p1_space, tensors, cell_material, axis, lo, hi, tol=tol,
+                      facets=facets)

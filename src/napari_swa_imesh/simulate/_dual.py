@@ -146,6 +146,12 @@ class DualBound:
     info: SolverInfo
     unknowns: int
 
+    def hypercircle(self, space: Space, values: np.ndarray, tensors: np.ndarray,
+                    cell_material: np.ndarray) -> np.ndarray:
+        """(M,) the gap per element against the primal potential `values` on `space`
+        (:func:`hypercircle`)."""
+        return hypercircle(space, values, self.flux, tensors, cell_material)
+
 
 def _cr_stiffness(space: Space, facets: FacetTable, tensors: np.ndarray,
                   cell_material: np.ndarray) -> sparse.csr_matrix:

@@ -35,10 +35,11 @@ from ._certify import (
     check_gap,
     check_memory_budget,
     flux_scale,
+    lower_bound,
     relative_gaps,
 )
 from ._conductivity import axis_names, conductivity_tensors
-from ._dual import dual_bound, facet_table, hypercircle
+from ._dual import facet_table
 from ._fe import vertex_values
 from ._hashin import HashinShtrikman, two_isotropic_phases
 from ._periodic import PeriodicProblem
@@ -292,8 +293,8 @@ def simulate_steps(mesh_or_labels, conductivity: Mapping, *, spacing=None,
                 t0 = time.perf_counter()
                 dual_space = fe_space(mesh, 1) if dual_space is None else dual_space
                 facets = facet_table(mesh.cells) if facets is None else facets
-                dual = dual_bound(mesh, dual_space, tensors, cell_material, axis, lo, hi,
-                                  tol=tol, facets=facets)
+                dual = lower_bound(mesh, space, dual_space, tensors, cell_material, axis,
+                                   lo, hi, tol=tol, facets=facets)
                 if dual.k_lower > value * (1 + BOUND_SLACK):
                     raise ValueError(f"along {name} the dual bound {dual.k_lower:.9g} lies "
                                      f"above the primal {value:.9g}: one of the solves is "
@@ -301,8 +302,8 @@ def simulate_steps(mesh_or_labels, conductivity: Mapping, *, spacing=None,
                 interval[name] = (min(dual.k_lower, value), value)
                 dual_info[name] = dual.info
                 # the gap per element, relative to this axis' flux: axes weigh the same
-                gap_indicator += hypercircle(space, values, dual.flux, tensors,
-                                             cell_material) / (value * flux_scale(lo, hi, axis))
+                gap_indicator += dual.hypercircle(space, values, tensors, cell_material
+                                                  ) / (value * flux_scale(lo, hi, axis))
                 del dual
                 seconds["dual"] = seconds.get("dual", 0.0) + time.perf_counter() - t0
         done += 1 + len(names)
