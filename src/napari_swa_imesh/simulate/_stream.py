@@ -138,6 +138,7 @@ def _on_plane(points: np.ndarray, vertices: np.ndarray, axis: int, value: float,
 def _edge_dofs(space: Space, pairs: np.ndarray) -> np.ndarray:
     """P2 dof of each sorted vertex pair (an edge of the mesh)."""
     n = len(space.points)
+    assert space.edges is not None
     keys = space.edges[:, 0].astype(np.int64) * n + space.edges[:, 1]
     wanted = pairs[:, 0].astype(np.int64) * n + pairs[:, 1]
     return n + np.searchsorted(keys, wanted)
