@@ -39,7 +39,7 @@ def _stream(mesh, conductivity, axis, order, tol=1e-10):
                         tol=tol)
 
 
-@settings(max_examples=5, deadline=None)
+@settings(max_examples=4, deadline=None)
 @given(st.integers(0, 999), st.integers(0, 1))
 def test_p1_is_the_crouzeix_raviart_bound_and_p2_is_sharper(seed, axis):
     mesh = mesh_labels(blobs((7, 9), seed=seed))
@@ -52,7 +52,7 @@ def test_p1_is_the_crouzeix_raviart_bound_and_p2_is_sharper(seed, axis):
     assert p2 > cr * (1 + 1e-6)
 
 
-@settings(max_examples=6, deadline=None)
+@settings(max_examples=4, deadline=None)
 @given(st.integers(0, 999), st.sampled_from([1, 2]))
 def test_keller_reciprocity(seed, order):
     """The stream problem along x is the primal along y with the inverse conductivities
@@ -66,7 +66,7 @@ def test_keller_reciprocity(seed, order):
     assert lower * upper == pytest.approx(1.0, rel=1e-8)
 
 
-@pytest.mark.parametrize("seed", [0, 5, 11])
+@pytest.mark.parametrize("seed", [0, 11])
 def test_below_a_finer_reference(seed):
     lab = blobs((8, 10), seed=seed)
     coarse = simulate(lab, K, order=2, adapt=0, gap=np.inf)
