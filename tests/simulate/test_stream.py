@@ -126,3 +126,37 @@ def test_hypercircle_sums_to_the_gap():
     gap = (r.interval["x"][1] - r.interval["x"][0]) * (hi[0] - lo[0]) / (hi[1] - lo[1])
     assert eta.min() >= 0
     assert eta.sum() == pytest.approx(gap, rel=1e-6)
+
+
+def _periodic(labels, conductivity, **kw):
+    return simulate(labels, conductivity, protocol="periodic", order=2, adapt=0, **kw)
+
+
+def test_periodic_laminate_interval_is_exact():
+    labels = np.ones((6, 10), np.uint8)
+    labels[:, 3:] = 2
+    labels[:, 7:] = 3
+    r = _periodic(labels, {1: 1.0, 2: 7.0, 3: 0.2})
+    layers = np.array([3, 4, 3]) / 10
+    exact = {"x": 1 / np.sum(layers / np.array([1.0, 7.0, 0.2])),
+             "y": np.sum(layers * np.array([1.0, 7.0, 0.2]))}
+    for name, (lo, hi) in r.interval.items():
+        assert lo == pytest.approx(exact[name], rel=1e-10)
+        assert hi == pytest.approx(exact[name], rel=1e-10)
+    assert "certified x" in r.describe() and "interval" in r.summary()
+
+
+def test_periodic_checkerboard_holds_dykhne_and_blobs_a_finer_solve():
+    squares = np.arange(12) // 3
+    board = (np.add.outer(squares, squares) % 2 + 1).astype(np.uint8)
+    with pytest.warns(UserWarning, match="periodic interval along"):
+        r = _periodic(board, {1: 1.0, 2: 10.0})
+    for lo, hi in r.interval.values():
+        assert lo < np.sqrt(10.0) < hi
+    lab = blobs((8, 10), seed=3)
+    with pytest.warns(UserWarning, match="periodic interval along"):
+        coarse = _periodic(lab, K)
+    fine = _periodic(lab, K, refine=1, interval=False)
+    for name, (lo, hi) in coarse.interval.items():
+        assert lo < fine.k_eff[name] < hi
+    assert not fine.interval and "no certified interval" in fine.describe()

@@ -43,6 +43,7 @@ from ._dual import facet_table
 from ._fe import vertex_values
 from ._hashin import HashinShtrikman, two_isotropic_phases
 from ._periodic import PeriodicProblem
+from ._periodic_dual import periodic_lower, periodic_upper
 from ._protocols import BOUND_SLACK, check_within_bounds, mixed_boundary, voigt_reuss
 from ._result import SimulationResult
 from ._solve import DEFAULT_TOLERANCE, SolverInfo, connected_parts
@@ -190,6 +191,7 @@ def simulate_steps(mesh_or_labels, conductivity: Mapping, *, spacing=None,
     order, adapt, growth, choice = auto_settings(mesh, order, adapt, source is not None,
                                                  reference)
     interval_wanted = bool(interval) and protocol == "mixed"
+    periodic_wanted = bool(interval) and protocol == "periodic" and mesh.ndim == 2
     if chosen == AUTO and order == 2 and check_memory(mesh, 2, interval_wanted, memory,
                                                       asked=False):
         order, adapt, growth, choice = auto_settings(mesh, 1, 0, source is not None)
@@ -219,6 +221,7 @@ def simulate_steps(mesh_or_labels, conductivity: Mapping, *, spacing=None,
         materials, cell_material = np.unique(mesh.material, return_inverse=True)
         seconds[f"adapt {step + 1}"] = time.perf_counter() - t0
     k_eff, bounds, potential, flux, solver = {}, {}, {}, {}, {}
+    upper: dict[str, float] = {}
     interval: dict[str, tuple[float, float]] = {}
     dual_info: dict[str, SolverInfo] = {}
     notes: list[str] = []
@@ -277,6 +280,8 @@ def simulate_steps(mesh_or_labels, conductivity: Mapping, *, spacing=None,
             else:
                 tensor[:, axis], values, info = periodic.solve(axis)
                 value = float(tensor[axis, axis])
+                if periodic_wanted:
+                    upper[name] = periodic_upper(matrix, values, float(np.prod(hi - lo)))
             voigt, reuss = voigt_reuss(tensors, fractions, axis)
             check_within_bounds(value, voigt, reuss, name)
             k_eff[name] = value
@@ -363,6 +368,22 @@ def simulate_steps(mesh_or_labels, conductivity: Mapping, *, spacing=None,
                      "that interval.")
         break
     seconds["setup"] = sum(info.setup for info in solver.values())
+    if periodic_wanted:         # 2-D periodic: bounds of the tensor (:mod:`._periodic_dual`)
+        t0 = time.perf_counter()
+        found = periodic_lower(space, tensors, cell_material, lo, hi, tol=tol)
+        if found is not None:
+            interval = {n: (min(float(found[0][image_axes[n], image_axes[n]]), u), u)
+                        for n, u in upper.items()}
+            dual_info = dict(zip(("periodic 0", "periodic 1"), found[1]))
+            wide = {a: g for a, g in relative_gaps(interval).items() if g > gap_target}
+            if wide:
+                a = max(wide, key=wide.get)
+                notes.append(f"the periodic interval along {a} is {interval[a][0]:.6g} .. "
+                             f"{interval[a][1]:.6g} (gap {100 * wide[a]:.3g} %), wider than "
+                             f"the target {100 * gap_target:g} %, and the periodic protocol "
+                             "is not refined for it (pass --refine): k_eff is certain only "
+                             "to within that interval.")
+        seconds["dual"] = time.perf_counter() - t0
     if tensor is not None:
         check_symmetric(tensor)
     hashin = None
