@@ -25,10 +25,11 @@ import numpy as np
 from scipy import sparse
 
 from ._assembly import Space, stiffness_matrix
+from ._certify import relative_gaps
 from ._periodic import PeriodicProblem
 from ._solve import SolverInfo
 
-__all__ = ["periodic_lower", "periodic_upper"]
+__all__ = ["periodic_interval", "periodic_lower", "periodic_upper"]
 
 _J = np.array([[0.0, 1.0], [-1.0, 0.0]])
 
@@ -76,3 +77,32 @@ def periodic_lower(space: Space, tensors: np.ndarray, cell_material: np.ndarray,
     if not (np.linalg.eigvalsh(m) > 0).all():
         return None
     return np.linalg.inv(m), [info for _, _, info in solves]
+
+
+def periodic_interval(space: Space, tensors: np.ndarray, cell_material: np.ndarray,
+                      lo: np.ndarray, hi: np.ndarray, upper: dict[str, float],
+                      image_axes: dict[str, int], tol: float, gap_target: float
+                      ) -> tuple[dict[str, tuple[float, float]], dict[str, SolverInfo],
+                                 list[str]]:
+    """Per axis solved ``(lower, upper)``, the dual solves' reports and the sentence for a
+    wide interval (empty when none; no interval when the lower bound is not finite).
+
+    `upper`: per axis name, :func:`periodic_upper` of its solve; `image_axes`: the mesh
+    axis of each name.
+    """
+    found = periodic_lower(space, tensors, cell_material, lo, hi, tol=tol)
+    if found is None:
+        return {}, {}, []
+    low, infos = found
+    interval = {n: (min(float(low[image_axes[n], image_axes[n]]), u), u)
+                for n, u in upper.items()}
+    wide = {a: g for a, g in relative_gaps(interval).items() if g > gap_target}
+    notes: list[str] = []
+    if wide:
+        a = max(wide, key=lambda name: wide[name])
+        notes.append(f"the periodic interval along {a} is {interval[a][0]:.6g} .. "
+                     f"{interval[a][1]:.6g} (gap {100 * wide[a]:.3g} %), wider than the "
+                     f"target {100 * gap_target:g} %, and the periodic protocol is not "
+                     "refined for it (pass --refine): k_eff is certain only to within "
+                     "that interval.")
+    return interval, dict(zip(("periodic 0", "periodic 1"), infos)), notes

@@ -43,7 +43,7 @@ from ._dual import facet_table
 from ._fe import vertex_values
 from ._hashin import HashinShtrikman, two_isotropic_phases
 from ._periodic import PeriodicProblem
-from ._periodic_dual import periodic_lower, periodic_upper
+from ._periodic_dual import periodic_interval, periodic_upper
 from ._protocols import BOUND_SLACK, check_within_bounds, mixed_boundary, voigt_reuss
 from ._result import SimulationResult
 from ._solve import DEFAULT_TOLERANCE, SolverInfo, connected_parts
@@ -370,19 +370,9 @@ def simulate_steps(mesh_or_labels, conductivity: Mapping, *, spacing=None,
     seconds["setup"] = sum(info.setup for info in solver.values())
     if periodic_wanted:         # 2-D periodic: bounds of the tensor (:mod:`._periodic_dual`)
         t0 = time.perf_counter()
-        found = periodic_lower(space, tensors, cell_material, lo, hi, tol=tol)
-        if found is not None:
-            interval = {n: (min(float(found[0][image_axes[n], image_axes[n]]), u), u)
-                        for n, u in upper.items()}
-            dual_info = dict(zip(("periodic 0", "periodic 1"), found[1]))
-            wide = {a: g for a, g in relative_gaps(interval).items() if g > gap_target}
-            if wide:
-                a = max(wide, key=wide.get)
-                notes.append(f"the periodic interval along {a} is {interval[a][0]:.6g} .. "
-                             f"{interval[a][1]:.6g} (gap {100 * wide[a]:.3g} %), wider than "
-                             f"the target {100 * gap_target:g} %, and the periodic protocol "
-                             "is not refined for it (pass --refine): k_eff is certain only "
-                             "to within that interval.")
+        interval, dual_info, note = periodic_interval(space, tensors, cell_material, lo, hi,
+                                                      upper, image_axes, tol, gap_target)
+        notes += note
         seconds["dual"] = time.perf_counter() - t0
     if tensor is not None:
         check_symmetric(tensor)
