@@ -11,18 +11,24 @@ flux plus a P2 curl, :mod:`simulate._curl`), the primal (upper) bound, both gaps
 the seconds of the primal solve, of the CR solve and of the reported bound. A bracket of
 the truth comes from P2 on the mesh refined twice (its own interval).
 
-Measured (this 2-core machine, loaded; seconds vary by 2x between runs):
+Measured (this 2-core machine under a load of 10 to 17, so the seconds vary by 2x to 3x
+between runs; the truth bracket is the refine-2 P2 interval):
 
-========== ==== ======= ======= ======= ========== ========== ==============
-case        P   CR low  new low upper   gap before gap after  truth in
-========== ==== ======= ======= ======= ========== ========== ==============
-2-D 18x22   1   1.1374  1.1374  1.9338  70.0 %     70.0 %     1.414 .. 1.646
-2-D 18x22   2   1.1374  1.3211  1.7414  53.1 %     31.8 %
-2-D 32x32   2   1.2205  1.3838  1.6893  38.4 %     22.1 %
-3-D 10^3    1   1.9725  2.0893  2.6760  35.7 %     28.1 %
-3-D 10^3    2   1.9725  2.0893  2.4251  23.0 %     16.1 %
-3-D 14^3    2   1.7450  1.8521  2.1364  22.4 %     15.4 %
-========== ==== ======= ======= ======= ========== ========== ==============
+========== == ====== ======= ====== ====== ====== ======= ===== ====== ===============
+case       P  CR low new low upper  gap CR gap    solve s CR s  new s  truth in
+========== == ====== ======= ====== ====== ====== ======= ===== ====== ===============
+2-D 18x22  1  1.1374 1.1374  1.9338 70.0 % 70.0 % 3.7     1.3   3.8    1.4142 .. 1.6456
+2-D 18x22  2  1.1374 1.3211  1.7414 53.1 % 31.8 % 3.7     1.4   0.9
+2-D 32x32  2  1.2205 1.3838  1.6893 38.4 % 22.1 % 0.3     1.1   1.3
+3-D 10^3   1  1.9725 2.0893  2.6760 35.7 % 28.1 % 0.3     0.5   3.2    2.1779 .. 2.3200
+3-D 10^3   2  1.9725 2.0893  2.4251 22.9 % 16.1 % 0.2     0.3   3.0
+3-D 14^3   2  1.7450 1.8521  2.1364 22.4 % 15.4 % 1.9     0.9   10.5
+========== == ====== ======= ====== ====== ====== ======= ===== ====== ===============
+
+(The 3-D rows were taken with 160 conjugate-gradient steps of the curl; it now stops
+once ten steps gain less than 0.1 %, about 30 steps, a bound lower by some 0.1 %.) The
+2-D bound is one P2 solve the primal's size; the 3-D curl's matrix is three times the
+P2 matrix, assembled in 3 x 3 blocks (most of its cost) and minimised by Jacobi CG.
 
 With P1 in 2-D the stream function on P1 *is* the CR bound (the divergence-free RT0
 fields are the rotated P1 gradients); with P2 it is the mixed RT1 bound. What is left is
