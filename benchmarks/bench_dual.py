@@ -76,7 +76,7 @@ def main(argv=None) -> int:
         for order in (1, 2):
             with warnings.catch_warnings():
                 warnings.simplefilter("ignore")
-                r = simulate(lab, k, axes="x", order=order, adapt=0, gap=np.inf)
+                r = simulate(lab, k, axes="x", order=order, adapt=0, gap=0.02)
             mesh = r.mesh
             materials, cell_material = np.unique(mesh.material, return_inverse=True)
             tensors = conductivity_tensors(k, materials, mesh.ndim, mesh.material_names)

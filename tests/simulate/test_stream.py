@@ -66,11 +66,14 @@ def test_keller_reciprocity(seed, order):
     assert lower * upper == pytest.approx(1.0, rel=1e-8)
 
 
-@pytest.mark.parametrize("seed", [0, 11])
-def test_below_a_finer_reference(seed):
+ANISOTROPIC = {1: [[2.0, 0.7], [0.7, 1.0]], 2: 10.0, 3: [[0.1, 0.0], [0.0, 0.5]]}
+
+
+@pytest.mark.parametrize("seed, conductivity", [(0, K), (4, ANISOTROPIC)])
+def test_below_a_finer_reference(seed, conductivity):
     lab = blobs((8, 10), seed=seed)
-    coarse = simulate(lab, K, order=2, adapt=0, gap=np.inf)
-    fine = simulate(lab, K, order=2, adapt=0, refine=3, interval=False)
+    coarse = simulate(lab, conductivity, order=2, adapt=0, gap=np.inf)
+    fine = simulate(lab, conductivity, order=2, adapt=0, refine=3, interval=False)
     for name, (lo, hi) in coarse.interval.items():
         assert lo < fine.k_eff[name] < hi
 

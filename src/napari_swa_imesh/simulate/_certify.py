@@ -69,7 +69,8 @@ def cannot_refine(mesh: Mesh, labels, level: int) -> str | None:
 def lower_bound(mesh: Mesh, space: Space, p1_space: Space, tensors: np.ndarray,
                 cell_material: np.ndarray, axis: int, lo: np.ndarray, hi: np.ndarray, *,
                 tol: float, facets: FacetTable | None = None,
-                memory: float = float("inf")) -> DualBound | StreamBound | CurlBound:
+                memory: float = float("inf"), upper: float = float("inf"),
+                gap: float = 0.0) -> DualBound | StreamBound | CurlBound:
     """The sharpest lower bound of k_eff along `axis` this mesh allows.
 
     2-D: the stream function on the primal's elements (:mod:`._stream`; with P2 the mixed
@@ -91,6 +92,9 @@ def lower_bound(mesh: Mesh, space: Space, p1_space: Space, tensors: np.ndarray,
         As for :func:`._dual.dual_bound`.
     memory : float
         The run's memory budget in bytes.
+    upper, gap : float
+        The primal's k_eff and the target relative width: a 3-D Crouzeix-Raviart bound
+        already within `gap` of `upper` is kept (the curl costs several primal solves).
 
     Returns
     -------
@@ -103,7 +107,7 @@ def lower_bound(mesh: Mesh, space: Space, p1_space: Space, tensors: np.ndarray,
         return bound
     base = dual_bound(mesh, p1_space, tensors, cell_material, axis, lo, hi, tol=tol,
                       facets=facets)
-    if mesh.ndim != 3 or not base.k_lower > 0:
+    if mesh.ndim != 3 or not base.k_lower > 0 or upper <= base.k_lower * (1 + gap):
         return base
     p2 = space if space.order == 2 else fe_space(mesh, 2)
     need = BYTES_PER_CURL_NODE * p2.n_dofs + estimate_memory(mesh, space.order, True)

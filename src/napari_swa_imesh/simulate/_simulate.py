@@ -299,7 +299,8 @@ def simulate_steps(mesh_or_labels, conductivity: Mapping, *, spacing=None,
                 dual_space = fe_space(mesh, 1) if dual_space is None else dual_space
                 facets = facet_table(mesh.cells) if facets is None else facets
                 dual = lower_bound(mesh, space, dual_space, tensors, cell_material, axis,
-                                   lo, hi, tol=tol, facets=facets, memory=memory)
+                                   lo, hi, tol=tol, facets=facets, memory=memory,
+                                   upper=value, gap=gap_target)
                 if dual.k_lower > value * (1 + BOUND_SLACK):
                     raise ValueError(f"along {name} the dual bound {dual.k_lower:.9g} lies "
                                      f"above the primal {value:.9g}: one of the solves is "
