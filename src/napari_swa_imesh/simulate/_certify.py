@@ -109,7 +109,10 @@ def lower_bound(mesh: Mesh, space: Space, p1_space: Space, tensors: np.ndarray,
                       facets=facets)
     if mesh.ndim != 3 or not base.k_lower > 0 or upper <= base.k_lower * (1 + gap):
         return base
-    p2 = space if space.order == 2 else fe_space(mesh, 2)
+    if space.order == 2:
+        p2 = space
+    else:                       # one P2 space per mesh, so the curl's matrix is shared
+        p2 = facets.cache.get("p2") or facets.cache.setdefault("p2", fe_space(mesh, 2))
     need = BYTES_PER_CURL_NODE * p2.n_dofs + estimate_memory(mesh, space.order, True)
     if p2.n_dofs > CURL_NODES or need > memory:
         return base

@@ -62,8 +62,10 @@ CURL_ITERATIONS = 1000
 #: primal's size.
 WINDOW = 10
 SETTLED = 1e-3
-#: Largest P2 space (vertices + edges) the curl is added on (besides the memory budget).
-CURL_NODES = 300_000
+#: Largest P2 space (vertices + edges) the curl is added on (besides the memory budget):
+#: its assembly and iterations cost several primal solves (10^3 blobs refined once,
+#: 55.6k nodes: some 30 s on this loaded machine), so larger meshes keep the CR bound.
+CURL_NODES = 100_000
 #: Peak bytes per P2 node of the curl's assembly and solve, above the Crouzeix-Raviart
 #: solve's peak (measured 8.1 kB at 20^3 blobs, 58.6k nodes; the three-component matrix
 #: has about 150 entries per node, built once in 3 x 3 blocks and restricted).
@@ -336,15 +338,20 @@ def curl_bound(mesh: Mesh, space: Space, tensors: np.ndarray, cell_material: np.
         return part, load.reshape(30, -1)
 
     t0 = time.perf_counter()
-    matrix = _curl_matrix(space, inverse, cell_material)
+    # the matrix does not depend on the axis: made once per mesh (facets.cache)
+    key = facets.cache.get("curl key", (None, None, None))
+    if key[0] is not space or key[1] is not tensors or key[2] is not cell_material:
+        facets.cache["curl key"] = (space, tensors, cell_material)
+        whole = _curl_matrix(space, inverse, cell_material).tocsr()
+        whole.eliminate_zeros()     # isotropic blocks have exact zeros: a third of them
+        facets.cache["curl matrix"] = whole
+        del whole
     for part, load in _map(loads, mesh.n_cells):     # summed here, on one thread
         np.add.at(rhs, dofs[part].T, load)
     free = ~np.repeat(zero, 3)
     # E(sigma + curl A) = E(sigma) + 2 (a . rhs + a K a / 2); E(sigma) = its flux
     start = float(base.k_lower * np.prod(np.delete(hi - lo, axis)) / (hi[axis] - lo[axis]))
-    matrix = matrix.tocsr()
-    matrix.eliminate_zeros()        # isotropic blocks have exact zeros: a third of them
-    matrix = matrix[free]
+    matrix = facets.cache["curl matrix"][free]
     matrix = matrix[:, free]
     x, k, residual = _pcg(matrix, -rhs[free], iterations, start / 2, settled)
     del matrix
