@@ -20,6 +20,7 @@ SLOW_FILES = {
     "test_demo.py",                         # the whole demo, in subprocesses
     "test_cli_batch.py",                    # a dask.distributed cluster per test
     "napari/test_workflow_3d.py",           # the 3-D workflow through every widget
+    "simulate/test_curl.py",                # 3-D curl bounds against finer P2 solves
 }
 
 

@@ -9,9 +9,14 @@ import numpy as np
 
 from ..mesh import Mesh
 from ._adapt import MAX_REFINE
+from ._assembly import Space, fe_space
+from ._budget import estimate_memory
+from ._curl import BYTES_PER_CURL_NODE, CURL_NODES, CurlBound, curl_bound
+from ._dual import DualBound, FacetTable, dual_bound, facet_table
+from ._stream import StreamBound, stream_bound
 
 __all__ = ["CERTIFY_UNKNOWNS", "GAP_TARGET", "cannot_refine", "check_gap",
-           "check_memory_budget", "flux_scale", "relative_gaps"]
+           "check_memory_budget", "flux_scale", "lower_bound", "relative_gaps"]
 
 #: Default relative width ``(upper - lower) / lower`` of the certified interval: wider, the
 #: run refines where the gap is (while the refine levels and the memory budget allow).
@@ -59,3 +64,57 @@ def cannot_refine(mesh: Mesh, labels, level: int) -> str | None:
     return None
 
 
+
+
+def lower_bound(mesh: Mesh, space: Space, p1_space: Space, tensors: np.ndarray,
+                cell_material: np.ndarray, axis: int, lo: np.ndarray, hi: np.ndarray, *,
+                tol: float, facets: FacetTable | None = None,
+                memory: float = float("inf"), upper: float = float("inf"),
+                gap: float = 0.0) -> DualBound | StreamBound | CurlBound:
+    """The sharpest lower bound of k_eff along `axis` this mesh allows.
+
+    2-D: the stream function on the primal's elements (:mod:`._stream`; with P2 the mixed
+    RT1 bound, as sharp as the primal's P2 upper bound). 3-D, or a 2-D mesh whose
+    boundary the stream function cannot take: the Crouzeix-Raviart / RT0 flux
+    (:mod:`._dual`), in 3-D improved by the curl of a P2 vector field (:mod:`._curl`)
+    while that space has at most :data:`._curl.CURL_NODES` nodes and its peak fits the
+    memory budget with the run's own estimate. Every result has
+    ``k_lower``, ``info`` and ``hypercircle``.
+
+    Parameters
+    ----------
+    mesh : Mesh
+    space : Space
+        The primal's space (P1 or P2).
+    p1_space : Space
+        The P1 space of `mesh` (the Crouzeix-Raviart bound's geometry).
+    tensors, cell_material, axis, lo, hi, tol, facets
+        As for :func:`._dual.dual_bound`.
+    memory : float
+        The run's memory budget in bytes.
+    upper, gap : float
+        The primal's k_eff and the target relative width: a 3-D Crouzeix-Raviart bound
+        already within `gap` of `upper` is kept (the curl costs several primal solves).
+
+    Returns
+    -------
+    DualBound, StreamBound or CurlBound
+    """
+    facets = facet_table(mesh.cells) if facets is None else facets
+    bound = stream_bound(mesh, space, tensors, cell_material, axis, lo, hi, tol=tol,
+                         facets=facets)
+    if bound is not None:
+        return bound
+    base = dual_bound(mesh, p1_space, tensors, cell_material, axis, lo, hi, tol=tol,
+                      facets=facets)
+    if mesh.ndim != 3 or not base.k_lower > 0 or upper <= base.k_lower * (1 + gap):
+        return base
+    if space.order == 2:
+        p2 = space
+    else:                       # one P2 space per mesh, so the curl's matrix is shared
+        p2 = facets.cache.get("p2") or facets.cache.setdefault("p2", fe_space(mesh, 2))
+    need = BYTES_PER_CURL_NODE * p2.n_dofs + estimate_memory(mesh, space.order, True)
+    if p2.n_dofs > CURL_NODES or need > memory:
+        return base
+    better = curl_bound(mesh, p2, tensors, cell_material, axis, lo, hi, base, facets)
+    return base if better is None else better

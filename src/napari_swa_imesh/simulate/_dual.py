@@ -37,7 +37,7 @@ where the gap is, and refinement marks by it.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 from scipy import sparse
@@ -78,11 +78,14 @@ class FacetTable:
         The elements on either side (``-1`` for the second on the boundary).
     vertices : (F, d) ndarray of intp
         The facet's vertices (sorted).
+    cache : dict
+        What the bounds of one mesh share across axes (the curl's matrix).
     """
 
     of_cell: np.ndarray
     owners: np.ndarray
     vertices: np.ndarray
+    cache: dict = field(default_factory=dict, repr=False, compare=False)
 
     @property
     def boundary(self) -> np.ndarray:
@@ -145,6 +148,12 @@ class DualBound:
     imbalance: float
     info: SolverInfo
     unknowns: int
+
+    def hypercircle(self, space: Space, values: np.ndarray, tensors: np.ndarray,
+                    cell_material: np.ndarray) -> np.ndarray:
+        """(M,) the gap per element against the primal potential `values` on `space`
+        (:func:`hypercircle`)."""
+        return hypercircle(space, values, self.flux, tensors, cell_material)
 
 
 def _cr_stiffness(space: Space, facets: FacetTable, tensors: np.ndarray,

@@ -142,8 +142,9 @@ class SimulationResult:
         for a, (lo, hi) in self.interval.items():
             lines.append(f"certified {a}: {lo:.6g} <= k_eff <= {hi:.6g}  (gap "
                          f"{100 * self.gap[a]:.3g} %, target {100 * self.gap_target:g} %)")
-        if self.protocol == "periodic":
-            lines.append("no certified interval: the dual bound is for the mixed protocol")
+        if self.protocol == "periodic" and not self.interval:
+            lines.append("no certified interval: the periodic protocol has one in 2-D only "
+                         "(and not with --no-interval)")
         lines += [f"warning: {w}" for w in self.warnings]
         if self.memory_estimate:
             lines.append(f"memory: estimated peak {format_bytes(self.memory_estimate)} "

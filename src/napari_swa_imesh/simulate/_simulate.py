@@ -35,13 +35,15 @@ from ._certify import (
     check_gap,
     check_memory_budget,
     flux_scale,
+    lower_bound,
     relative_gaps,
 )
 from ._conductivity import axis_names, conductivity_tensors
-from ._dual import dual_bound, facet_table, hypercircle
+from ._dual import facet_table
 from ._fe import vertex_values
 from ._hashin import HashinShtrikman, two_isotropic_phases
 from ._periodic import PeriodicProblem
+from ._periodic_dual import periodic_interval, periodic_upper
 from ._protocols import BOUND_SLACK, check_within_bounds, mixed_boundary, voigt_reuss
 from ._result import SimulationResult
 from ._solve import DEFAULT_TOLERANCE, SolverInfo, connected_parts
@@ -189,6 +191,7 @@ def simulate_steps(mesh_or_labels, conductivity: Mapping, *, spacing=None,
     order, adapt, growth, choice = auto_settings(mesh, order, adapt, source is not None,
                                                  reference)
     interval_wanted = bool(interval) and protocol == "mixed"
+    periodic_wanted = bool(interval) and protocol == "periodic" and mesh.ndim == 2
     if chosen == AUTO and order == 2 and check_memory(mesh, 2, interval_wanted, memory,
                                                       asked=False):
         order, adapt, growth, choice = auto_settings(mesh, 1, 0, source is not None)
@@ -218,6 +221,7 @@ def simulate_steps(mesh_or_labels, conductivity: Mapping, *, spacing=None,
         materials, cell_material = np.unique(mesh.material, return_inverse=True)
         seconds[f"adapt {step + 1}"] = time.perf_counter() - t0
     k_eff, bounds, potential, flux, solver = {}, {}, {}, {}, {}
+    upper: dict[str, float] = {}
     interval: dict[str, tuple[float, float]] = {}
     dual_info: dict[str, SolverInfo] = {}
     notes: list[str] = []
@@ -276,6 +280,8 @@ def simulate_steps(mesh_or_labels, conductivity: Mapping, *, spacing=None,
             else:
                 tensor[:, axis], values, info = periodic.solve(axis)
                 value = float(tensor[axis, axis])
+                if periodic_wanted:
+                    upper[name] = periodic_upper(matrix, values, float(np.prod(hi - lo)))
             voigt, reuss = voigt_reuss(tensors, fractions, axis)
             check_within_bounds(value, voigt, reuss, name)
             k_eff[name] = value
@@ -292,8 +298,9 @@ def simulate_steps(mesh_or_labels, conductivity: Mapping, *, spacing=None,
                 t0 = time.perf_counter()
                 dual_space = fe_space(mesh, 1) if dual_space is None else dual_space
                 facets = facet_table(mesh.cells) if facets is None else facets
-                dual = dual_bound(mesh, dual_space, tensors, cell_material, axis, lo, hi,
-                                  tol=tol, facets=facets)
+                dual = lower_bound(mesh, space, dual_space, tensors, cell_material, axis,
+                                   lo, hi, tol=tol, facets=facets, memory=memory,
+                                   upper=value, gap=gap_target)
                 if dual.k_lower > value * (1 + BOUND_SLACK):
                     raise ValueError(f"along {name} the dual bound {dual.k_lower:.9g} lies "
                                      f"above the primal {value:.9g}: one of the solves is "
@@ -301,8 +308,8 @@ def simulate_steps(mesh_or_labels, conductivity: Mapping, *, spacing=None,
                 interval[name] = (min(dual.k_lower, value), value)
                 dual_info[name] = dual.info
                 # the gap per element, relative to this axis' flux: axes weigh the same
-                gap_indicator += hypercircle(space, values, dual.flux, tensors,
-                                             cell_material) / (value * flux_scale(lo, hi, axis))
+                gap_indicator += dual.hypercircle(space, values, tensors, cell_material
+                                                  ) / (value * flux_scale(lo, hi, axis))
                 del dual
                 seconds["dual"] = seconds.get("dual", 0.0) + time.perf_counter() - t0
         done += 1 + len(names)
@@ -362,6 +369,12 @@ def simulate_steps(mesh_or_labels, conductivity: Mapping, *, spacing=None,
                      "that interval.")
         break
     seconds["setup"] = sum(info.setup for info in solver.values())
+    if periodic_wanted:         # 2-D periodic: bounds of the tensor (:mod:`._periodic_dual`)
+        t0 = time.perf_counter()
+        interval, dual_info, note = periodic_interval(space, tensors, cell_material, lo, hi,
+                                                      upper, image_axes, tol, gap_target)
+        notes += note
+        seconds["dual"] = time.perf_counter() - t0
     if tensor is not None:
         check_symmetric(tensor)
     hashin = None

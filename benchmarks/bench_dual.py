@@ -1,0 +1,111 @@
+"""The certified interval's lower bound: Crouzeix-Raviart against the sharper duals.
+
+Run:  python benchmarks/bench_dual.py [--quick]
+
+Three-phase blobs (smoothed noise cut at its terciles, conductivities 1, 10, 0.1:
+contrast 100), k_eff along x, mixed protocol, the IMESH mesh at refine 0. Per case and
+element order: the Crouzeix-Raviart / RT0 lower bound (the interval's lower bound before
+issue 26's second step), the lower bound the interval now reports (2-D: the stream
+function on the primal's elements, :mod:`simulate._stream`; 3-D: the Crouzeix-Raviart
+flux plus a P2 curl, :mod:`simulate._curl`), the primal (upper) bound, both gaps, and
+the seconds of the primal solve, of the CR solve and of the reported bound. A bracket of
+the truth comes from P2 on the mesh refined twice (its own interval).
+
+Measured (this 2-core machine under a load of 10 to 17, so the seconds vary by 2x to 3x
+between runs; the truth bracket is the refine-2 P2 interval):
+
+========== == ====== ======= ====== ====== ====== ======= ===== ====== ===============
+case       P  CR low new low upper  gap CR gap    solve s CR s  new s  truth in
+========== == ====== ======= ====== ====== ====== ======= ===== ====== ===============
+2-D 18x22  1  1.1374 1.1374  1.9338 70.0 % 70.0 % 3.7     1.3   3.8    1.4142 .. 1.6456
+2-D 18x22  2  1.1374 1.3211  1.7414 53.1 % 31.8 % 3.7     1.4   0.9
+2-D 32x32  2  1.2205 1.3838  1.6893 38.4 % 22.1 % 0.3     1.1   1.3
+3-D 10^3   1  1.9725 2.0893  2.6760 35.7 % 28.1 % 0.3     0.5   3.2    2.1779 .. 2.3200
+3-D 10^3   2  1.9725 2.0893  2.4251 22.9 % 16.1 % 0.2     0.3   3.0
+3-D 14^3   2  1.7450 1.8521  2.1364 22.4 % 15.4 % 1.9     0.9   10.5
+========== == ====== ======= ====== ====== ====== ======= ===== ====== ===============
+
+(The 3-D rows were taken with 160 conjugate-gradient steps of the curl; it now stops
+once ten steps gain less than 0.1 %, about 30 steps, a bound lower by some 0.1 %.) The
+2-D bound is one P2 solve the primal's size; the 3-D curl's matrix is three times the
+P2 matrix, assembled in 3 x 3 blocks (most of its cost) and minimised by Jacobi CG.
+
+The default run (all three axes, refine for the interval) on the 10x11x12 blobs of
+tests/simulate/test_simulate.py at contrast 1e6 (k = 1e-3, 1, 1e3): before, the interval
+stopped at gaps 2.7 / 2.8 / 2.2 % (x / y / z) in 27 s (9.5 s of it the CR duals); now
+1.1 / 1.2 / 0.9 %, within the 2 % target, in 50 s (35 s the duals with the curl). The 2-D
+default on 18x22 blobs (k = 1, 10, 0.1) ends at the finest refine level either way: gap
+12.6 % in 43 s before, 9.7 % in 48 s now.
+
+With P1 in 2-D the stream function on P1 *is* the CR bound (the divergence-free RT0
+fields are the rotated P1 gradients); with P2 it is the mixed RT1 bound. What is left is
+the mesh: at the corners where four voxels of alternating conductivity meet the flux is
+singular (exponent near 0.13 at contrast 100), and both bounds converge slowly there as
+the interfaces are refined (18x22, P2, refine 0..4: stream 1.321, 1.377, 1.414, 1.440,
+1.459; upper 1.741, 1.682, 1.646, 1.619, 1.600), the lower now about as far below the
+truth as the upper is above it.
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+import time
+import warnings
+
+import numpy as np
+from scipy import ndimage
+
+
+def blobs(shape, seed=0, sigma=1.5):
+    f = ndimage.gaussian_filter(np.random.default_rng(seed).standard_normal(shape), sigma)
+    return (np.digitize(f, np.quantile(f, [1 / 3, 2 / 3])) + 1).astype(np.uint8)
+
+
+def main(argv=None) -> int:
+    from napari_swa_imesh.simulate import simulate
+    from napari_swa_imesh.simulate._assembly import fe_space
+    from napari_swa_imesh.simulate._conductivity import conductivity_tensors
+    from napari_swa_imesh.simulate._dual import dual_bound
+
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--quick", action="store_true", help="the two smallest cases")
+    parser.add_argument("--truth", action="store_true",
+                        help="also bracket the truth with P2 on the mesh refined twice")
+    args = parser.parse_args(argv)
+    k = {1: 1.0, 2: 10.0, 3: 0.1}
+    cases = [((18, 22), 0), ((10, 10, 10), 0)] if args.quick else [
+        ((18, 22), 0), ((32, 32), 1), ((10, 10, 10), 0), ((14, 14, 14), 2)]
+    print("case        P  CR low   new low  upper    gap CR   gap new  "
+          "solve s  CR s   new s")
+    for shape, seed in cases:
+        lab = blobs(shape, seed)
+        for order in (1, 2):
+            with warnings.catch_warnings():
+                warnings.simplefilter("ignore")
+                r = simulate(lab, k, axes="x", order=order, adapt=0, gap=0.02)
+            mesh = r.mesh
+            materials, cell_material = np.unique(mesh.material, return_inverse=True)
+            tensors = conductivity_tensors(k, materials, mesh.ndim, mesh.material_names)
+            lo, hi = mesh.image_box()
+            t0 = time.perf_counter()
+            cr = dual_bound(mesh, fe_space(mesh, 1), tensors, cell_material,
+                            mesh.ndim - 1, lo, hi, tol=1e-10).k_lower
+            cr_seconds = time.perf_counter() - t0
+            low, up = r.interval["x"]
+            name = "x".join(map(str, shape))
+            print(f"{mesh.ndim}-D {name:8s} {order}  {cr:.5g}  {low:.5g}  {up:.5g}  "
+                  f"{100 * (up / cr - 1):6.1f} %  {100 * r.gap['x']:6.1f} %  "
+                  f"{r.seconds.get('solve', 0):6.2f}  {cr_seconds:5.2f}  "
+                  f"{r.seconds.get('dual', 0):6.2f}", flush=True)
+        if args.truth:
+            with warnings.catch_warnings():
+                warnings.simplefilter("ignore")
+                fine = simulate(lab, k, axes="x", order=2, adapt=0, refine=2, gap=np.inf)
+            print(f"   truth in {fine.interval['x'][0]:.5g} .. {fine.interval['x'][1]:.5g}",
+                  flush=True)
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
