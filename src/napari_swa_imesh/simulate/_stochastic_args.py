@@ -85,8 +85,8 @@ def stochastic_options(args: argparse.Namespace) -> dict | None:
                              "SIG.csv.")
         if not args.conductivity:
             raise ValueError("simulate needs --conductivity MATERIAL=K for every material "
-                             "(or --stochastic SIG.csv to draw them from the signatures, or --model "
-                             "fisher-kpp/drug with -D).")
+                             "(or --stochastic SIG.csv to draw them from the signatures, "
+                             "or --model fisher-kpp/drug with -D).")
         return None
     clash = [flag for flag, on in (
         ("--transient", args.transient is not None),

@@ -225,7 +225,11 @@ def _sources(path: Path) -> list[Path]:
     out = []
     for grid in root.iter("Grid"):
         if grid.attrib.get("GridType") == "Uniform":
-            h5 = grid.find("./Geometry/DataItem").text.strip().split(":")[0]
+            item = grid.find("./Geometry/DataItem")
+            if item is None or not item.text:
+                raise ValueError(f"{path} has a piece with no geometry; write it again with "
+                                 "swa-imesh mesh.")
+            h5 = item.text.strip().split(":")[0]
             out.append((path.parent / h5).with_suffix(XDMF_INDEX))
     return out
 

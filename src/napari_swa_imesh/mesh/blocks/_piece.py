@@ -101,10 +101,10 @@ def piece_pass(packed: tuple[np.ndarray, int], cells: np.ndarray, values: np.nda
     """
     code, bits = packed
     d = cells.shape[1] - 1
-    both = np.empty((len(code), 2), np.int64)
-    both[:, 0] = code
-    both[:, 1] = values.view(np.int64)
-    both = both.view(np.complex128).reshape(-1)
+    pairs = np.empty((len(code), 2), np.int64)
+    pairs[:, 0] = code
+    pairs[:, 1] = values.view(np.int64)
+    both = pairs.view(np.complex128).reshape(-1)     # one 16-byte item per point: a gather
     per_leaf = np.zeros(n_leaves, np.float64)
     bad = chain = 0
     for start in range(0, len(cells), _CHUNK):
