@@ -33,7 +33,7 @@ def test_the_command_gives_the_library_result_and_writes_table_and_histogram(inp
     table, figure = tmp / "samples.csv", tmp / "hist.png"
     rc, out, err = _run(capsys, "simulate", tmp / "labels.npy", "--stochastic", tmp / "sig.csv",
                         "--samples", 5, "--map", "log-linear:-2,0.05", "--tile-size", 4,
-                        "--seed", 9, "--spacing", 0.5, 0.5, "--sample-table", table,
+                        "--random-seed", 9, "--spacing", 0.5, 0.5, "--sample-table", table,
                         "--histogram", figure, "--json")
     assert rc == 0, err
     report = json.loads(out)["stochastic"]

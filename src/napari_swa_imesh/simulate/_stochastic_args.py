@@ -16,7 +16,7 @@ __all__ = ["DEFAULT_SAMPLES", "add_stochastic_arguments", "stochastic_options"]
 
 DEFAULT_SAMPLES = 100
 #: (attribute, flag) of the options that only a stochastic run takes
-_ONLY = (("samples", "--samples"), ("map", "--map"), ("seed", "--seed"),
+_ONLY = (("samples", "--samples"), ("map", "--map"), ("random_seed", "--random-seed"),
          ("tile_size", "--tile-size"), ("workers", "--workers"),
          ("scheduler", "--scheduler"), ("histogram", "--histogram"),
          ("sample_table", "--sample-table"))
@@ -46,7 +46,7 @@ def add_stochastic_arguments(parser: argparse.ArgumentParser) -> None:
                    help="the RES tile side: the correlation length, in voxels for a label "
                         "image, in the mesh's units for a mesh file (default: 2^scale from "
                         "the signatures' scale column, which swa-imesh segment writes)")
-    s.add_argument("--seed", type=int, default=None, metavar="S",
+    s.add_argument("--random-seed", type=int, default=None, metavar="S",
                    help="seed of the fields (default 0): the same seed, the same samples "
                         "whatever the workers")
     s.add_argument("--workers", type=int, default=None, metavar="N",
@@ -113,9 +113,9 @@ def stochastic_options(args: argparse.Namespace) -> dict | None:
     samples = DEFAULT_SAMPLES if args.samples is None else args.samples
     if samples < 2:
         raise ValueError(f"--samples must be 2 or more, not {samples}.")
-    seed = 0 if args.seed is None else args.seed
+    seed = 0 if args.random_seed is None else args.random_seed
     if seed < 0:
-        raise ValueError(f"--seed must be 0 or more, not {seed}.")
+        raise ValueError(f"--random-seed must be 0 or more, not {seed}.")
     if args.workers is not None and args.workers < 1:
         raise ValueError(f"--workers must be 1 or more, not {args.workers}.")
     if args.workers is not None and args.scheduler:
