@@ -73,7 +73,10 @@ def run_demo(args) -> int:
     fitted = segment(train, samples)                 # scale: the suggested RES
     result = segment(mosaic, model=fitted.model)
     seconds["segment"] = time.perf_counter() - t
-    write_figure(plot_res_scales(fitted.res, result.scales), out / "res.png", force=args.force,
+    res = fitted.res                                 # found: segment chose the scale
+    if res is None:  # pragma: no cover - segment without a scale always measures RES
+        raise RuntimeError("segment() returned no RES statistics without a scale")
+    write_figure(plot_res_scales(res, result.scales), out / "res.png", force=args.force,
                  dpi=110)
     fitted.model.save(out / "model.npz", force=args.force)
     write_labels(out / "labels.tif", result.labels, force=args.force)
@@ -82,15 +85,16 @@ def run_demo(args) -> int:
 
     summary = {
         "method": result.method, "scales": list(result.scales), "scale": result.scale,
-        "suggested_scale": fitted.res.suggested_scale,
+        "suggested_scale": res.suggested_scale,
         "eps_l": fitted.eps_l, "dice": ev["dice"], "mean_dice": ev["mean_dice"],
         "files": str(out),
     }
     try:
         from .mesh import check_mesh, mesh_labels, write_mesh
+        have_mesher = True
     except ImportError:  # pragma: no cover - the mesher ships with the package
-        mesh_labels = None
-    if mesh_labels is not None:
+        have_mesher = False
+    if have_mesher:
         t = time.perf_counter()
         mesh = mesh_labels(result.labels, material_names={1: "brick", 2: "grass"})
         checks = check_mesh(mesh, result.labels)

@@ -18,6 +18,7 @@ temporary path that :func:`~napari_swa_imesh.io.atomic_write` moves into place.
 from __future__ import annotations
 
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -181,6 +182,8 @@ class _NpyBlocks:
         from ._headers import load_npy
 
         mm = load_npy(path, mmap_mode="r")
+        if not isinstance(mm, np.memmap):  # pragma: no cover - mmap_mode="r" maps a .npy
+            raise TypeError(f"{path} did not open as a memory map")
         self.path, self.shape, self.dtype, self.ndim = path, mm.shape, mm.dtype, mm.ndim
         self.offset, self.order = mm.offset, "F" if mm.flags.f_contiguous and mm.ndim > 1 \
             else "C"
@@ -260,7 +263,9 @@ def write_zarr_to(tmp, data, *, spacing=None, **compute) -> None:
     import dask.array as da
     import zarr
 
-    attrs = {} if spacing is None else {SPACING_KEY: [float(s) for s in spacing]}
-    z = zarr.create_array(store=str(tmp), shape=data.shape, dtype=data.dtype,
+    attrs: dict[str, Any] = {} if spacing is None else {SPACING_KEY: [float(s) for s in spacing]}
+    # dask types its targets as numpy array-likes; a zarr array (anything that takes
+    # slice assignment) is one to dask.array.store
+    z: Any = zarr.create_array(store=str(tmp), shape=data.shape, dtype=data.dtype,
                           chunks=tuple(c[0] for c in data.chunks), attributes=attrs)
     da.store(data, z, lock=False, **compute)

@@ -103,18 +103,19 @@ def lattice_checks(points: np.ndarray, cells: np.ndarray, material: np.ndarray,
     both[:, 0] = packed
     both[:, 1] = np.random.default_rng(_SEED).integers(0, 1 << 64, size=len(points),
                                                        dtype=np.uint64).view(np.int64)
-    both = both.view(np.complex128).reshape(-1)
+    corner_values = both.view(np.complex128).reshape(-1)   # (N,) corner, value as one
     del packed
     rest = [[j for j in range(d + 1) if j != k] for k in range(d + 1)]
     leaf_volume = np.zeros(len(tree))
     used = np.zeros(len(points), dtype=bool)
-    total, min_det, chain, off_box = 0, None, 0, 0
+    min_det: int | None = None
+    total, chain, off_box = 0, 0, 0
     for start in range(0, m, _CELLS_PER_CHUNK):
         ids = cells[start:start + _CELLS_PER_CHUNK]
         n = len(ids)
         used[ids] = True
         col = np.ascontiguousarray(ids.T)                # (d+1, n)
-        gathered = both[col].view(np.int64)              # (d+1, 2n): corner, value, ...
+        gathered = corner_values[col].view(np.int64)     # (d+1, 2n): corner, value, ...
         p = unpack(gathered[:, 0::2], bits, d)
         det = _edge_det([[p[k][a] - p[0][a] for a in range(d)] for k in range(1, d + 1)])
         low = int(det.min())
@@ -190,6 +191,8 @@ def lattice_checks(points: np.ndarray, cells: np.ndarray, material: np.ndarray,
     volume = total / unit
     if abs(volume - n_included) > 1e-9 * max(1, n_included):
         return None
+    if min_det is None:  # pragma: no cover - no elements returned None above
+        return None
     return {"min_volume": min_det / (1 << d * fine) / math.factorial(d),
             "positive_volume": True,
             "volume_error": volume - n_included, "volume_sum": True,
@@ -209,7 +212,7 @@ def _facet_products(v: list) -> list:
 
 
 def _may_stay_single(corners: list, opposite: list, lab: np.ndarray, exclude: np.ndarray,
-                     fine: int = 0) -> np.ndarray:
+                     fine: int = 0) -> tuple[np.ndarray, int]:
     """Which facets (their d corners ``corners[j][a]`` and the element's other corner
     ``opposite[a]``, integers in units of 2**-fine pixel) lie on a pixel plane with the
     pixel just across outside
@@ -230,16 +233,16 @@ def _may_stay_single(corners: list, opposite: list, lab: np.ndarray, exclude: np
         hit = np.flatnonzero(flat)
         if not len(hit):
             continue
-        pixel = []
+        pixel_rows = []
         for b in range(d):
             if b == a:
                 # the element lies above the plane: the pixel across is below it
-                pixel.append((plane[hit] >> fine) - (opposite[a][hit] > plane[hit]))
+                pixel_rows.append((plane[hit] >> fine) - (opposite[a][hit] > plane[hit]))
             else:
-                pixel.append(sum(c[b][hit] for c in corners) // d >> fine)
-        pixel = np.stack(pixel)
+                pixel_rows.append(sum(c[b][hit] for c in corners) // d >> fine)
+        pixel = np.stack(pixel_rows)
         inside = ((pixel >= 0) & (pixel < np.array(lab.shape)[:, None])).all(axis=0)
-        ok = ~inside
+        ok = np.logical_not(inside)
         if exclude.size and inside.any():
             ok[inside] = facing = np.isin(lab[tuple(pixel[:, inside])], exclude)
             exterior += int(np.count_nonzero(facing))

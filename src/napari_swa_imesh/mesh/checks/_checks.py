@@ -185,10 +185,10 @@ def _rasterize(points: np.ndarray, cells: np.ndarray, material: np.ndarray, shap
                 flat = np.ravel_multi_index(tuple(pix[which, k].T), shape)
                 mats = mat[e[which]]
                 covered[flat] = True
-                if labels is None:
-                    last[flat] = mats
-                else:
+                if labels is not None:
                     n_wrong += int(np.count_nonzero(mats != _at(labels, flat)))
+                elif last is not None:               # no labels: the array to paint
+                    last[flat] = mats
     return covered, last, n_wrong
 
 
@@ -349,7 +349,7 @@ def _check_on_lattice(mesh: Mesh, lab: np.ndarray, exclude: np.ndarray,
 
 
 def _elements(points, cells, material, lab: np.ndarray, exclude: np.ndarray,
-              tree: RegionTree, n_included: int) -> tuple[dict, np.ndarray]:
+              tree: RegionTree, n_included: int) -> tuple[dict, np.ndarray, int]:
     """Volumes, leaves and labels, element by element in chunks (one gather of corners).
 
     * volumes positive, adding up to the included pixels;
@@ -454,15 +454,15 @@ def _facets(points, cells, sign, lab: np.ndarray, exclude: np.ndarray,
     box = np.array(lab.shape, dtype=float)
     shared_3plus = misoriented = off_box = unmatched = 0
     for keys, packer in _side_passes(cells, sign, spread_bits, n_points=len(points)):
-        once = []
+        once_parts = []
         for block in _blocks(keys, 1):
             k = keys[block]
             starts, counts = _runs(k, 1)
             shared_3plus += int(np.count_nonzero(counts >= 3))
             two = starts[counts == 2]
             misoriented += int(np.count_nonzero(k[two + 1] - k[two] != 1))
-            once.append(k[starts[counts == 1]])
-        once = np.concatenate(once) if once else keys[:0]
+            once_parts.append(k[starts[counts == 1]])
+        once = np.concatenate(once_parts) if once_parts else keys[:0]
         del keys
         fpts = points[np.stack(packer.decode(once, d), axis=1)]  # (B, d, d), ids sorted
         on_box = ((np.abs(fpts).max(axis=1) <= _TOL) |

@@ -24,6 +24,7 @@ import math
 
 import numpy as np
 
+from ..mesher._lattice import Lattice
 from ..mesher._packed import corners, pack_points
 from ..model._quality import _edge_det
 from ..model._recipe import MadeLattice
@@ -89,9 +90,9 @@ def _as_made(mesh: Mesh) -> MadeLattice | None:
     return made if made is not None and made.applies_to(mesh) else None
 
 
-def _lattice_shape(mesh: Mesh) -> tuple[int, ...] | None:
-    """The shape of the lattice of cells the mesh records, or None."""
-    lattice = mesh.recipe.lattice
+def _lattice_shape(mesh: Mesh, lattice: Lattice | None) -> tuple[int, ...] | None:
+    """The shape of the lattice of cells the mesh records (its recipe's `lattice`, None
+    for the voxels), or None."""
     step = np.asarray(mesh.spacing if lattice is None else lattice.step, dtype=np.float64)
     per_voxel = np.asarray([1] * mesh.ndim if lattice is None else lattice.cells_per_voxel,
                            dtype=np.int64)
@@ -101,10 +102,9 @@ def _lattice_shape(mesh: Mesh) -> tuple[int, ...] | None:
     return shape if len(shape) == mesh.ndim and max(shape) < 2**30 else None
 
 
-def _lattice_coords(mesh: Mesh) -> np.ndarray | None:
+def _lattice_coords(mesh: Mesh, lattice: Lattice | None) -> np.ndarray | None:
     """Vertex coordinates in lattice cells (int32), or None when the points are not on
-    the lattice the mesh records."""
-    lattice = mesh.recipe.lattice
+    the lattice the mesh records (its recipe's `lattice`, None for the voxels)."""
     u = mesh.points / np.asarray(mesh.spacing if lattice is None else lattice.step,
                                  dtype=np.float64)
     coords = np.rint(u).astype(np.int32)
@@ -237,14 +237,16 @@ def template_group_rows(mesh: Mesh, *, signs: bool = False):
     if (recipe is None or recipe.method != "template" or "leaf" not in cd
             or "level" not in cd or not mesh.records_box or m == 0 or d not in (2, 3)):
         return None
-    shape = _lattice_shape(mesh)
+    shape = _lattice_shape(mesh, recipe.lattice)
     if shape is None or math.prod(shape) > _MAX_CELLS_PER_ELEMENT * m + (1 << 20):
         return None
     made = _as_made(mesh)
+    packed: tuple[np.ndarray, int] | None
+    axes: list[np.ndarray]
     if made is not None and made.packed is not None:
         packed, axes = made.packed, []
     else:
-        made, coords = None, _lattice_coords(mesh)
+        made, coords = None, _lattice_coords(mesh, recipe.lattice)
         if coords is None:
             return None
         packed = pack_points(coords)

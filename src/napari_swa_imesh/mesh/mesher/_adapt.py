@@ -59,7 +59,8 @@ def _refine_marked(labels, mesh: Mesh, marked: np.ndarray, tree: RegionTree | No
     (required for a mesh adapted before: its tree is not the labels' own); returns the
     new mesh and its tree, for the next step."""
     recipe = mesh.recipe
-    if recipe is None or not recipe.remeshable:
+    coarse = None if recipe is None else recipe.lattice
+    if recipe is None or not recipe.remeshable or coarse is None:
         raise ValueError("adaptive refinement needs a template mesh made from the labels by "
                          "mesh_labels (not read from a file, not coarsened).")
     marked = np.asarray(marked, dtype=bool)
@@ -72,7 +73,6 @@ def _refine_marked(labels, mesh: Mesh, marked: np.ndarray, tree: RegionTree | No
     if tuple(lab.shape) != tuple(mesh.shape):
         raise ValueError(f"the labels have shape {lab.shape} but the mesh was made from "
                          f"{tuple(mesh.shape)}: pass the labels the mesh was made from.")
-    coarse = recipe.lattice
     if coarse.refine >= MAX_REFINE:
         raise ValueError(f"the mesh is at refine level {MAX_REFINE} already, the finest; "
                          "it cannot be refined further.")

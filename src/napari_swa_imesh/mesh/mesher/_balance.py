@@ -65,10 +65,10 @@ def _dilate(grid: np.ndarray, connectivity: int) -> np.ndarray:
     return out
 
 
-def _split_grids(tree: RegionTree, connectivity: int) -> list[np.ndarray | None]:
-    """split[k] for k = 0..top (split[0] is None: pixels are never split)."""
+def _split_grids(tree: RegionTree, connectivity: int) -> list[np.ndarray]:
+    """split[k] for k = 0..top (split[0] is empty: pixels are never split)."""
     top = tree.top_level
-    split: list[np.ndarray | None] = [None]
+    split = [np.zeros((0,) * tree.ndim, dtype=bool)]
     for k in range(1, top + 1):
         grid_shape = tuple(n >> k for n in tree.padded_shape)
         # parents of the region tree's leaves of level k-1 are split
@@ -76,7 +76,7 @@ def _split_grids(tree: RegionTree, connectivity: int) -> list[np.ndarray | None]
         grid = np.zeros(grid_shape, dtype=bool)
         grid[tuple((tree.origin[sel] >> k).T)] = True
         below = split[k - 1]
-        if below is not None and below.any():
+        if below.any():
             grid |= _any_children(_dilate(below, connectivity))
         split.append(grid)
     return split

@@ -188,26 +188,28 @@ def cut_leaves(okey: np.ndarray, size: np.ndarray, hanging: np.ndarray, strides:
                                            f"(face {f}, case {case}); the tree is not "
                                            "balanced as assumed.")
                     groups.append((v, f, case, other[order[lo:hi]]))
-    table = luts.LEAF_TABLE.get(d)
-    per_entry = np.diff(table.offset)[entry] if len(tabled) else np.zeros(0, np.int64)
+    # tabled leaves exist only where _table_entries found the table
+    per_entry = (np.diff(luts.LEAF_TABLE[d].offset)[entry] if len(tabled)
+                 else np.zeros(0, np.int64))
     total = (sum(len(sel) * len(luts.PLAIN[d][v]) for v, sel in plain_groups)
              + sum(len(sel) * len(luts.FACE_LUT[d][v][f][c]) for v, f, c, sel in groups)
              + int(per_entry.sum()))
-    new_points = []
+    new_parts = []
     for v, f, case, sel in groups:
         new_local = _new_points(d, v, f, case)
         if len(new_local):
             new_keys = new_local.astype(kd) @ strides
-            new_points.append((okey[sel, None] + half[sel, None] * new_keys[None]).ravel())
+            new_parts.append((okey[sel, None] + half[sel, None] * new_keys[None]).ravel())
     if len(tabled):
         # the table's own new points (fan face centres, the centre where used), per leaf
+        table = luts.LEAF_TABLE[d]
         starts = np.searchsorted(table.new_entry, np.arange(len(table.key) + 1))
         n_new = (starts[1:] - starts[:-1])[entry]
         leaf_of_new = np.repeat(tabled, n_new)
         row = np.repeat(starts[entry] - (np.cumsum(n_new) - n_new), n_new) + np.arange(n_new.sum())
         new_keys = table.new_point[row].astype(kd) @ strides
-        new_points.append(okey[leaf_of_new] + half[leaf_of_new] * new_keys)
-    new_points = np.concatenate(new_points) if new_points else np.zeros(0, kd)
+        new_parts.append(okey[leaf_of_new] + half[leaf_of_new] * new_keys)
+    new_points = np.concatenate(new_parts) if new_parts else np.zeros(0, kd)
     vertex_id = present = None
     if used is not None:
         used[new_points] = True
@@ -258,13 +260,14 @@ def cut_leaves(okey: np.ndarray, size: np.ndarray, hanging: np.ndarray, strides:
     if len(tabled):
         # tabled leaves, grouped by their number of tetrahedra t (a few dozen groups):
         # each leaf takes its entry's row of t members (unit: half side)
+        table = luts.LEAF_TABLE[d]
         rows = _member_rows(table)
         count = np.diff(table.offset)[entry]
         order = np.argsort(count, kind="stable")
         counts, first = np.unique(count[order], return_index=True)
-        bounds = np.append(first, len(order)).tolist()
+        group_bounds = np.append(first, len(order)).tolist()
         local = table.simplex.astype(kd) @ strides              # (S, d+1)
-        for t, lo, hi in zip(counts.tolist(), bounds[:-1], bounds[1:]):
+        for t, lo, hi in zip(counts.tolist(), group_bounds[:-1], group_bounds[1:]):
             # np.take, not fancy indexing: whole rows copied, no per-element iterator
             members = np.take(rows[:, :t], entry[order[lo:hi]], axis=0)      # (n, t)
             start = emit(start, tabled[order[lo:hi]], half,

@@ -63,6 +63,7 @@ from __future__ import annotations
 import itertools
 import math
 import threading
+from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -173,9 +174,9 @@ def face_simplices(d: int, axis: int, side: int, present: set[tuple[int, ...]],
     if d == 2:
         mid = lift((1,))
         segs = [[(0,), (1,)], [(1,), (2,)]] if mid in present else [[(0,), (2,)]]
-        faces = segs
+        faces: Sequence[Sequence[tuple[int, ...]]] = segs
     elif d == 3:
-        present_2d = {tuple(p[a] for a in others) for p in present}
+        present_2d = {(p[others[0]], p[others[1]]) for p in present}
 
         def through_low(i, j, s):
             if variant == 0:
@@ -229,11 +230,17 @@ def _build(d: int):
     faces = _faces(d)
     face_sites = _face_sites(d, sites)
     templates: list = []
-    plain, plain_id, lut, ids = [], [], [], []
+    plain: list[np.ndarray] = []                    # one entry per diagonal variant
+    plain_id: list[int] = []
+    lut: list[list[list[np.ndarray]]] = []
+    ids: list[list[np.ndarray]] = []
     for v in (0,) if d == 2 else (0, 1, 2):
-        built = _build_variant(d, v, sites, faces, face_sites, templates)
-        for out, value in zip((plain, plain_id, lut, ids), built):
-            out.append(value)
+        v_plain, v_plain_id, v_lut, v_ids = _build_variant(d, v, sites, faces, face_sites,
+                                                           templates)
+        plain.append(v_plain)
+        plain_id.append(v_plain_id)
+        lut.append(v_lut)
+        ids.append(v_ids)
     return sites, faces, face_sites, plain, plain_id, lut, ids, np.array(templates)
 
 
