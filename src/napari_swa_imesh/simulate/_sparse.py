@@ -81,18 +81,16 @@ def symmetric_from_upper(upper: sparse.csr_matrix, diagonal: np.ndarray
     indptr = (u_ptr + l_ptr + np.arange(n + 1)).astype(dtype)
     indices = np.empty(nnz, dtype=dtype)
     data = np.empty(nnz, dtype=np.result_type(upper.dtype, diagonal.dtype))
-    # entry k of a list whose row i starts at s goes to indptr[i] + (k - s): the shifts
-    # are per row, the positions made in the index type (int32 up to 2^31 entries)
-    shift = (indptr[:-1] - l_ptr[:-1]).astype(dtype)
-    where = np.repeat(shift, l_len)
-    where += np.arange(l_ptr[-1], dtype=dtype)
-    indices[where], data[where] = lower.indices, lower.data
-    del lower, where
-    diagonal_at = indptr[:-1] + l_len.astype(dtype)
-    indices[diagonal_at], data[diagonal_at] = np.arange(n, dtype=dtype), diagonal
-    where = np.repeat((diagonal_at + 1 - u_ptr[:-1]).astype(dtype), u_len)
-    where += np.arange(u_ptr[-1], dtype=dtype)
-    indices[where], data[where] = upper.indices, upper.data
+    # which of the three lists each position takes, row after row (lower, diagonal,
+    # upper): boolean masks place them in order, sequentially, with no index arrays
+    lengths = np.stack([l_len, np.ones(n, dtype=np.int64), u_len], axis=1).ravel()
+    kind = np.repeat(np.tile(np.arange(3, dtype=np.int8), n), lengths)
+    for code, (where_indices, where_data) in enumerate(
+            ((lower.indices, lower.data), (np.arange(n, dtype=dtype), diagonal),
+             (upper.indices, upper.data))):
+        mask = kind == code
+        indices[mask], data[mask] = where_indices, where_data
+    del kind, mask, lower
     out = sparse.csr_matrix((data, indices, indptr), shape=(n, n))
     out.has_sorted_indices = True
     out.has_canonical_format = True
