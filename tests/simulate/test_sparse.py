@@ -15,6 +15,7 @@ from scipy import sparse
 from napari_swa_imesh.mesh import Mesh, mesh_labels
 from napari_swa_imesh.simulate import _assembly
 from napari_swa_imesh.simulate._assembly import _pair_table, fe_space, stiffness_matrix
+from napari_swa_imesh.simulate._solve import connected_parts, element_parts
 from napari_swa_imesh.simulate._sparse import sum_pairwise, symmetric_from_upper
 
 
@@ -93,3 +94,23 @@ def test_batched_assembly_equals_one_coo_assembly(shape, order, monkeypatch):
     # the midpoint of the opposite edge of a triangle do not couple)
     reference.eliminate_zeros()
     assert ours.nnz == reference.nnz
+
+
+@pytest.mark.parametrize("shape", [(9, 8), (6, 5, 7)])
+@pytest.mark.parametrize("order", [1, 2])
+def test_element_parts_are_the_matrix_parts(shape, order):
+    """Random labels with one material excluded leave many separate parts (islands,
+    corners touching): the parts from the element stars are those of the matrix."""
+    rng = np.random.default_rng(sum(shape) * order)
+    labels = np.where(rng.random(shape) < 0.1, rng.integers(2, 4, shape), 1).astype(np.uint8)
+    mesh = mesh_labels(labels, exclude=[1])
+    _, cell_material = np.unique(mesh.material, return_inverse=True)
+    space = fe_space(mesh, order)
+    matrix = stiffness_matrix(space, np.stack([np.eye(mesh.ndim)] * 2), cell_material)
+    expected = connected_parts(matrix)
+    parts = element_parts(mesh.cells, len(mesh.points), space.edges)
+    assert parts.shape == expected.shape
+    assert np.unique(expected).size > 2                  # the case is not trivial
+    # the same partition: each label of one maps to exactly one label of the other
+    pairs = np.unique(np.stack([parts, expected]), axis=1)
+    assert pairs.shape[1] == np.unique(parts).size == np.unique(expected).size
