@@ -1,6 +1,7 @@
 """Effective conductivity on IMESH meshes against voxel references computed here.
 
 Run:  python benchmarks/bench_simulate.py [--quick] [--skip-speed | --speed-only]
+                                         [--scaling [N ...]]
 
 1. Accuracy. Two images whose exact k_eff is not known in closed form:
    - 2-D: 30 % random disks (conductivity 10) in a matrix (1), 96^2 pixels;
@@ -24,6 +25,9 @@ Run:  python benchmarks/bench_simulate.py [--quick] [--skip-speed | --speed-only
 2. Speed: a 128^3 three-phase volume, image to k_eff along x, the path
    `swa-imesh simulate` runs: mesh, assembly, solve (iterations), and the whole command in
    a fresh process with its peak memory.
+3. Scaling (``--scaling``, :mod:`bench_scaling`): time and peak memory against voxel
+   count (32^3, 64^3, 128^3 by default) for the default and the voxel peers in the same
+   run, on one material imaged finer, with the fitted exponent of time against voxels.
 """
 
 from __future__ import annotations
@@ -252,7 +256,13 @@ def main(argv=None) -> int:
     parser.add_argument("--skip-speed", action="store_true")
     parser.add_argument("--speed-only", action="store_true", help="skip the accuracy part")
     parser.add_argument("--size", type=int, default=128, help="edge of the speed volume")
+    parser.add_argument("--scaling", type=int, nargs="*", metavar="N",
+                        help="only the scaling table, at these edges (default 32 64 128)")
     args = parser.parse_args(argv)
+    if args.scaling is not None:
+        import bench_scaling
+
+        return bench_scaling.main(["--sizes", *map(str, args.scaling or (32, 64, 128))])
     n2, n3, n3b = (48, 12, 16) if args.quick else (96, 24, 32)
     if not args.speed_only:
         accuracy_case("2-D disks, 30 %, contrast 10", disks(n2), K2D, axis=1,

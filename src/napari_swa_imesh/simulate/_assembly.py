@@ -25,6 +25,7 @@ import numpy as np
 from scipy import sparse
 
 from ..mesh import Mesh
+from ._sparse import sum_pairwise, symmetric_from_upper
 
 __all__ = ["Space", "assemble_pairs", "barycentric_gradients", "cell_fluxes",
            "cell_gradients", "cell_volumes", "dissipation", "fe_space", "p1_embedding",
@@ -281,43 +282,45 @@ def assemble_pairs(element_dofs: np.ndarray, n: int, a: np.ndarray, b: np.ndarra
     values : callable
         ``slice -> (K, m)`` the element entries of those pairs for a chunk of elements.
 
-    Only the upper triangle is gathered (in batches, so the list of element entries never
-    holds more than some 10^7), then mirrored.
+    Only the upper triangle is gathered, in batches (the list of element entries never
+    holds more than some 10^7); each batch becomes a canonical CSR matrix (duplicates
+    summed), the batches are added pairwise (a balanced tree: every entry is merged
+    about log2(batches) times, not once per batch), and the mirror image and the diagonal
+    are placed around each row by index arithmetic (:mod:`._sparse`), not added.
     """
     diagonal = np.zeros(n)
     off = a != b
     k = int(off.sum())
-    upper = sparse.csr_matrix((n, n))
+    first, second = a[off], b[off]
+    parts = []
     for batch in _chunks(len(element_dofs), max(CHUNK, BATCH // max(k, 1))):
         m = batch.stop - batch.start
-        rows = np.empty((k, m), dtype=np.int32)
-        cols = np.empty((k, m), dtype=np.int32)
+        dofs = np.ascontiguousarray(element_dofs[batch].T, dtype=np.int32)   # (n_local, m)
+        i, cols = dofs[first], dofs[second]                                # (k, m)
+        rows = np.minimum(i, cols)
+        np.maximum(i, cols, out=cols)
+        del i
         data = np.empty((k, m))
         diagonal_values = np.empty((int((~off).sum()), m))
 
-        def fill(chunk: slice, batch=batch, rows=rows, cols=cols, data=data,
+        def fill(chunk: slice, batch=batch, data=data,
                  diagonal_values=diagonal_values) -> None:
             part = slice(chunk.start - batch.start, chunk.stop - batch.start)
             v = values(chunk)
-            dofs = element_dofs[chunk].T                                  # (n_local, m)
-            i, j = dofs[a[off]], dofs[b[off]]
-            np.minimum(i, j, out=rows[:, part], casting="unsafe")
-            np.maximum(i, j, out=cols[:, part], casting="unsafe")
             data[:, part] = v[off]
             diagonal_values[:, part] = v[~off]
 
         for _ in _map(fill, m, batch.start):
             pass
-        diagonal += np.bincount(element_dofs[batch][:, a[~off]].T.ravel(),
-                                weights=diagonal_values.ravel(), minlength=n)
-        upper = upper + sparse.csr_matrix((data.ravel(), (rows.ravel(), cols.ravel())),
-                                          shape=(n, n))
-        del rows, cols, data, diagonal_values
-    full = upper + upper.T.tocsr()
-    del upper
-    full = full + sparse.diags(diagonal, format="csr")
-    full.sort_indices()
-    return full
+        diagonal += np.bincount(dofs[a[~off]].ravel(), weights=diagonal_values.ravel(),
+                                minlength=n)
+        del diagonal_values, dofs
+        parts.append(sparse.csr_matrix((data.ravel(), (rows.ravel(), cols.ravel())),
+                                       shape=(n, n)))
+        del rows, cols, data
+    upper = sum_pairwise(parts) if parts else sparse.csr_matrix((n, n))
+    del parts
+    return symmetric_from_upper(upper, diagonal)
 
 
 def _field_gradients(space: Space, values: np.ndarray, part: slice, lam: np.ndarray

@@ -46,7 +46,7 @@ from ._periodic import PeriodicProblem
 from ._periodic_dual import periodic_interval, periodic_upper
 from ._protocols import BOUND_SLACK, check_within_bounds, mixed_boundary, voigt_reuss
 from ._result import SimulationResult
-from ._solve import DEFAULT_TOLERANCE, SolverInfo, connected_parts
+from ._solve import DEFAULT_TOLERANCE, SolverInfo, element_parts
 
 __all__ = ["SimulationResult", "simulate", "simulate_steps"]
 
@@ -249,7 +249,7 @@ def simulate_steps(mesh_or_labels, conductivity: Mapping, *, spacing=None,
                           "whole face of the image, k_eff refers to a smaller box: simulate "
                           "the label image instead.", stacklevel=2)
         image_axes = {n: i for i, n in enumerate(axis_names(mesh.ndim))}
-        parts = connected_parts(matrix)
+        parts = element_parts(mesh.cells, len(mesh.points), space.edges)
 
         last: dict = {}           # the energy's pass over the elements also gives the flux
 

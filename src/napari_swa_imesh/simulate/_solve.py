@@ -15,7 +15,8 @@ from scipy import sparse
 from scipy.sparse import csgraph
 
 __all__ = ["DirichletSolver", "SPDSolver", "SolverInfo", "check_constrained",
-           "connected_parts", "solve_dirichlet", "solve_spd", "split_fixed"]
+           "connected_parts", "element_parts", "solve_dirichlet", "solve_spd",
+           "split_fixed"]
 
 DEFAULT_TOLERANCE = 1e-10        # relative residual of the conjugate-gradient solve
 MAX_ITERATIONS = 2000
@@ -49,6 +50,34 @@ class SolverInfo:
 def connected_parts(matrix: sparse.csr_matrix) -> np.ndarray:
     """(n,) index of the connected part of each degree of freedom (the matrix pattern)."""
     return csgraph.connected_components(matrix, directed=False)[1]
+
+
+def element_parts(cells: np.ndarray, n_points: int,
+                  edges: np.ndarray | None = None) -> np.ndarray:
+    """:func:`connected_parts` of a P1 or P2 stiffness matrix, from its elements.
+
+    Two vertices are connected when an element holds both (an element's matrix couples
+    all its degrees of freedom: a group it did not couple to the rest would make that
+    group's indicator a zero-energy function); a P2 edge dof lies in its vertices' part.
+    The graph is the elements' vertex stars, a tenth of the P2 matrix's entries.
+
+    Parameters
+    ----------
+    cells : (M, d + 1) ndarray of int
+    n_points : int
+    edges : (E, 2) ndarray of int, optional
+        P2: the vertex pair of each edge dof (numbered after the vertices).
+
+    Returns
+    -------
+    (n,) ndarray of int
+        Part of each dof, ``n = n_points (+ E)``.
+    """
+    centre = np.repeat(cells[:, :1], cells.shape[1] - 1, axis=1).ravel()
+    graph = sparse.csr_matrix((np.ones(centre.size),
+                               (centre, cells[:, 1:].ravel())), shape=(n_points, n_points))
+    parts = csgraph.connected_components(graph, directed=False)[1]
+    return parts if edges is None else np.concatenate([parts, parts[edges[:, 0]]])
 
 
 def check_constrained(parts: np.ndarray, fixed: np.ndarray, where: str = "",
