@@ -206,3 +206,22 @@ def test_a_narrow_bridge_through_a_void_layer_is_bounded_from_both_sides():
                     interval=False)
     lo, hi = r.interval["x"]
     assert 0 < lo < fine.k_eff["x"] < hi
+
+
+def test_an_interval_that_does_not_fit_is_dropped_and_said_not_refused():
+    from napari_swa_imesh.mesh import mesh_labels
+    from napari_swa_imesh.simulate._budget import estimate_memory
+
+    lab = np.ones((6, 6, 6), np.uint8)            # 3-D: the dual's facets outweigh P1
+    lab[:3, :3] = 2
+    mesh = mesh_labels(lab)
+    k = {1: 1.0, 2: 10.0}
+    primal_only = estimate_memory(mesh, 1, False)
+    assert estimate_memory(mesh, 1, True) > primal_only       # the dual is what does not fit
+    with pytest.warns(UserWarning, match="no certified interval: its dual solve would need"):
+        r = simulate(mesh, k, axes="x", order=1, memory=primal_only)
+    assert r.interval == {} and "no certified interval" in r.warnings[0]
+    full = simulate(mesh, k, axes="x", order=1)
+    assert r.k_eff["x"] == full.k_eff["x"] and full.interval     # same solve, with interval
+    with pytest.raises(ValueError, match="above the memory budget"):
+        simulate(mesh, k, axes="x", order=1, memory=primal_only - 1)   # the primal refused

@@ -13,8 +13,8 @@ from __future__ import annotations
 
 from ..mesh import Mesh
 
-__all__ = ["DEFAULT_MEMORY", "check_memory", "estimate_memory", "format_bytes",
-           "parse_memory"]
+__all__ = ["DEFAULT_MEMORY", "check_memory", "estimate_memory", "fit_interval",
+           "format_bytes", "parse_memory"]
 
 #: Default budget of a steady run (bytes): a sixth of this 24 GB machine.
 DEFAULT_MEMORY = 4 * 2 ** 30
@@ -110,3 +110,32 @@ def check_memory(mesh: Mesh, order: int, interval: bool, memory: float, *,
             + ", or crop the image.")
     return (f"the next refinement would need about {format_bytes(need)}, above the memory "
             f"budget of {format_bytes(memory)} (raise it with --memory)")
+
+
+def fit_interval(mesh: Mesh, order: int, interval: bool, memory: float,
+                 note: str | None = None) -> tuple[bool, str | None]:
+    """Whether the interval's dual solve still fits `memory`, and the note when it does not.
+
+    A run whose conforming solve fits but whose dual does not goes on without the interval
+    (k_eff is then the conforming, upper estimate alone) and says so, instead of refusing
+    a default run at 128^3 for a certificate the user did not ask for by name. `note`
+    (an earlier step's) is passed through.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from napari_swa_imesh.mesh import mesh_labels
+    >>> mesh = mesh_labels(np.indices((6, 6, 6)).sum(0) % 2 + 1)   # 3-D: the dual outweighs P1
+    >>> fit_interval(mesh, 1, True, 4 * 2 ** 30)
+    (True, None)
+    >>> keep, note = fit_interval(mesh, 1, True, estimate_memory(mesh, 1, False))
+    >>> keep, note.startswith("no certified interval")
+    (False, True)
+    """
+    if (not interval or estimate_memory(mesh, order, True) <= memory
+            or estimate_memory(mesh, order, False) > memory):
+        return interval, note
+    return False, (f"no certified interval: its dual solve would need about "
+                   f"{format_bytes(estimate_memory(mesh, order, True))}, above the memory "
+                   f"budget of {format_bytes(memory)}, so k_eff is the conforming (upper) "
+                   "estimate alone; raise --memory for the interval.")

@@ -25,6 +25,7 @@ from ._budget import (
     DEFAULT_MEMORY,
     check_memory,
     estimate_memory,
+    fit_interval,
     format_bytes,
     unknowns,
 )
@@ -198,6 +199,7 @@ def simulate_steps(mesh_or_labels, conductivity: Mapping, *, spacing=None,
         choice = (f"P1 (P2 would need about "
                   f"{format_bytes(estimate_memory(mesh, 2, interval_wanted))}, above the "
                   f"memory budget of {format_bytes(memory)})")
+    interval_wanted, skipped = fit_interval(mesh, order, interval_wanted, memory)
     check_memory(mesh, order, interval_wanted, memory, asked=True)   # before any solve
     start = len(mesh.points)
     seconds["mesh"] = time.perf_counter() - t0
@@ -224,11 +226,12 @@ def simulate_steps(mesh_or_labels, conductivity: Mapping, *, spacing=None,
     upper: dict[str, float] = {}
     interval: dict[str, tuple[float, float]] = {}
     dual_info: dict[str, SolverInfo] = {}
-    notes: list[str] = []
     certify = 0
     growth_seen = 1.0
     done = 1 + adapt
+    interval_wanted, skipped = fit_interval(mesh, order, interval_wanted, memory, skipped)
     check_memory(mesh, order, interval_wanted, memory, asked=True)
+    notes: list[str] = [skipped] if skipped else []
     while True:
         yield done, total, f"assembling P{order} on {mesh.n_cells} elements"
         t0 = time.perf_counter()
@@ -250,7 +253,6 @@ def simulate_steps(mesh_or_labels, conductivity: Mapping, *, spacing=None,
                           "the label image instead.", stacklevel=2)
         image_axes = {n: i for i, n in enumerate(axis_names(mesh.ndim))}
         parts = element_parts(mesh.cells, len(mesh.points), space.edges)
-
         last: dict = {}           # the energy's pass over the elements also gives the flux
 
         def energy(u: np.ndarray, space=space, cell_material=cell_material,
