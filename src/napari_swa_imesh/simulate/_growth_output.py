@@ -83,23 +83,27 @@ def _csv_text(table: dict[str, np.ndarray]) -> str:
 
 
 def _plot(table: dict[str, np.ndarray], path: Path, names: dict, threshold: float) -> None:
+    """The volume and the front's distance per material over time, side by side."""
     import matplotlib
 
     matplotlib.use("Agg", force=False)
     from matplotlib.figure import Figure
 
-    fig = Figure(figsize=(6, 4), dpi=100)
-    ax = fig.add_subplot(1, 1, 1)
+    fig = Figure(figsize=(10, 4), dpi=100)
+    volume, front = fig.add_subplot(1, 2, 1), fig.add_subplot(1, 2, 2)
     for key in table:
-        if key.startswith("volume_"):
-            label = key.removeprefix("volume_")
-            ax.plot(table["time"], table[key], marker=".",
-                    label=str(names.get(int(label), f"material {label}")))
-    ax.plot(table["time"], table["volume"], color="k", lw=2, label="all")
-    ax.set_xlabel("time")
-    ax.set_ylabel(f"volume with c > {threshold:g}")
-    ax.legend(loc="upper left")
-    ax.grid(alpha=0.3)
+        for prefix, ax in (("volume_", volume), ("front_", front)):
+            if key.startswith(prefix):
+                label = key.removeprefix(prefix)
+                ax.plot(table["time"], table[key], marker=".",
+                        label=str(names.get(int(label), f"material {label}")))
+    volume.plot(table["time"], table["volume"], color="k", lw=2, label="all")
+    volume.set_ylabel(f"volume with c > {threshold:g}")
+    front.set_ylabel("front's distance from the seed")
+    for ax in (volume, front):
+        ax.set_xlabel("time")
+        ax.legend(loc="upper left")
+        ax.grid(alpha=0.3)
     fig.tight_layout()
     fig.savefig(path, format="png")
 

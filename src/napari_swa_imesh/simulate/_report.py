@@ -74,6 +74,9 @@ def read_signatures(path) -> list[dict]:
         with neither or with another number of cells, a label that is not a whole number.
     """
     p = Path(path)
+    if not p.is_file():
+        raise FileNotFoundError(f"no signatures file at {p}; give the CSV that swa-imesh "
+                                "segment --signatures writes.")
     try:
         text = p.read_text(encoding="utf-8-sig")
     except UnicodeDecodeError:

@@ -33,7 +33,7 @@ def add_stochastic_arguments(parser: argparse.ArgumentParser) -> None:
         "stochastic", "with --stochastic, each material's conductivity is a random field: "
         "its intensity a Gaussian field of the material's mean_mean and mean_std at the "
         "RES (the signatures), correlated over the tile size (covariance exp(-(r/T)^2)), "
-        "mapped by --map; k_eff of --samples realisations as mean, std, 95 %% interval and "
+        "mapped by --map; k_eff of --samples realisations as mean, std, 95 % interval and "
         "Monte-Carlo standard error. Materials given in --conductivity stay fixed.")
     s.add_argument("--stochastic", default=None, metavar="SIG.csv",
                    help="the signatures (swa-imesh segment --signatures)")
