@@ -13,7 +13,8 @@
   writer, with extra fields); the formats, one :class:`MeshFormat` record each, by
   :func:`mesh_format` (of a path) and :func:`mesh_formats` (all, as users see them);
 * placement: ``mesh_labels(..., affine=...)`` puts the files in an image's world frame
-  (NIfTI); :func:`world_from_affine` gives the spacing and ``Mesh.world`` it uses;
+  (NIfTI); :func:`world_from_affine` gives the spacing and ``Mesh.world`` it uses,
+  :func:`image_placement` both for a label image file;
 * facet groups for boundary conditions: :func:`facet_groups` (box sides, material
   interfaces, exteriors);
 * memory: :func:`estimate_mesh_memory`, :func:`count_boundary_voxels`;
@@ -56,7 +57,7 @@ from .model._quality import (
     signed_volumes,
 )
 from .model._types import Mesh
-from .model._world import voxel_sizes, world_from_affine
+from .model._world import image_placement, voxel_sizes, world_from_affine
 
 __all__ = [
     "FacetGroup", "facet_groups", "write_mesh_vtu", "Mesh", "balance_tree", "mesh_labels",
@@ -70,5 +71,5 @@ __all__ = [
     # for the packages above mesh (simulate, pipeline, the widgets), issue 24
     "MESH_SUFFIXES", "ASPECT_LIMIT", "MAX_REFINE", "Lattice", "check_refine",
     "check_max_aspect", "voxel_sizes", "paired_facets", "export_vectors", "refine_marked",
-    "refine_marked_tree", "mesh_arguments", "mesh_checked_labels",
+    "refine_marked_tree", "mesh_arguments", "mesh_checked_labels", "image_placement",
 ]

@@ -237,7 +237,7 @@ def _placement(args, peek) -> tuple | None:
     """(spacing, world) from a NIfTI file's affine (its header only, before any work), or
     None: the image's own frame (other formats, ``--index-space``)."""
     from ..io import is_nifti, read_affine
-    from .model._world import world_from_affine
+    from .model._world import image_placement
 
     name = Path(args.labels).name
     if not is_nifti(args.labels):
@@ -252,10 +252,10 @@ def _placement(args, peek) -> tuple | None:
         raise ValueError(f"--spacing conflicts with the affine of {name}, which sets the voxel "
                          "sizes and places the mesh in world coordinates; drop --spacing, or "
                          "add --index-space to mesh in the image's own frame with it.")
-    affine = read_affine(args.labels)
+    read_affine(args.labels)          # a bad header is refused before the pixels
     if peek is None or len(peek[0]) not in (2, 3):
         return None                   # the reader or the mesher's door says what is wrong
-    return world_from_affine(affine, len(peek[0]), name=f"the affine of {name}")
+    return image_placement(args.labels, len(peek[0]))
 
 
 def _write_options(args, ndim: int | None) -> dict:

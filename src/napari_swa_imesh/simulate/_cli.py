@@ -144,7 +144,7 @@ def _run_simulate(args: argparse.Namespace) -> int:
     from .._cli_util import parse_material_names
     from .._validation import normalize_spacing
     from ..io import read_image
-    from ..mesh import read_mesh
+    from ..mesh import image_placement, read_mesh
     from ._conductivity import parse_conductivity_args
     from ._output import check_field_path, check_series_path, write_field, write_series
     from ._report import (
@@ -233,8 +233,12 @@ def _run_simulate(args: argparse.Namespace) -> int:
         if is_image:
             source, file_spacing = read_image(args.input)
             spacing = args.spacing or file_spacing
+            # a NIfTI file's mesh is written in its world frame, as swa-imesh mesh does
+            placement = None if args.spacing else image_placement(args.input, source.ndim)
+            if placement is not None:
+                spacing = placement[0]
         else:
-            source, spacing = read_mesh(args.input), None
+            source, spacing, placement = read_mesh(args.input), None, None
             if not source.info.get("has_material", True):
                 raise ValueError(f"{Path(args.input).name} has no material per element; "
                                  "simulate needs one (mesh the labels with swa-imesh mesh).")
@@ -268,6 +272,8 @@ def _run_simulate(args: argparse.Namespace) -> int:
         if args.json:                     # the text output has them in its lines
             for note in result.warnings:
                 print(f"warning: {note}", file=sys.stderr)
+    if placement is not None and boundary is None:
+        result.mesh.world = placement[1]
     table = None
     if signatures is not None or args.report:
         table = simulation_report(result, conductivity, signatures)

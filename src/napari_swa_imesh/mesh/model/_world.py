@@ -146,3 +146,35 @@ def world_from_affine(affine, ndim: int, *, name: str = "affine"
     world[:ndim, :ndim] = unit
     world[:ndim, ndim] = shift - linear.sum(axis=1) / 2
     return tuple(float(s) for s in sizes), world
+
+
+def image_placement(path, ndim: int) -> tuple[tuple[float, ...], np.ndarray] | None:
+    """Spacing and ``Mesh.world`` that place the mesh of a label image file in its world.
+
+    Parameters
+    ----------
+    path : str or Path
+        The label image file; only a NIfTI file (``.nii``, ``.nii.gz``) has a placement,
+        read from its header's affine.
+    ndim : int
+        Dimension of the label image (2 or 3).
+
+    Returns
+    -------
+    (spacing, world) or None
+        As :func:`world_from_affine` for a NIfTI file; None for other formats (the
+        image's own frame).
+
+    Raises
+    ------
+    ValueError
+        As :func:`world_from_affine`, naming the file's affine.
+    """
+    from pathlib import Path
+
+    from ...io import is_nifti, read_affine
+
+    if not is_nifti(path):
+        return None
+    return world_from_affine(read_affine(path), ndim,
+                             name=f"the affine of {Path(path).name}")

@@ -42,7 +42,8 @@ def add_growth_arguments(p: argparse.ArgumentParser) -> None:
     g.add_argument("--rate", type=float, default=None, metavar="RHO",
                    help="fisher-kpp: proliferation rate")
     g.add_argument("--seed", default=None, metavar="X,Y[,Z]:R",
-                   help="ball where c = 1 at t = 0 (the written files' coordinates); "
+                   help="ball where c = 1 at t = 0 (the written files' coordinates: world "
+                        "x, y(, z) for a NIfTI file, unless --spacing is given); "
                         "required for fisher-kpp, an initial bolus for drug")
     g.add_argument("--kill", nargs="+", action="extend", default=[],
                    metavar="START:END:RATE", help="kill rate over a time window "
@@ -83,6 +84,18 @@ def _seed(text: str) -> tuple[tuple[float, ...], float]:
         raise ValueError(f"--seed takes X,Y[,Z]:R with a positive radius, such as "
                          f"12,20,8:3, not {text!r}.")
     return xyz, r
+
+
+def _seed_from_world(seed, world: np.ndarray) -> tuple[tuple[float, ...], float]:
+    """The seed ball given in world x, y(, z) as the library takes it for a label image
+    (x, y(, z) = the array's axes reversed); the radius is kept, since the linear part of
+    ``world`` is a rotation (or a reflection) unless the affine shears."""
+    centre, radius = seed
+    d = len(world) - 1
+    if len(centre) != d:
+        return seed                   # the library says what is wrong
+    index = np.linalg.solve(world[:d, :d], np.asarray(centre, dtype=float) - world[:d, d])
+    return tuple(float(v) for v in index[::-1]), radius
 
 
 def _kill(items) -> list[tuple[float, float, float]]:
@@ -186,7 +199,7 @@ def run_growth(args: argparse.Namespace) -> int:
     from ..._cli_util import StepTimer, parse_material_names, print_json
     from ..._validation import normalize_spacing
     from ...io import IMAGE_SUFFIXES, image_suffix, read_image
-    from ...mesh import read_mesh
+    from ...mesh import image_placement, read_mesh
     from .._growth import simulate_growth
     from .._growth_output import growth_outputs, growth_table, write_growth
 
@@ -207,12 +220,20 @@ def run_growth(args: argparse.Namespace) -> int:
             source, file_spacing = read_image(args.input)
             extra: dict[str, Any] = {"spacing": args.spacing or file_spacing,
                                      "exclude": tuple(args.exclude)}
+            # a NIfTI file's mesh is written in its world frame, as swa-imesh mesh does
+            placement = None if args.spacing else image_placement(args.input, source.ndim)
+            if placement is not None:
+                extra["spacing"] = placement[0]
+                if options.get("seed") is not None:
+                    options["seed"] = _seed_from_world(options["seed"], placement[1])
         else:
-            source, extra = read_mesh(args.input), {}
+            source, extra, placement = read_mesh(args.input), {}, None
             if not source.info.get("has_material", True):
                 raise ValueError(f"{Path(args.input).name} has no material per element; "
                                  "simulate needs one (mesh the labels with swa-imesh mesh).")
     result = simulate_growth(source, material_names=names, **extra, **options)
+    if placement is not None:
+        result.mesh.world = placement[1]
     written = []
     if args.output:
         with timer("write"):
