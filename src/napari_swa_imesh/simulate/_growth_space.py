@@ -15,9 +15,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..mesh import MAX_REFINE, Mesh, mesh_labels
-from ._adapt import refine_within
-from ._transient_space import VERTEX_BUDGET, _element_size, _refine_level, vertex_budget
+from ..mesh import Mesh, mesh_labels
+from ._transient_space import VERTEX_BUDGET, _element_size, refine_to_sizes, vertex_budget
 
 __all__ = ["FRONT_CELLS", "bound_sizes", "front_mesh", "size_ratio"]
 
@@ -91,22 +90,10 @@ def front_mesh(labels, *, spacing, exclude, material_names, sizes: dict[int, flo
     mesh = mesh_labels(labels, spacing=spacing, exclude=exclude,
                        material_names=dict(material_names or {}), max_size=max_size)
     budget = min(VERTEX_BUDGET, max(vertex_budget(labels), VERTEX_FLOOR))
-    tree, rounds, reason = None, 0, ""
-    ratio = size_ratio(mesh, sizes, reach)
-    while ratio.max(initial=0.0) > 1 + 1e-9:
-        if rounds >= SIZE_ROUNDS or _refine_level(mesh) >= MAX_REFINE:
-            reason = f"{rounds} levels of splitting, the most"
-            break
-        leaf = np.asarray(mesh.cell_data["leaf"])
-        per_leaf = np.zeros(int(leaf.max()) + 1)
-        np.maximum.at(per_leaf, leaf, np.where(ratio > 1, ratio, 0.0))
-        before = len(mesh.points)
-        mesh, tree = refine_within(labels, mesh, per_leaf, budget, tree)
-        rounds += 1
-        ratio = size_ratio(mesh, sizes, reach)
-        if len(mesh.points) == before or len(mesh.points) > 0.95 * budget:
-            reason = f"the vertex budget of {int(budget)} vertices"
-            break
+    mesh, _, rounds, ratio, reason = refine_to_sizes(
+        labels, mesh, lambda m: size_ratio(m, sizes, reach), budget,
+        rounds_most=SIZE_ROUNDS, slack=1e-9,
+        budget_reason=f"the vertex budget of {int(budget)} vertices")
     worst = float(ratio.max(initial=0.0))
     return mesh, {"rounds": rounds, "max_ratio": worst, "met": worst <= 1 + 1e-9,
                   "reason": reason}

@@ -24,6 +24,8 @@ steady problem). It is tested against the 1-D analytic front.
 
 from __future__ import annotations
 
+from collections.abc import Callable
+
 import numpy as np
 from scipy import ndimage
 
@@ -166,13 +168,39 @@ def resolve_fronts(labels, *, spacing, exclude, material_names, faces: list[str]
     budget = vertex_budget(labels)
     mesh = mesh_labels(labels, spacing=spacing, exclude=exclude,
                        material_names=dict(material_names or {}), max_size=max_size)
-    tree, rounds, ratio = None, 0, _ratios(mesh, faces, start_labels, spacing_arr, first,
-                                           last, error)
+    mesh, tree, rounds, ratio, reason = refine_to_sizes(
+        labels, mesh,
+        lambda m: _ratios(m, faces, start_labels, spacing_arr, first, last, error),
+        budget, rounds_most=SIZE_ROUNDS, slack=0.0,
+        budget_reason=f"the vertex budget of {int(budget)}, {VERTEX_FACTOR:g} times the "
+                      "voxels'")
+    worst = float(ratio.max(initial=0.0))
+    return mesh, {"rounds": rounds, "max_ratio": worst, "met": worst <= 1.0 + 1e-9,
+                  "allowed_at_source": smallest, "reason": reason, "tree": tree}
+
+
+def refine_to_sizes(labels, mesh: Mesh, ratios: Callable[[Mesh], np.ndarray],
+                    budget: float, *, rounds_most: int, slack: float, budget_reason: str
+                    ) -> tuple[Mesh, object, int, np.ndarray, str]:
+    """Split the leaves of elements larger than asked until none is.
+
+    `ratios(mesh)` is each element's size over its allowance; leaves with a ratio above
+    ``1 + slack`` are split (:func:`~._adapt.refine_within`, within `budget` vertices)
+    until none is left, `rounds_most` rounds or the deepest refine level are reached,
+    or a round adds no vertex or fills the budget (then `budget_reason` is the reason).
+
+    Returns
+    -------
+    mesh, tree, rounds, ratio, reason
+        The last mesh and its tree, the rounds taken, its ratios, why it stopped short
+        (empty when every element meets its size).
+    """
     from ._adapt import MAX_REFINE
 
-    reason = ""
-    while ratio.max(initial=0.0) > 1:
-        if rounds >= SIZE_ROUNDS or _refine_level(mesh) >= MAX_REFINE:
+    tree, rounds, reason = None, 0, ""
+    ratio = ratios(mesh)
+    while ratio.max(initial=0.0) > 1 + slack:
+        if rounds >= rounds_most or _refine_level(mesh) >= MAX_REFINE:
             reason = f"{rounds} levels of splitting, the most"
             break
         leaf = np.asarray(mesh.cell_data["leaf"])
@@ -181,13 +209,11 @@ def resolve_fronts(labels, *, spacing, exclude, material_names, faces: list[str]
         before = len(mesh.points)
         mesh, tree = refine_within(labels, mesh, per_leaf, budget, tree)
         rounds += 1
-        ratio = _ratios(mesh, faces, start_labels, spacing_arr, first, last, error)
+        ratio = ratios(mesh)
         if len(mesh.points) == before or len(mesh.points) > (1 - 0.05) * budget:
-            reason = f"the vertex budget of {int(budget)}, {VERTEX_FACTOR:g} times the voxels'"
+            reason = budget_reason
             break
-    worst = float(ratio.max(initial=0.0))
-    return mesh, {"rounds": rounds, "max_ratio": worst, "met": worst <= 1.0 + 1e-9,
-                  "allowed_at_source": smallest, "reason": reason, "tree": tree}
+    return mesh, tree, rounds, ratio, reason
 
 
 def _ratios(mesh, faces, start_labels, spacing, first, last, error) -> np.ndarray:
