@@ -33,11 +33,12 @@ def test_simulate_labels_prints_k_eff_and_writes_a_field_paraview_reads(labels_f
 
     path, labels = labels_file
     out_path = path.parent / "field.vtu"
+    # the interval has its own tests: here the command must equal the library and write
     rc, out, err = _run(capsys, "simulate", path, "-k", "1=1", "2=10", "3=0.1", "--spacing",
-                        "2", "1", "1", "-o", out_path, "--json")
+                        "2", "1", "1", "--no-interval", "-o", out_path, "--json")
     assert rc == 0, err
     report = json.loads(out)
-    expected = simulate(labels, {1: 1.0, 2: 10.0, 3: 0.1}, spacing=(2, 1, 1))
+    expected = simulate(labels, {1: 1.0, 2: 10.0, 3: 0.1}, spacing=(2, 1, 1), interval=False)
     assert report["k_eff"] == pytest.approx(expected.k_eff, rel=1e-9)
     assert set(report) >= {"k_eff", "bounds", "dofs", "residual", "iterations", "seconds"}
     grid = pyvista.read(out_path)

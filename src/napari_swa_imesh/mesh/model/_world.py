@@ -163,7 +163,8 @@ def image_placement(path, ndim: int) -> tuple[tuple[float, ...], np.ndarray] | N
     -------
     (spacing, world) or None
         As :func:`world_from_affine` for a NIfTI file; None for other formats (the
-        image's own frame).
+        image's own frame) and for an image that is not 2-D or 3-D (the label checks
+        refuse it with their own sentence).
 
     Raises
     ------
@@ -174,7 +175,7 @@ def image_placement(path, ndim: int) -> tuple[tuple[float, ...], np.ndarray] | N
 
     from ...io import is_nifti, read_affine
 
-    if not is_nifti(path):
+    if not is_nifti(path) or ndim not in (2, 3):
         return None
     return world_from_affine(read_affine(path), ndim,
                              name=f"the affine of {Path(path).name}")
