@@ -9,6 +9,7 @@ import numpy as np
 
 from .._cli_util import StepTimer, print_json
 from .._glossary import define
+from .._steps import run_steps
 from ..io import check_writable
 
 # re-exported for the classify widget until it imports them from the library
@@ -219,12 +220,7 @@ def _run_segment(args: argparse.Namespace) -> int:
                         classifier=args.classifier, sieve=args.sieve, model=model,
                         spacing=spacing, method=args.method)
     with timer("segment"):
-        while True:
-            try:
-                next(gen)
-            except StopIteration as stop:
-                result = stop.value
-                break
+        result = run_steps(gen)
     with timer("write"):
         if args.tiles:
             # the header describes the tile grid: 2^j voxels per tile, first tile's centre

@@ -25,6 +25,7 @@ from dataclasses import dataclass, field
 import numpy as np
 from scipy import ndimage as ndi
 
+from .._steps import run_steps
 from .._timing import StepTimer
 from .._validation import IMAGE_NDIM, as_image
 from ._features import n_features
@@ -444,8 +445,4 @@ def segment(image, samples: Samples | None = None, *, method: str = RECOMMENDED_
     gen = segment_steps(image, samples, method=method, scale=scale, sieve=sieve,
                         model=model, spacing=spacing, feature_set=feature_set,
                         classifier=classifier)
-    while True:
-        try:
-            next(gen)
-        except StopIteration as stop:
-            return stop.value
+    return run_steps(gen)

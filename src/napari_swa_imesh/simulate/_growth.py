@@ -25,6 +25,7 @@ from dataclasses import dataclass, field
 import numpy as np
 from scipy import sparse
 
+from .._steps import run_steps
 from ..mesh import Mesh, signed_volumes
 from ._assembly import fe_space, stiffness_matrix
 from ._conductivity import material_label
@@ -477,8 +478,4 @@ def simulate_growth(mesh_or_labels, diffusivity: Mapping, *, duration: float,
                        rate=rate, seed=seed, decay=decay, kill=kill, fixed=fixed, flux=flux,
                        source=source, saves=saves, spacing=spacing, exclude=exclude,
                        material_names=material_names, error=error, front_cells=front_cells)
-    while True:
-        try:
-            next(gen)
-        except StopIteration as stop:
-            return stop.value
+    return run_steps(gen)

@@ -9,6 +9,7 @@ from numbers import Real
 
 import numpy as np
 
+from .._steps import run_steps
 from ..mesh import Mesh, mesh_labels
 from ..mesh import refine_marked_tree as _refine_marked
 from ._adapt import (
@@ -493,8 +494,4 @@ def simulate(mesh_or_labels, conductivity: Mapping, *, spacing=None,
                            refine=refine, protocol=protocol, adapt=adapt, labels=labels,
                            max_aspect=max_aspect, interval=interval, gap=gap,
                            memory=memory)
-    while True:
-        try:
-            next(steps)
-        except StopIteration as stop:
-            return stop.value
+    return run_steps(steps)

@@ -35,6 +35,7 @@ from numbers import Integral
 
 import numpy as np
 
+from .._steps import run_steps
 from ..mesh import Mesh, mesh_labels
 from ._assembly import cell_fluxes, fe_space, p1_embedding, stiffness_matrix
 from ._budget import DEFAULT_MEMORY, estimate_memory, format_bytes
@@ -355,8 +356,4 @@ def stochastic_k_eff(mesh_or_labels, signatures, *, samples: int, correlation,
                              max_size=max_size, order=order, axes=axes, tol=tol,
                              workers=workers, scheduler=scheduler, client=client,
                              memory=memory)
-    while True:
-        try:
-            next(steps)
-        except StopIteration as stop:
-            return stop.value
+    return run_steps(steps)

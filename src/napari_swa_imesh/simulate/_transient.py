@@ -30,6 +30,7 @@ from numbers import Real
 
 import numpy as np
 
+from .._steps import run_steps
 from ..mesh import Mesh
 from ._assembly import fe_space, p1_embedding, stiffness_matrix
 from ._conductivity import conductivity_tensors, material_label
@@ -445,8 +446,4 @@ def simulate_transient(mesh_or_labels, conductivity: Mapping, *, duration: float
                           capacity=capacity, initial=initial, fixed=fixed, spacing=spacing,
                           order=order, exclude=exclude, save_every=save_every,
                           material_names=material_names, tol=tol, error=error)
-    while True:
-        try:
-            next(gen)
-        except StopIteration as stop:
-            return stop.value
+    return run_steps(gen)

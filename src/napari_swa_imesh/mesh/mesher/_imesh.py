@@ -26,6 +26,7 @@ from typing import NamedTuple
 import numpy as np
 
 from ..._region_tree import RegionTree, _build_tree
+from ..._steps import run_steps
 from ..._validation import normalize_spacing
 from ..checks._checks import _check_mesh
 from ..model._recipe import MadeLattice, Recipe
@@ -221,12 +222,7 @@ class MeshPlan:
 
     def run(self, **options) -> Meshed:
         """:meth:`steps` to the end."""
-        steps = self.steps(**options)
-        while True:
-            try:
-                next(steps)
-            except StopIteration as done:
-                return done.value
+        return run_steps(self.steps(**options))
 
 
 def plan_mesh(labels, *, method: str = "template", exclude=(), spacing=None,
