@@ -21,6 +21,7 @@ import uuid
 from collections.abc import Callable, Sequence
 from pathlib import Path
 
+from .._dask_connect import connect_dask
 from .._dask_logs import quiet_dask
 
 __all__ = ["expand_inputs", "output_for", "mesh_for", "connect", "run_batch", "segment_one",
@@ -146,37 +147,8 @@ def connect(scheduler: str | None = None, *, workers: int = 2, memory: int | Non
     ValueError
         When the scheduler does not answer within :data:`CONNECT_SECONDS`.
     """
-    import logging
-
-    from distributed import Client, LocalCluster
-
-    if scheduler:
-        try:
-            return Client(scheduler, timeout=f"{CONNECT_SECONDS}s")
-        except (OSError, TimeoutError, ValueError) as exc:
-            raise ValueError(f"no Dask scheduler answers at {scheduler} within "
-                             f"{CONNECT_SECONDS} s ({type(exc).__name__}); start one "
-                             "(`dask scheduler`) or leave --scheduler out to use a local "
-                             "cluster.") from exc
-    import dask
-
-    # each task is a few long numpy calls: the workers' stack sampler (every 10 ms, under
-    # the GIL) would only slow them down
-    cluster = None
-    try:
-        with dask.config.set({"distributed.worker.profile.enabled": False}):
-            cluster = LocalCluster(n_workers=workers, threads_per_worker=1, processes=True,
-                                   memory_limit=memory or "auto", dashboard_address=None,
-                                   silence_logs=logging.CRITICAL)
-        client = Client(cluster)
-        client.run(_load_package)          # imports belong to starting the cluster
-    except Exception as exc:    # "Nanny failed to start", a worker killed while starting
-        if cluster is not None:
-            cluster.close()
-        raise ValueError(
-            f"the local Dask cluster of {workers} worker(s) did not start (a worker process "
-            f"died while starting: {type(exc).__name__}: {_sentence(str(exc))}); check the "
-            "memory left (--memory), try fewer --workers, or give --scheduler.") from exc
+    client, _ = connect_dask(scheduler, workers=workers, memory=memory,
+                             timeout=CONNECT_SECONDS, preload=_load_package)
     return client
 
 

@@ -7,33 +7,14 @@ the number of workers nor the blocks' placement changes a result.
 
 from __future__ import annotations
 
-import logging
 from collections.abc import Callable, Iterator, Sequence
 
+from .._dask_connect import connect_dask
 from .._dask_logs import quiet_dask
 
 __all__ = ["CONNECT_SECONDS", "run_blocks"]
 
 CONNECT_SECONDS = 10
-
-
-def _connect(scheduler: str | None, workers: int):
-    from distributed import Client, LocalCluster
-
-    if scheduler:
-        try:
-            return Client(scheduler, timeout=f"{CONNECT_SECONDS}s"), None
-        except (OSError, TimeoutError, ValueError) as exc:
-            raise ValueError(f"no Dask scheduler answers at {scheduler} within "
-                             f"{CONNECT_SECONDS} s ({type(exc).__name__}); start one "
-                             "(`dask scheduler`) or leave --scheduler out to use local "
-                             "workers.") from exc
-    import dask
-
-    with dask.config.set({"distributed.worker.profile.enabled": False}):
-        cluster = LocalCluster(n_workers=workers, threads_per_worker=1, processes=True,
-                               dashboard_address=None, silence_logs=logging.CRITICAL)
-    return Client(cluster), cluster
 
 
 def run_blocks(fn: Callable, shared, blocks: Sequence, *, workers: int = 1,
@@ -74,7 +55,8 @@ def run_blocks(fn: Callable, shared, blocks: Sequence, *, workers: int = 1,
         cluster = None
         own = client is None
         if own:
-            client, cluster = _connect(scheduler, workers)
+            client, cluster = connect_dask(scheduler, workers=workers,
+                                           timeout=CONNECT_SECONDS)
         futures = []
         try:
             from distributed import as_completed

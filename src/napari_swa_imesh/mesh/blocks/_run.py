@@ -25,6 +25,7 @@ from pathlib import Path
 
 import numpy as np
 
+from ..._dask_connect import connect_dask
 from ..formats._registry import PARTITIONED, PVTU, XDMF_INDEX
 from . import _core as bk
 from . import _files as bf
@@ -174,28 +175,6 @@ class _Dask:
         return out
 
 
-def _connect(scheduler, workers: int, memory):
-    """A client on `scheduler`, or on a new local cluster of `workers` processes."""
-    import logging
-
-    from distributed import Client, LocalCluster
-
-    if scheduler:
-        try:
-            return Client(scheduler, timeout="10s"), None
-        except (OSError, TimeoutError, ValueError) as exc:
-            raise ValueError(f"no Dask scheduler answers at {scheduler} ({type(exc).__name__}"
-                             "); start one (`dask scheduler`) or leave --scheduler out to "
-                             "use a local cluster.") from exc
-    import dask
-
-    with dask.config.set({"distributed.worker.profile.enabled": False}):
-        cluster = LocalCluster(n_workers=workers, threads_per_worker=1, processes=True,
-                               memory_limit=memory or "auto", dashboard_address=None,
-                               silence_logs=logging.CRITICAL)
-    return Client(cluster), cluster
-
-
 def _open_source(labels):
     """(source handed to tasks, shape, spacing, dtype): a path stays a path."""
     from ..._validation import as_labels
@@ -319,7 +298,8 @@ def mesh_blocks(labels, output, *, block: int | None = None, memory: int | None 
     if client is not None:
         runner = _Dask(client)
     elif scheduler or workers > 0:
-        own_client, cluster = _connect(scheduler, int(workers) or 1, memory)
+        own_client, cluster = connect_dask(scheduler, workers=int(workers) or 1,
+                                               memory=memory)
         runner = _Dask(own_client)
     else:
         runner = _Local()
