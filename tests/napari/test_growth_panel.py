@@ -42,6 +42,10 @@ def test_fisher_kpp_from_the_tab_with_a_time_slider(make_napari_viewer, qtbot):
     assert "t = 0.5" in panel.time_note.value
     assert result.amount[-1] > result.amount[0]
     assert 0 <= result.values.min() and result.values.max() <= 1
+    panel.seed.value = "700,5:2"                       # outside the image: the worker refuses
+    panel.run()
+    wait_idle(qtbot, widget, timeout=120_000)
+    assert panel.summary.value == "" and not panel.time_slider.enabled
 
 
 def test_a_tensor_diffusivity_is_refused_before_any_work(make_napari_viewer, qtbot,

@@ -47,6 +47,11 @@ def test_the_box_runs_the_library_and_shows_mean_interval_and_histogram(make_nap
     assert "95 % of samples in" in box.summary.value
     assert len(box.plot.figure.axes) == 1
     assert box.plot.figure.axes[0].get_xlabel() == "k_eff"
+    box.map_edit.value = "linear:1"                        # fails in the worker
+    box.run()
+    wait_idle(qtbot, box)
+    assert box.result is None and box.summary.value == ""  # the last run is not shown
+    assert not box.plot.figure.axes
 
 
 def test_the_box_refuses_without_signatures_and_with_a_bad_map(make_napari_viewer, qtbot):

@@ -152,8 +152,12 @@ class GrowthPanel:
             result = yield from growth_steps(source, diffusivity, **options)
             return result, shown_faces(result.mesh.cells, result.mesh.material)[0]
 
-        return self.host.tasks.run(steps, title="Reaction-diffusion",
-                                   on_result=lambda out: self._show_result(layer, *out))
+        worker = self.host.tasks.run(steps, title="Reaction-diffusion",
+                                     on_result=lambda out: self._show_result(layer, *out))
+        if worker is not None:          # a run that fails must not leave the last one shown
+            self.summary.value = ""
+            self.time_slider.enabled = False
+        return worker
 
     def _show_result(self, mesh_layer, result: GrowthResult, faces: np.ndarray) -> None:
         self.result, self._faces = result, faces

@@ -15,9 +15,10 @@ from typing import TYPE_CHECKING
 
 from qtpy.QtWidgets import QFileDialog, QTableWidget, QTableWidgetItem
 
-from ..simulate import read_signatures, simulation_report, write_report
+from ..simulate import simulation_report, write_report
 from ._classify_widget import SEGMENTATION_KEY
 from ._dock import Fold, button, side_by_side, wrapped_label
+from ._signatures_input import SignaturesInput
 from ._tasks import notify_error, notify_info, notify_warning
 
 if TYPE_CHECKING:
@@ -52,7 +53,7 @@ def fill_table(table: QTableWidget, rows: list[list[str]], *, row_header: bool =
     table.resizeColumnsToContents()
 
 
-class ReportPanel:
+class ReportPanel(SignaturesInput):
     """Signatures source, the joined table, its warnings and the export button."""
 
     def __init__(self):
@@ -87,16 +88,6 @@ class ReportPanel:
         self.signatures, self.source = rows, source if rows else ""
         self._show_source()
         self.refresh()
-
-    def load_signatures(self, path) -> bool:
-        """Read a signatures CSV; a file that is not one is refused with a notification."""
-        try:
-            rows = read_signatures(path)
-        except (ValueError, OSError) as exc:
-            notify_error(f"could not read the signatures: {exc}")
-            return False
-        self.set_signatures(rows, Path(path).name)
-        return True
 
     def set_result(self, result: SimulationResult | None, conductivity=None) -> None:
         """The run to report (its conductivity table as given to ``simulate``); None: no
@@ -147,11 +138,6 @@ class ReportPanel:
             return None
         notify_info(f"report written to {written}")
         return written
-
-    def _on_load_clicked(self) -> None:
-        path, _ = QFileDialog.getOpenFileName(None, "Load signatures", "", "CSV (*.csv)")
-        if path:
-            self.load_signatures(path)
 
     def _on_export_clicked(self) -> None:
         path, _ = QFileDialog.getSaveFileName(None, "Export report", "report.csv",

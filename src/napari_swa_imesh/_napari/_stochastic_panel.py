@@ -13,17 +13,16 @@ napari theme (:class:`._plots.ThemedFigure`).
 from __future__ import annotations
 
 from collections.abc import Callable
-from pathlib import Path
 from typing import TYPE_CHECKING
 
 import numpy as np
 from magicgui.widgets import Container, FloatSpinBox, LineEdit, SpinBox
-from qtpy.QtWidgets import QFileDialog
 
-from ..simulate import read_signatures, signature_tile_size, stochastic_steps
+from ..simulate import signature_tile_size, stochastic_steps
 from ._dock import Fold, button, side_by_side, wrapped_label
 from ._layers import MESH_KEY
 from ._plots import ThemedFigure
+from ._signatures_input import SignaturesInput
 from ._tasks import TaskPanel, notify_error
 
 if TYPE_CHECKING:
@@ -48,7 +47,7 @@ def source_of(mesh_layer, labels_layer) -> tuple:
     return mesh, labels
 
 
-class StochasticPanel:
+class StochasticPanel(SignaturesInput):
     """Signatures source, N, map, tile size and seed; the run, its summary and histogram.
 
     Parameters
@@ -109,26 +108,11 @@ class StochasticPanel:
         elif self.source_name.startswith("classification of"):
             self.set_signatures(None, "")
 
-    def load_signatures(self, path) -> bool:
-        """Read a signatures CSV; a file that is not one is refused with a notification."""
-        try:
-            rows = read_signatures(path)
-        except (ValueError, OSError) as exc:
-            notify_error(f"could not read the signatures: {exc}")
-            return False
-        self.set_signatures(rows, Path(path).name)
-        return True
-
     def _show_source(self) -> None:
         self.source_label.value = (
             f"signatures: {self.source_name} ({len(self.signatures)} materials)"
             if self.signatures else
             "no signatures: classify the labels (Classify tab) or load a CSV")
-
-    def _on_load_clicked(self) -> None:
-        path, _ = QFileDialog.getOpenFileName(None, "Load signatures", "", "CSV (*.csv)")
-        if path:
-            self.load_signatures(path)
 
     # -- run -------------------------------------------------------------------------------
     def run(self, *_):
@@ -165,11 +149,19 @@ class StochasticPanel:
         def steps():
             return (yield from stochastic_steps(data, rows, material_names=names, **run))
 
-        return self.tasks.run(steps, title="Stochastic k_eff", on_result=self._show_result)
+        worker = self.tasks.run(steps, title="Stochastic k_eff", on_result=self._show_result)
+        if worker is not None:          # a run that fails must not leave the last one shown
+            self._show_result(None)
+        return worker
 
     # -- results (main thread) -------------------------------------------------------------
-    def _show_result(self, result: StochasticResult) -> None:
+    def _show_result(self, result: StochasticResult | None) -> None:
         self.result = result
+        if result is None:
+            self.summary.value = ""
+            self.summary.native.setToolTip("")
+            self.plot.redraw()
+            return
         lines = []
         for axis in result.samples:
             s = result.statistics(axis)
