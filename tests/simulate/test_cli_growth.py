@@ -98,3 +98,25 @@ def test_bad_growth_input_exits_2_with_one_sentence(brain, capsys, args, message
     assert rc == 2
     assert message in err and err.count("\n") == 1
     assert list(brain.parent.iterdir()) == [brain]
+
+
+def test_json_run_says_each_warning_once(brain, capsys, monkeypatch):
+    import warnings
+
+    from napari_swa_imesh.simulate import _growth
+
+    real = _growth.simulate_growth
+
+    def warning_growth(*args, **kwargs):
+        result = real(*args, **kwargs)
+        result.warnings.append("a note the run made")
+        warnings.warn("a note the run made", UserWarning, stacklevel=2)
+        return result
+
+    monkeypatch.setattr(_growth, "simulate_growth", warning_growth)
+    rc, text, err = _run(capsys, "simulate", brain, "--model", "fisher-kpp", "-D", "2=1",
+                         "--rate", "1", "--seed", "6,6:2", "--duration", "1", "--steps", "1",
+                         "--front-cells", "1", "--json")
+    assert rc == 0, err
+    assert err.count("a note the run made") == 1
+    assert json.loads(text)["warnings"] == ["a note the run made"]

@@ -320,7 +320,9 @@ source, saves, spacing, exclude, material_names, error, front_cells
         notes.append(f"elements the front reaches are up to {size['max_ratio']:.2g} times "
                      f"the size its width allows ({size['reason']}): the front speed may be "
                      + ("off; give the label image (it is refined) or a finer mesh."
-                        if is_mesh else "off; ask fewer front cells or a shorter duration."))
+                        if is_mesh else "off; ask fewer front cells or a shorter duration."
+                        if front_cells > 1 else "off; ask a shorter duration or a smaller "
+                        "image (the front is already meshed at its coarsest)."))
     t_mesh = time.perf_counter()
     result = yield from _run(mesh, table, fixed_faces, fixed_materials, flux, sources,
                              Reaction(model, rate, decay, kill), centre, radius, duration,

@@ -8,7 +8,6 @@ for the drug what they mean for the other runs; the rest are this group's.
 from __future__ import annotations
 
 import argparse
-import sys
 from pathlib import Path
 from typing import Any
 
@@ -240,9 +239,7 @@ def run_growth(args: argparse.Namespace) -> int:
             written = write_growth(result, args.output, threshold=args.threshold,
                                    force=args.force)
     table = growth_table(result, threshold=args.threshold)
-    if args.json:
-        for note in result.warnings:
-            print(f"warning: {note}", file=sys.stderr)
+    if args.json:                   # its warnings were shown on stderr as they came
         report = {"command": "simulate", "input": str(args.input), **result.summary(),
                   "volume": table["volume"].tolist(),
                   "output": [str(p) for p in written],
