@@ -381,6 +381,8 @@ def _reference_steps(img, samples, *, scale, feature_set, classifier, sieve, mod
                 moments, counts = tile_moments_worker(img, None, model.scale)
             del feats
             signatures = material_signatures(moments, counts, tiles, model.materials)
+            for row in signatures:          # the tile side a stochastic run correlates over
+                row["scale"] = model.scale
     yield 5, STEPS, "done"
     return SegmentationResult(labels, tiles, model.scale, model, signatures, res,
                               timer.seconds, method=REFERENCE_METHOD, scales=(model.scale,),
