@@ -37,7 +37,8 @@ def training_tiles(image: np.ndarray, samples: Samples, scale: int, feature_set:
     """
     d = image.ndim
     full = 1 << (scale * d)
-    rows, labels, names = [], [], None
+    rows, labels = [], []
+    names: list[str] = []
     for label in samples.labels:
         got = 0
         for box in samples.boxes_of(label):

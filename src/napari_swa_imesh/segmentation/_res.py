@@ -120,8 +120,8 @@ material_res, reason, method
         return out
 
 
-def box_tile_moments(image: np.ndarray, samples: Samples, label: int, max_scale: int
-                     ) -> list[np.ndarray]:
+def box_tile_moments(image: np.ndarray | BoxCrops, samples: Samples, label: int,
+                     max_scale: int) -> list[np.ndarray]:
     """Moments of the full tiles inside a material's boxes, per scale.
 
     Returns a list over scales 0..max_scale of (n_tiles, 4) arrays, tiles aligned to each
@@ -207,7 +207,7 @@ def res_statistics_of_boxes(image, samples: Samples, *, max_scale: int | None = 
                                     max_scale=max_scale, method=method)
 
 
-def res_statistics_unchecked(img: np.ndarray, samples: Samples, *,
+def res_statistics_unchecked(img: np.ndarray | BoxCrops, samples: Samples, *,
                              max_scale: int | None = None, change_tol: float = 0.1,
                              spread_tol: float = 0.5, method: str = "recommended"
                              ) -> ResStatistics:

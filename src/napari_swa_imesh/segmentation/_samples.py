@@ -271,13 +271,16 @@ class Samples:
 
 def _whole(value, what: str) -> int:
     """`value` as an int when it is a whole number (not a bool, fraction or infinity)."""
-    if isinstance(value, (bool, np.bool_)) or not isinstance(value, numbers.Real) or (
-            not isinstance(value, numbers.Integral)
-            and not (np.isfinite(value) and float(value).is_integer())):
-        shown = json.dumps(value) if isinstance(value, (bool, int, float, str)) else value
-        raise ValueError(f"{what} must be a whole number; got {shown}. Give "
-                         "pixel indices and labels as integers.")
-    return int(value)
+    if not isinstance(value, (bool, np.bool_)):
+        if isinstance(value, numbers.Integral):
+            return int(value)
+        if isinstance(value, numbers.Real):
+            number = float(value)
+            if np.isfinite(number) and number.is_integer():
+                return int(number)
+    shown = json.dumps(value) if isinstance(value, (bool, int, float, str)) else value
+    raise ValueError(f"{what} must be a whole number; got {shown}. Give "
+                     "pixel indices and labels as integers.")
 
 
 def _warn_unknown(entry: dict, known: set[str], where: str) -> None:

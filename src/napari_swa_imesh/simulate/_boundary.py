@@ -209,7 +209,11 @@ def solve_boundary_value(mesh: Mesh, conductivity: Mapping, *, dirichlet=None,
             np.broadcast_to(per_cell[:, None], basis.dx.shape)))
         total_source = float(np.sum(per_cell[:, None] * basis.dx))
 
-    ids = {name: _facet_ids(basis.mesh, groups[name].facets) for name in named}
+    ids = {}
+    for name in named:
+        facets = groups[name].facets
+        assert facets is not None           # facet_groups gives them unless asked not to
+        ids[name] = _facet_ids(basis.mesh, facets)
     facet_bases = {name: skfem.FacetBasis(basis.mesh, basis.elem, facets=ids[name],
                                           intorder=2 * order)
                    for name in [*fluxes, *films]}

@@ -112,10 +112,11 @@ class HashinShtrikman:
 
     def to_dict(self) -> dict:
         """Plain JSON-able values."""
-        out = {"k_low": self.k_low, "k_high": self.k_high, "f_high": self.f_high,
-               "lower": self.lower, "upper": self.upper}
-        if self.trace_lower is not None:
-            holds = self.trace_holds
+        out: dict[str, object] = {"k_low": self.k_low, "k_high": self.k_high,
+                                  "f_high": self.f_high, "lower": self.lower,
+                                  "upper": self.upper}
+        holds = self.trace_holds
+        if self.trace_lower is not None and self.trace_upper is not None and holds:
             out["trace_lower"] = {"value": self.trace_lower[0], "bound": self.trace_lower[1],
                                   "holds": holds[0]}
             out["trace_upper"] = {"value": self.trace_upper[0], "bound": self.trace_upper[1],

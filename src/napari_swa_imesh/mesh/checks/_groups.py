@@ -30,7 +30,7 @@ class FacetGroup:
         number formats such as Abaqus use.
     """
 
-    facets: np.ndarray
+    facets: np.ndarray | None
     owner: np.ndarray
     opposite: np.ndarray
 
