@@ -37,9 +37,8 @@ def add_commands(subparsers) -> None:
     p.set_defaults(func=run)
 
 #: options of the in-memory path the block path does not take, with their defaults
-_NOT_HERE = {"refine": 0, "coarsen": 0, "periodic": False, "method": "template",
-             "order": "1", "msh_ascii": False, "index_space": False, "full_check": False,
-             "facet_groups": "all"}
+_NOT_HERE = {"refine": 0, "coarsen": 0, "method": "template", "msh_ascii": False,
+             "index_space": False, "full_check": False, "facet_groups": "all"}
 
 
 def add_block_arguments(p: argparse.ArgumentParser) -> None:
@@ -74,9 +73,10 @@ def run_blocks(args: argparse.Namespace, names: dict[int, str]) -> int:
     used = [k for k, v in _NOT_HERE.items() if getattr(args, k, v) != v]
     if used:
         raise ValueError(f"--{used[0].replace('_', '-')} is not available for block-wise "
-                         "meshing (first order, template method, no refinement, coarsening "
-                         "or periodic faces); leave it out, or mesh in memory with another "
-                         "output suffix.")
+                         "meshing (template method, no refinement or coarsening); leave it "
+                         "out, or mesh in memory with another output suffix.")
+    if args.order not in ("1", "2"):
+        raise ValueError(f"--order must be 1 or 2, not {args.order!r}.")
     memory = parse_memory_size(args.memory) if args.memory else None
     if args.workers is not None and args.scheduler:
         raise ValueError("give --workers or --scheduler, not both: a scheduler has its own "
@@ -95,6 +95,7 @@ def run_blocks(args: argparse.Namespace, names: dict[int, str]) -> int:
                              exclude=tuple(args.exclude), spacing=args.spacing,
                              material_names=names, subdivide=not args.no_subdivide,
                              max_aspect=args.max_aspect, max_size=args.max_size,
+                             order=int(args.order), periodic=args.periodic,
                              force=args.force, progress=progress)
     if args.json:
         print(json.dumps(report))   # plain ints, floats, strings and lists

@@ -28,6 +28,8 @@ import numpy as np
 from ..formats._registry import PARTITIONED, PVTU, XDMF_INDEX
 from . import _core as bk
 from . import _files as bf
+from . import _periodic
+from ._quadratic import n_global_ids
 
 __all__ = ["BLOCK_SUFFIXES", "BlockMeshError", "block_memory", "choose_block", "mesh_blocks"]
 
@@ -38,17 +40,21 @@ class BlockMeshError(ValueError):
     """A check of the block-wise mesh failed: nothing was written."""
 
 
-def block_memory(block: int, d: int = 3) -> int:
+def block_memory(block: int, d: int = 3, order: int = 1) -> int:
     """Peak bytes of one meshing task of a cube of `block` voxels (conservative): the
     in-memory mesher's estimate for the block at the worst case, plus the local corner
-    lattice (up to ``4 * block + 1`` points per axis, 10 bytes each)."""
+    lattice (up to ``4 * block + 1`` points per axis, 10 bytes each); at `order` 2 the
+    mid-edge nodes (edge keys, ids and the wider cells: 128 bytes for each of the
+    ``d!`` elements a voxel may hold at worst)."""
     from ..model._memory import estimate_mesh_memory
 
     return int(estimate_mesh_memory((block,) * d, np.int64, check=False)
-               + 10 * (4 * block + 1) ** d)
+               + 10 * (4 * block + 1) ** d
+               + (128 * math.factorial(d) * block ** d if order == 2 else 0))
 
 
-def choose_block(shape, memory: int | None, block: int | None = None) -> int:
+def choose_block(shape, memory: int | None, block: int | None = None,
+                 order: int = 1) -> int:
     """The block side: `block` if given (checked against `memory`), else the largest
     power of two, at most the default root, whose task fits `memory` (default 2 GB).
 
@@ -58,18 +64,18 @@ def choose_block(shape, memory: int | None, block: int | None = None) -> int:
     budget = memory if memory else 2 << 30
     cap = 1 << bk.default_top(shape)
     if block is not None:
-        need = block_memory(int(block), d)
+        need = block_memory(int(block), d, order)
         if memory and need > memory:
             raise ValueError(f"a block of {block} voxels needs about {need / 2**30:.2f} GB "
                              f"per worker, above --memory {memory / 2**30:.2f} GB; give a "
                              "smaller --block or more --memory.")
         return int(block)
     b = max(2, cap)
-    while b > 8 and block_memory(b, d) > budget:
+    while b > 8 and block_memory(b, d, order) > budget:
         b //= 2
-    if block_memory(b, d) > budget:
+    if block_memory(b, d, order) > budget:
         raise ValueError(f"even a block of {b} voxels needs about "
-                         f"{block_memory(b, d) / 2**30:.2f} GB per worker, above the "
+                         f"{block_memory(b, d, order) / 2**30:.2f} GB per worker, above the "
                          f"{budget / 2**30:.2f} GB allowed; give more --memory.")
     return b
 
@@ -118,11 +124,13 @@ def mesh_task(source, plan: bk.BlockPlan, index, grids, number: int, folder: str
                "n_cells": len(piece.cells), "volumes": piece.volumes,
                "worst": float(piece.quality.max(initial=0.0)), "seams": piece.seams,
                "problems": piece.problems,
+               "box": _periodic.box_facets(piece, plan.shape) if plan.periodic else {},
                "groups": {n: len(o) for n, (_, o) in piece.groups.items()}}
     if len(piece.cells):
         write = bf.write_piece_h5 if options["kind"] == XDMF_INDEX else bf.write_piece_vtu
-        write(Path(folder), output, number, piece, options["spacing"], options["group_ids"],
-              np.dtype(options["ids"]), np.dtype(options["mat"]))
+        summary["n_points"] = write(Path(folder), output, number, piece, options["spacing"],
+                                    options["group_ids"], np.dtype(options["ids"]),
+                                    np.dtype(options["mat"]), options["order"], plan.shape)
     return summary
 
 
@@ -216,7 +224,8 @@ def mesh_blocks(labels, output, *, block: int | None = None, memory: int | None 
                 workers: int = 2, scheduler: str | None = None, client=None,
                 exclude=(), spacing=None, material_names: dict | None = None,
                 subdivide: bool = True, max_aspect: float | None = None,
-                max_size: float | None = None, force: bool = False, retries: int = 2,
+                max_size: float | None = None, order: int = 1, periodic: bool = False,
+                force: bool = False, retries: int = 2,
                 progress: Callable[[str, int, int], None] | None = None) -> dict:
     """Mesh a label volume block by block into a partitioned mesh (``.pvtu`` or ``.xdmf``).
 
@@ -251,6 +260,14 @@ def mesh_blocks(labels, output, *, block: int | None = None, memory: int | None 
     max_size : float, optional
         Longest element edge (physical units): leaves are split as the in-memory mesher
         splits them (a cap per level, so local to every block).
+    order : {1, 2}
+        Element order: 2 adds a node at the midpoint of every edge (10-node tetrahedra,
+        6-node triangles; facets of order 2), global ids from the doubled lattice
+        (``_quadratic``), as ``write_mesh(..., order=2)`` writes the in-memory mesh.
+    periodic : bool
+        Opposite faces of the image box carry the same vertices and facets, translated
+        (leaves touching the box split to one lattice cell, as ``mesh_labels`` does);
+        checked across the box before anything is written (``_periodic``).
     force : bool
         Replace existing outputs.
     retries : int
@@ -288,6 +305,8 @@ def mesh_blocks(labels, output, *, block: int | None = None, memory: int | None 
         from ..formats._xdmf import require_h5py
 
         require_h5py("write")
+    if isinstance(order, bool) or order not in (1, 2):
+        raise ValueError(f"order must be 1 (linear) or 2 (mid-edge nodes), not {order!r}.")
     if int(workers) < 0:
         raise ValueError(f"workers must be >= 0; got {workers}.")
     source, shape, file_spacing, _ = _open_source(labels)
@@ -305,8 +324,9 @@ def mesh_blocks(labels, output, *, block: int | None = None, memory: int | None 
             max_level += 1
     exclude_arr = _exclude_array(exclude)
     cells = tuple(n * f for n, f in zip(shape, lattice.factors))
-    b = choose_block(cells, memory, block)
-    plan = bk.plan_blocks(shape, b, factors=lattice.factors, max_level=max_level)
+    b = choose_block(cells, memory, block, order)
+    plan = bk.plan_blocks(shape, b, factors=lattice.factors, max_level=max_level,
+                          periodic=periodic)
     blocks = plan.blocks()
 
     def src(index):
@@ -336,13 +356,12 @@ def mesh_blocks(labels, output, *, block: int | None = None, memory: int | None 
                              f"exclude={exclude_arr.tolist()}); nothing is left to mesh.")
         split = bk.balance_grids(plan, {i: c[0] for i, c in zip(blocks, coarse)})
         del coarse
-        n_lattice = math.prod(n + 1 for n in plan.shape)
-        ids = bf.id_dtype(n_lattice)
+        ids = bf.id_dtype(n_global_ids(plan.shape, order))
         mat = np.dtype(np.int32) if max(present) < 2**31 else np.dtype(np.float64)
         group_ids = bk.group_table(d, present, material_names)
         options = {"exclude": exclude_arr, "present": present, "names": material_names or {},
                    "spacing": step, "kind": kind, "group_ids": group_ids, "ids": ids.str,
-                   "mat": mat.str}
+                   "mat": mat.str, "order": order}
         with atomic_write([out, folder], force=force, folders=[folder]) as (tmp_out,
                                                                           tmp_folder):
             tmp_folder.mkdir()
@@ -361,7 +380,8 @@ def mesh_blocks(labels, output, *, block: int | None = None, memory: int | None 
             else:
                 bf.write_xdmf_index(tmp_out, folder.name,
                                     [(bf.piece_names(out, s["number"])[2], s["n_points"],
-                                      s["n_cells"]) for s in written], d, ids, mat)
+                                      s["n_cells"]) for s in written], d, ids, mat,
+                                    (d + 1) * (d + 2) // 2 if order == 2 else d + 1)
     finally:
         if own_client is not None:
             own_client.close()
@@ -372,7 +392,7 @@ def mesh_blocks(labels, output, *, block: int | None = None, memory: int | None 
                    "equals_in_memory": plan.block == 1 << bk.default_top(plan.shape),
                    "spacing": list(sp), "shape": list(shape),
                    "lattice": {"cells_per_voxel": list(lattice.factors), "step": list(step)},
-                   "max_size": max_size})
+                   "max_size": max_size, "order": order, "periodic": bool(periodic)})
     return report
 
 
@@ -401,6 +421,9 @@ def _check_whole(plan, summaries, counts, present, spacing, bound) -> dict:
     d = len(plan.shape)
     problems = [f"block {s['index']}: {p}" for s in summaries for p in s["problems"]]
     problems += bk.seam_mismatches(plan, {s["index"]: s["seams"] for s in summaries})
+    if plan.periodic:
+        problems += _periodic.periodic_mismatches(
+            plan, {s["index"]: s["box"] for s in summaries})
     volumes: dict[int, int] = {}
     for s in summaries:
         for m, v in s["volumes"].items():
