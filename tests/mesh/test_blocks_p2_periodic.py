@@ -8,6 +8,8 @@ import dataclasses
 
 import numpy as np
 import pytest
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
 
 from napari_swa_imesh import build_tree
 from napari_swa_imesh.cli import main
@@ -72,7 +74,39 @@ def _periodic_reference(lab, block, exclude):
     ((13, 10, 12), 2, (0,)), ((13, 10, 12), 4, (0,)), ((13, 10, 12), 8, ()),
     ((12, 10, 14), 4, (0,)), ((17, 22), 4, (0,)), ((17, 22), 16, ())])
 def test_periodic_pieces_assemble_into_the_in_memory_mesh(shape, block, exclude):
-    lab = _volume(shape)
+    _assert_periodic_same(_volume(shape), block, exclude)
+
+
+@settings(max_examples=8, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@given(seed=st.integers(0, 2**16), block=st.sampled_from([2, 4, 8]),
+       shape=st.tuples(st.integers(3, 13), st.integers(3, 13), st.integers(3, 13)))
+def test_random_periodic_volumes_assemble_exactly(seed, block, shape):
+    rng = np.random.default_rng(seed)
+    lab = rng.integers(0, 3, shape) * (rng.random(shape) < 0.3)
+    lab[0, 0, 0] = 1
+    _assert_periodic_same(lab, block, (0,))
+
+
+@pytest.mark.parametrize("options", [{"order": 2}, {"periodic": True}])
+def test_a_misaligned_block_still_fails_the_seam_check(tmp_path, monkeypatch, options):
+    lab = _volume()
+    real = bk.mesh_block
+
+    def shifted(plan, index, *args, **kw):
+        piece = real(plan, index, *args, **kw)
+        if index == (1, 1, 1):
+            piece.gid = piece.gid + 1                  # its vertices one lattice key off
+            piece.seams = {k: v + 1 for k, v in piece.seams.items()}
+        return piece
+
+    monkeypatch.setattr(bk, "mesh_block", shifted)
+    with pytest.raises(BlockMeshError, match="disagree on their shared face"):
+        mesh_blocks(lab, tmp_path / "m.pvtu", block=4, workers=0, exclude=(0,), **options)
+    assert list(tmp_path.iterdir()) == []
+
+
+def _assert_periodic_same(lab, block, exclude):
+    shape = lab.shape
     plan, pieces = _pieces(lab, block, exclude)
     assert all(not p.problems for p in pieces)
     assert bk.seam_mismatches(plan, {p.index: p.seams for p in pieces}) == []
