@@ -19,6 +19,7 @@ worker processes is started unless a scheduler address or a client is given.
 from __future__ import annotations
 
 import math
+import time
 import uuid
 from collections.abc import Callable
 from pathlib import Path
@@ -30,6 +31,7 @@ from . import _core as bk
 from . import _files as bf
 from . import _periodic
 from ._quadratic import n_global_ids
+from ._timing import task_report, timed
 
 __all__ = ["BLOCK_SUFFIXES", "BlockMeshError", "block_memory", "choose_block", "mesh_blocks"]
 
@@ -344,8 +346,13 @@ def mesh_blocks(labels, output, *, block: int | None = None, memory: int | None 
     else:
         runner = _Local()
     try:
-        coarse = runner.map(coarse_task, [(src(i), plan, i) for i in blocks], retries,
-                            progress, "coarse")
+        client_cpu = time.process_time()
+        n_workers = (1 if isinstance(runner, _Local) else
+                     max(1, len(runner.client.scheduler_info().get("workers", {}))))
+        coarse = runner.map(timed, [(coarse_task, src(i), plan, i) for i in blocks],
+                            retries, progress, "coarse")
+        timings = {"coarse": [t for _, t in coarse]}
+        coarse = [c for c, _ in coarse]
         counts: dict[int, int] = {}
         for _, (values, n) in coarse:
             for v, c in zip(values.tolist(), n.tolist()):
@@ -366,9 +373,11 @@ def mesh_blocks(labels, output, *, block: int | None = None, memory: int | None 
                                                                           tmp_folder):
             tmp_folder.mkdir()
             summaries = runner.map(
-                mesh_task, [(src(i), plan, i, bk.block_slices(plan, split, i), n,
-                             str(tmp_folder), str(out), options)
-                            for n, i in enumerate(blocks)], retries, progress, "mesh")
+                timed, [(mesh_task, src(i), plan, i, bk.block_slices(plan, split, i), n,
+                         str(tmp_folder), str(out), options)
+                        for n, i in enumerate(blocks)], retries, progress, "mesh")
+            timings["mesh"] = [t for _, t in summaries]
+            summaries = [m for m, _ in summaries]
             report = _check_whole(plan, summaries, counts, present, step,
                                   # every element is a template scaled by the lattice
                                   # step: the worst such template is the proven bound
@@ -382,6 +391,7 @@ def mesh_blocks(labels, output, *, block: int | None = None, memory: int | None 
                                     [(bf.piece_names(out, s["number"])[2], s["n_points"],
                                       s["n_cells"]) for s in written], d, ids, mat,
                                     (d + 1) * (d + 2) // 2 if order == 2 else d + 1)
+        client_cpu = time.process_time() - client_cpu       # balance, checks, scheduler
     finally:
         if own_client is not None:
             own_client.close()
@@ -392,7 +402,9 @@ def mesh_blocks(labels, output, *, block: int | None = None, memory: int | None 
                    "equals_in_memory": plan.block == 1 << bk.default_top(plan.shape),
                    "spacing": list(sp), "shape": list(shape),
                    "lattice": {"cells_per_voxel": list(lattice.factors), "step": list(step)},
-                   "max_size": max_size, "order": order, "periodic": bool(periodic)})
+                   "max_size": max_size, "order": order, "periodic": bool(periodic),
+                   "tasks": {**task_report(timings, n_workers),
+                             "client_cpu_s": client_cpu}})
     return report
 
 
