@@ -31,6 +31,7 @@ from . import _core as bk
 from . import _files as bf
 from . import _periodic
 from ._quadratic import n_global_ids
+from ._refine import interface_cells
 from ._timing import task_report, timed
 
 __all__ = ["BLOCK_SUFFIXES", "BlockMeshError", "block_memory", "choose_block", "mesh_blocks"]
@@ -104,14 +105,19 @@ def _check_labels(data: np.ndarray, index) -> None:
         raise ValueError(f"block {tuple(index)} holds negative labels; labels are >= 0.")
 
 
-def coarse_task(source, plan: bk.BlockPlan, index):
-    """Round 1: (mixed grids, (labels, counts) of the block's own voxels)."""
+def coarse_task(source, plan: bk.BlockPlan, index, interfaces=None):
+    """Round 1: (mixed grids, (labels, counts) of the block's own lattice cells); with
+    `interfaces` (the excluded materials, for ``refine``) a cell with an interface face
+    on its boundary counts as mixed (``_refine``)."""
     data = _read(source, plan, index)
     _check_labels(data, index)
     win = bk._window_labels(plan, index, data)
     core = win[(slice(1, -1),) * win.ndim]
     values, counts = np.unique(core[core >= 0], return_counts=True)
-    return bk.mixed_grids(win, plan.top), (values, counts)
+    mixed = bk.mixed_grids(win, plan.top)
+    if interfaces is not None:
+        mixed = [m | t for m, t in zip(mixed, interface_cells(win, plan.top, interfaces))]
+    return mixed, (values, counts)
 
 
 def mesh_task(source, plan: bk.BlockPlan, index, grids, number: int, folder: str,
@@ -226,7 +232,8 @@ def mesh_blocks(labels, output, *, block: int | None = None, memory: int | None 
                 workers: int = 2, scheduler: str | None = None, client=None,
                 exclude=(), spacing=None, material_names: dict | None = None,
                 subdivide: bool = True, max_aspect: float | None = None,
-                max_size: float | None = None, order: int = 1, periodic: bool = False,
+                max_size: float | None = None, refine: int = 0, order: int = 1,
+                periodic: bool = False,
                 force: bool = False, retries: int = 2,
                 progress: Callable[[str, int, int], None] | None = None) -> dict:
     """Mesh a label volume block by block into a partitioned mesh (``.pvtu`` or ``.xdmf``).
@@ -262,6 +269,11 @@ def mesh_blocks(labels, output, *, block: int | None = None, memory: int | None 
     max_size : float, optional
         Longest element edge (physical units): leaves are split as the in-memory mesher
         splits them (a cap per level, so local to every block).
+    refine : int
+        Interface refinement ``0 .. 4``, as for
+        :func:`~napari_swa_imesh.mesh.mesh_labels`: the lattice is ``2**refine`` times
+        finer and cells touching an interface are split to one lattice cell
+        (``_refine``; decided per block from its window).
     order : {1, 2}
         Element order: 2 adds a node at the midpoint of every edge (10-node tetrahedra,
         6-node triangles; facets of order 2), global ids from the doubled lattice
@@ -314,7 +326,7 @@ def mesh_blocks(labels, output, *, block: int | None = None, memory: int | None 
     source, shape, file_spacing, _ = _open_source(labels)
     d = len(shape)
     sp = normalize_spacing(spacing if spacing is not None else file_spacing, d)
-    lattice, max_size, _ = resolution_arguments(sp, method="template", refine=0,
+    lattice, max_size, _ = resolution_arguments(sp, method="template", refine=refine,
                                                 max_size=max_size, subdivide=subdivide,
                                                 coarsen=0, max_aspect=max_aspect)
     step = tuple(float(h) for h in lattice.step)
@@ -325,9 +337,9 @@ def mesh_blocks(labels, output, *, block: int | None = None, memory: int | None 
         while not (1 << (max_level + 1)) * diagonal > max_size and max_level < 62:
             max_level += 1
     exclude_arr = _exclude_array(exclude)
-    cells = tuple(n * f for n, f in zip(shape, lattice.factors))
+    cells = tuple(n * f for n, f in zip(shape, lattice.cells_per_voxel))
     b = choose_block(cells, memory, block, order)
-    plan = bk.plan_blocks(shape, b, factors=lattice.factors, max_level=max_level,
+    plan = bk.plan_blocks(shape, b, factors=lattice.cells_per_voxel, max_level=max_level,
                           periodic=periodic)
     blocks = plan.blocks()
 
@@ -349,8 +361,9 @@ def mesh_blocks(labels, output, *, block: int | None = None, memory: int | None 
         client_cpu = time.process_time()
         n_workers = (1 if isinstance(runner, _Local) else
                      max(1, len(runner.client.scheduler_info().get("workers", {}))))
-        coarse = runner.map(timed, [(coarse_task, src(i), plan, i) for i in blocks],
-                            retries, progress, "coarse")
+        interfaces = tuple(exclude_arr.tolist()) if lattice.refine else None
+        coarse = runner.map(timed, [(coarse_task, src(i), plan, i, interfaces)
+                                    for i in blocks], retries, progress, "coarse")
         timings = {"coarse": [t for _, t in coarse]}
         coarse = [c for c, _ in coarse]
         counts: dict[int, int] = {}
@@ -401,7 +414,8 @@ def mesh_blocks(labels, output, *, block: int | None = None, memory: int | None 
                    "blocks": plan.n_blocks, "pieces": len(written),
                    "equals_in_memory": plan.block == 1 << bk.default_top(plan.shape),
                    "spacing": list(sp), "shape": list(shape),
-                   "lattice": {"cells_per_voxel": list(lattice.factors), "step": list(step)},
+                   "lattice": {"cells_per_voxel": list(lattice.cells_per_voxel),
+                               "step": list(step), "refine": lattice.refine},
                    "max_size": max_size, "order": order, "periodic": bool(periodic),
                    "tasks": {**task_report(timings, n_workers),
                              "client_cpu_s": client_cpu}})
