@@ -9,8 +9,8 @@ import pytest
 from napari_swa_imesh import build_tree
 from napari_swa_imesh.cli import main
 from napari_swa_imesh.mesh import facet_groups, mesh_labels, read_mesh
-from napari_swa_imesh.mesh.blocks import mesh_blocks, read_pvtu_groups
 from napari_swa_imesh.mesh.blocks import _core as bk
+from napari_swa_imesh.mesh.blocks import mesh_blocks, read_pvtu_groups
 from napari_swa_imesh.mesh.mesher._imesh import _mesh_tree
 from napari_swa_imesh.mesh.mesher._lattice import _InterfaceFaces, split_leaves
 
