@@ -87,7 +87,9 @@ def test_random_periodic_volumes_assemble_exactly(seed, block, shape):
     _assert_periodic_same(lab, block, (0,))
 
 
-@pytest.mark.parametrize("options", [{"order": 2}, {"periodic": True}, {"refine": 1}])
+@pytest.mark.parametrize("options", [{"order": 2}, {"periodic": True}, {"refine": 1},
+                                     {"coarsen": 1}])
+@pytest.mark.filterwarnings("ignore:coarsening by")
 def test_a_misaligned_block_still_fails_the_seam_check(tmp_path, monkeypatch, options):
     lab = _volume()
     real = bk.mesh_block

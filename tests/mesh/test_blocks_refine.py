@@ -1,5 +1,6 @@
-"""Block-wise interface refinement (issue 27): the pieces of ``refine=K`` assemble into
-the in-memory refined mesh for several block sizes (vertices, elements, groups)."""
+"""Block-wise interface refinement and coarsening (issue 27): the pieces of
+``refine=K`` / ``coarsen=C`` assemble into the in-memory mesh for several block sizes
+(vertices, elements, groups)."""
 
 from __future__ import annotations
 
@@ -76,7 +77,8 @@ def test_refined_pieces_equal_the_in_memory_refined_mesh(tmp_path, shape, k, blo
                               groups[name][np.lexsort(groups[name].T[::-1])]), name
 
 
-def test_command_line_refine(tmp_path, capsys):
+@pytest.mark.filterwarnings("ignore:coarsening by")
+def test_command_line_refine_and_coarsen(tmp_path, capsys):
     lab = _volume((9, 7, 8))
     np.save(tmp_path / "l.npy", lab.astype(np.uint8))
     out = tmp_path / "m.pvtu"
@@ -87,3 +89,41 @@ def test_command_line_refine(tmp_path, capsys):
     assert main(["mesh", str(tmp_path / "l.npy"), "-o", str(tmp_path / "n.pvtu"),
                  "--workers", "0", "--refine", "9"]) == 2
     assert not (tmp_path / "n.pvtu").exists()
+    capsys.readouterr()
+    assert main(["mesh", str(tmp_path / "l.npy"), "-o", str(tmp_path / "c.pvtu"),
+                 "--workers", "0", "--exclude", "0", "--coarsen", "1"]) == 0
+    assert "seams conforming" in capsys.readouterr().out
+    with pytest.warns(UserWarning):
+        n_ref = mesh_labels(lab, exclude=(0,), coarsen=1).n_cells
+    assert read_mesh(tmp_path / "c.pvtu").n_cells == n_ref
+
+
+# --------------------------------------------------------------------------- coarsen
+@pytest.mark.parametrize(("c", "block"), [(1, 4), (1, 16), (2, 4), (2, 8), (2, 16)])
+def test_coarsened_pieces_equal_the_in_memory_coarsened_mesh(tmp_path, c, block):
+    from napari_swa_imesh.mesh import mesh_tree
+    from napari_swa_imesh.mesh.mesher._coarsen import coarsen_labels
+
+    rng = np.random.default_rng(c)
+    lab = np.ones((21, 18, 23), np.int64)
+    lab[4:15, 6:13, 3:20] = 2
+    lab[rng.random(lab.shape) < 0.05] = 3           # specks: voted away, as in memory
+    lab[:6, :5, :7] = 4                             # a corner block that survives
+    with pytest.warns(UserWarning, match=r"removed material\(s\) 3 entirely"):
+        report = mesh_blocks(lab, tmp_path / "m.pvtu", block=block, workers=0,
+                             exclude=(0,), coarsen=c)
+    assert report["coarsen"] == {"level": c, "lost": [3]}
+    coarse = coarsen_labels(lab, c)[0]
+    if report["equals_in_memory"]:
+        with pytest.warns(UserWarning):
+            ref = mesh_labels(lab, exclude=(0,), coarsen=c)
+    else:
+        ref = mesh_tree(build_tree(coarse, top_level=block.bit_length() - 1), exclude=(0,))
+    got = read_mesh(tmp_path / "m.pvtu")
+    assert got.n_cells == ref.n_cells and len(got.points) == len(ref.points)
+    assert np.array_equal(_keys(got.points, got.cells, 1), _keys(ref.points, ref.cells, 1))
+    for m in (1, 2, 4):                             # volumes exact, of the voted labels
+        assert report["volumes"][m] == np.count_nonzero(coarse == m)
+    groups = read_pvtu_groups(tmp_path / "m.pvtu")
+    assert {n: len(g) for n, g in groups.items()} == {
+        n: len(g.facets) for n, g in facet_groups(ref).items()}

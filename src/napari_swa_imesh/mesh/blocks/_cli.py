@@ -37,7 +37,7 @@ def add_commands(subparsers) -> None:
     p.set_defaults(func=run)
 
 #: options of the in-memory path the block path does not take, with their defaults
-_NOT_HERE = {"coarsen": 0, "method": "template", "msh_ascii": False,
+_NOT_HERE = {"method": "template", "msh_ascii": False,
              "index_space": False, "full_check": False, "facet_groups": "all"}
 
 
@@ -73,7 +73,7 @@ def run_blocks(args: argparse.Namespace, names: dict[int, str]) -> int:
     used = [k for k, v in _NOT_HERE.items() if getattr(args, k, v) != v]
     if used:
         raise ValueError(f"--{used[0].replace('_', '-')} is not available for block-wise "
-                         "meshing (template method, no coarsening); leave it "
+                         "meshing (template method only); leave it "
                          "out, or mesh in memory with another output suffix.")
     if args.order not in ("1", "2"):
         raise ValueError(f"--order must be 1 or 2, not {args.order!r}.")
@@ -96,7 +96,7 @@ def run_blocks(args: argparse.Namespace, names: dict[int, str]) -> int:
                              material_names=names, subdivide=not args.no_subdivide,
                              max_aspect=args.max_aspect, max_size=args.max_size,
                              refine=args.refine, order=int(args.order),
-                             periodic=args.periodic,
+                             periodic=args.periodic, coarsen=args.coarsen,
                              force=args.force, progress=progress)
     if args.json:
         print(json.dumps(report))   # plain ints, floats, strings and lists

@@ -76,6 +76,8 @@ class BlockPlan:
         ``_lattice.lattice_tree``'s ``max_size`` does).
     periodic : bool
         Leaves touching the image box are split to one lattice cell (``_periodic``).
+    coarsen : int
+        Voxels are voted in cubes of ``2**coarsen`` first (``_coarsen``).
     """
 
     shape: tuple[int, ...]
@@ -83,6 +85,7 @@ class BlockPlan:
     factors: tuple[int, ...] = ()
     max_level: int | None = None
     periodic: bool = False
+    coarsen: int = 0
 
     @property
     def rule(self) -> str:
@@ -150,8 +153,8 @@ def default_top(shape) -> int:
     return max(0, int(np.floor(np.log2(max(1, min(shape))))))
 
 
-def plan_blocks(shape, block: int | None = None, *, factors=(),
-                max_level: int | None = None, periodic: bool = False) -> BlockPlan:
+def plan_blocks(shape, block: int | None = None, *, factors=(), max_level: int | None = None,
+                periodic: bool = False, coarsen: int = 0) -> BlockPlan:
     """The block plan of a volume: `block` a power of two, at most the default root.
 
     `shape` is the volume's; with `factors` (cells per voxel) the plan is on its lattice,
@@ -166,7 +169,8 @@ def plan_blocks(shape, block: int | None = None, *, factors=(),
     block = int(block)
     if block < 2 or block & (block - 1):
         raise ValueError(f"block must be a power of two of at least 2 voxels; got {block}.")
-    return BlockPlan(shape, min(block, max(2, cap)), factors, max_level, bool(periodic))
+    return BlockPlan(shape, min(block, max(2, cap)), factors, max_level, bool(periodic),
+                     int(coarsen))
 
 
 def _window_labels(plan: BlockPlan, index, data: np.ndarray) -> np.ndarray:

@@ -30,6 +30,7 @@ from ..formats._registry import PARTITIONED, PVTU, XDMF_INDEX
 from . import _core as bk
 from . import _files as bf
 from . import _periodic
+from ._coarsen import coarsened, read_slices
 from ._quadratic import n_global_ids
 from ._refine import interface_cells
 from ._timing import task_report, timed
@@ -84,14 +85,22 @@ def choose_block(shape, memory: int | None, block: int | None = None,
 
 
 # ----------------------------------------------------------------------------- tasks
-def _read(source, plan: bk.BlockPlan, index) -> np.ndarray:
+def _read(source, plan: bk.BlockPlan, index, raw: list | None = None) -> np.ndarray:
     """The block's window on the lattice: its voxels from a path (opened here, on the
-    worker) or the array slice the caller handed over, repeated by the plan's factors."""
+    worker) or the array slice the caller handed over (``read_slices``), coarsened when
+    asked (the labels before the vote appended to `raw`), repeated by the plan's
+    factors."""
+    slices, crop = read_slices(plan, index)
     if not isinstance(source, np.ndarray):
         from ..._zarr_io import open_lazy
 
         image, _ = open_lazy(source)
-        source = np.asarray(image[plan.voxel_window(index)[0]].compute(scheduler="sync"))
+        source = np.asarray(image[slices].compute(scheduler="sync"))
+    if crop is not None:
+        _check_labels(source, index)                  # before the vote, which trusts them
+        if raw is not None:
+            raw.append(np.unique(source))
+        source = coarsened(source, plan, crop)
     return plan.to_lattice(source, index)
 
 
@@ -109,7 +118,8 @@ def coarse_task(source, plan: bk.BlockPlan, index, interfaces=None):
     """Round 1: (mixed grids, (labels, counts) of the block's own lattice cells); with
     `interfaces` (the excluded materials, for ``refine``) a cell with an interface face
     on its boundary counts as mixed (``_refine``)."""
-    data = _read(source, plan, index)
+    raw: list = []
+    data = _read(source, plan, index, raw)
     _check_labels(data, index)
     win = bk._window_labels(plan, index, data)
     core = win[(slice(1, -1),) * win.ndim]
@@ -117,7 +127,7 @@ def coarse_task(source, plan: bk.BlockPlan, index, interfaces=None):
     mixed = bk.mixed_grids(win, plan.top)
     if interfaces is not None:
         mixed = [m | t for m, t in zip(mixed, interface_cells(win, plan.top, interfaces))]
-    return mixed, (values, counts)
+    return mixed, (values, counts, raw[0] if raw else values)
 
 
 def mesh_task(source, plan: bk.BlockPlan, index, grids, number: int, folder: str,
@@ -233,7 +243,7 @@ def mesh_blocks(labels, output, *, block: int | None = None, memory: int | None 
                 exclude=(), spacing=None, material_names: dict | None = None,
                 subdivide: bool = True, max_aspect: float | None = None,
                 max_size: float | None = None, refine: int = 0, order: int = 1,
-                periodic: bool = False,
+                periodic: bool = False, coarsen: int = 0,
                 force: bool = False, retries: int = 2,
                 progress: Callable[[str, int, int], None] | None = None) -> dict:
     """Mesh a label volume block by block into a partitioned mesh (``.pvtu`` or ``.xdmf``).
@@ -274,6 +284,9 @@ def mesh_blocks(labels, output, *, block: int | None = None, memory: int | None 
         :func:`~napari_swa_imesh.mesh.mesh_labels`: the lattice is ``2**refine`` times
         finer and cells touching an interface are split to one lattice cell
         (``_refine``; decided per block from its window).
+    coarsen : int
+        ``0 .. 5``: voxels voted in cubes of ``2**coarsen`` (majority label) first, as
+        :func:`~napari_swa_imesh.mesh.mesh_labels` does (``_coarsen``).
     order : {1, 2}
         Element order: 2 adds a node at the midpoint of every edge (10-node tetrahedra,
         6-node triangles; facets of order 2), global ids from the doubled lattice
@@ -303,7 +316,7 @@ def mesh_blocks(labels, output, *, block: int | None = None, memory: int | None 
     """
     from ..._atomic import atomic_write, check_writable
     from ..._validation import normalize_spacing
-    from ..mesher._door import resolution_arguments
+    from ..mesher._door import resolution_arguments, warn_lost_materials
     from ..mesher._imesh import _exclude_array
     from ..mesher._templates import template_quality
 
@@ -326,9 +339,9 @@ def mesh_blocks(labels, output, *, block: int | None = None, memory: int | None 
     source, shape, file_spacing, _ = _open_source(labels)
     d = len(shape)
     sp = normalize_spacing(spacing if spacing is not None else file_spacing, d)
-    lattice, max_size, _ = resolution_arguments(sp, method="template", refine=refine,
-                                                max_size=max_size, subdivide=subdivide,
-                                                coarsen=0, max_aspect=max_aspect)
+    lattice, max_size, coarsen = resolution_arguments(
+        sp, method="template", refine=refine, max_size=max_size, subdivide=subdivide,
+        coarsen=coarsen, max_aspect=max_aspect)
     step = tuple(float(h) for h in lattice.step)
     max_level = None
     if max_size is not None:
@@ -340,12 +353,12 @@ def mesh_blocks(labels, output, *, block: int | None = None, memory: int | None 
     cells = tuple(n * f for n, f in zip(shape, lattice.cells_per_voxel))
     b = choose_block(cells, memory, block, order)
     plan = bk.plan_blocks(shape, b, factors=lattice.cells_per_voxel, max_level=max_level,
-                          periodic=periodic)
+                          periodic=periodic, coarsen=coarsen)
     blocks = plan.blocks()
 
     def src(index):
         if isinstance(source, np.ndarray):
-            return source[plan.voxel_window(index)[0]]
+            return source[read_slices(plan, index)[0]]
         return source
 
     own_client = cluster = None
@@ -367,9 +380,13 @@ def mesh_blocks(labels, output, *, block: int | None = None, memory: int | None 
         timings = {"coarse": [t for _, t in coarse]}
         coarse = [c for c, _ in coarse]
         counts: dict[int, int] = {}
-        for _, (values, n) in coarse:
+        before: set[int] = set()
+        for _, (values, n, raw) in coarse:
             for v, c in zip(values.tolist(), n.tolist()):
                 counts[v] = counts.get(v, 0) + c
+            before.update(raw.tolist())
+        lost = sorted(before - set(counts))           # voted away by the coarsening
+        warn_lost_materials({"level": coarsen, "lost": lost}, material_names)
         present = sorted(m for m in counts if m not in set(exclude_arr.tolist()))
         if not present:
             raise ValueError(f"every voxel is excluded (labels present: {sorted(counts)}, "
@@ -417,6 +434,7 @@ def mesh_blocks(labels, output, *, block: int | None = None, memory: int | None 
                    "lattice": {"cells_per_voxel": list(lattice.cells_per_voxel),
                                "step": list(step), "refine": lattice.refine},
                    "max_size": max_size, "order": order, "periodic": bool(periodic),
+                   "coarsen": {"level": coarsen, "lost": lost},
                    "tasks": {**task_report(timings, n_workers),
                              "client_cpu_s": client_cpu}})
     return report
