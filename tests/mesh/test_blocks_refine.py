@@ -127,3 +127,18 @@ def test_coarsened_pieces_equal_the_in_memory_coarsened_mesh(tmp_path, c, block)
     groups = read_pvtu_groups(tmp_path / "m.pvtu")
     assert {n: len(g) for n, g in groups.items()} == {
         n: len(g.facets) for n, g in facet_groups(ref).items()}
+
+
+@pytest.mark.filterwarnings("ignore:coarsening by")
+@pytest.mark.parametrize("options", [
+    {"refine": 1, "periodic": True}, {"coarsen": 1, "refine": 1, "order": 2},
+    {"periodic": True, "spacing": (2.0, 1.0, 1.0)},
+    {"coarsen": 1, "periodic": True, "max_size": 3.0}])
+def test_options_combine_as_in_memory(tmp_path, options):
+    lab = _volume((13, 10, 12))
+    report = mesh_blocks(lab, tmp_path / "m.pvtu", workers=0, exclude=(0,), **options)
+    assert report["equals_in_memory"]
+    ref = mesh_labels(lab, exclude=(0,), **{k: v for k, v in options.items() if k != "order"})
+    got = read_mesh(tmp_path / "m.pvtu")
+    assert got.n_cells == ref.n_cells and len(got.points) == len(ref.points)
+    assert np.array_equal(_keys(got.points, got.cells, 2), _keys(ref.points, ref.cells, 2))
