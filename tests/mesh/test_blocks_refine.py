@@ -142,3 +142,16 @@ def test_options_combine_as_in_memory(tmp_path, options):
     got = read_mesh(tmp_path / "m.pvtu")
     assert got.n_cells == ref.n_cells and len(got.points) == len(ref.points)
     assert np.array_equal(_keys(got.points, got.cells, 2), _keys(ref.points, ref.cells, 2))
+
+
+def test_coarsening_takes_whole_valued_float_labels_and_refuses_others(tmp_path):
+    lab = np.ones((12, 10, 9))
+    lab[3:8, 2:6, 1:7] = 2.0
+    np.save(tmp_path / "l.npy", lab)
+    report = mesh_blocks(tmp_path / "l.npy", tmp_path / "m.pvtu", workers=0, coarsen=1)
+    assert report["n_elements"] == mesh_labels(lab, coarsen=1).n_cells
+    lab[0, 0, 0] = 0.5
+    np.save(tmp_path / "k.npy", lab)
+    with pytest.raises(ValueError, match="non-integer labels"):
+        mesh_blocks(tmp_path / "k.npy", tmp_path / "n.pvtu", workers=0, coarsen=1)
+    assert not (tmp_path / "n.pvtu").exists() and not (tmp_path / "n").exists()

@@ -98,6 +98,8 @@ def _read(source, plan: bk.BlockPlan, index, raw: list | None = None) -> np.ndar
         source = np.asarray(image[slices].compute(scheduler="sync"))
     if crop is not None:
         _check_labels(source, index)                  # before the vote, which trusts them
+        if source.dtype.kind == "f":
+            source = source.astype(np.int64)          # whole numbers (checked)
         if raw is not None:
             raw.append(np.unique(source))
         source = coarsened(source, plan, crop)
