@@ -67,18 +67,11 @@ def _cell_keys(ids: np.ndarray, shape) -> np.ndarray:
     """The face cell of each facet (rows of global ids): the global id of its
     componentwise lowest corner (every box facet lies in one lattice cell's face)."""
     d = len(shape)
-    lows = []
-    stride = 1
-    strides = []
-    for a in reversed(range(d)):
-        strides.append(stride)
-        stride *= int(shape[a]) + 1
-    strides = strides[::-1]
+    strides = [int(np.prod([int(n) + 1 for n in shape[a + 1:]])) for a in range(d)]
     key = np.zeros(len(ids), np.int64)
     for a in range(d):
         coord = (ids // strides[a]) % (int(shape[a]) + 1)              # (F, d)
-        lows.append(coord.min(axis=1))
-        key += lows[-1] * strides[a]
+        key += coord.min(axis=1) * strides[a]
     return key
 
 
