@@ -259,7 +259,10 @@ def test_command_line_order_2_and_periodic(tmp_path, capsys):
         out = tmp_path / f"m{option[0][2:]}.pvtu"
         assert main(["mesh", str(tmp_path / "l.npy"), "-o", str(out), "--workers", "0",
                      "--exclude", "0"] + option) == 0
-        assert "seams conforming" in capsys.readouterr().out
+        said = capsys.readouterr().out
+        assert "seams conforming" in said
+        assert ("10-node elements" in said) == (option[0] == "--order")
+        assert ("box faces periodic" in said) == (option[0] == "--periodic")
         assert check(read_mesh(out))
     assert main(["mesh", str(tmp_path / "l.npy"), "-o", str(tmp_path / "x.pvtu"),
                  "--workers", "0", "--order", "3"]) == 2

@@ -107,7 +107,10 @@ def run_blocks(args: argparse.Namespace, names: dict[int, str]) -> int:
         print(f"wrote {report['output']} ({report['pieces']} pieces in "
               f"{report['pieces_folder']}, blocks of {report['block']}^{len(report['shape'])}"
               f" {unit}): {report['n_elements']} elements, worst radius-to-edge "
-              f"{report['worst_ratio']:.4f} (bound {report['quality_bound']:.4f}); seams "
-              f"conforming; volumes exact ({vols})"
+              f"{report['worst_ratio']:.4f} (bound {report['quality_bound']:.4f})"
+              + ("; 10-node elements" if report["order"] == 2 and len(report["shape"]) == 3
+                 else "; 6-node elements" if report["order"] == 2 else "")
+              + ("; box faces periodic" if report["periodic"] else "")
+              + f"; seams conforming; volumes exact ({vols})"
               + ("" if memory is None else f"; {format_bytes(memory)} per worker"))
     return 0
