@@ -1,7 +1,7 @@
 """Block-wise meshing benchmark (issue 27): throughput against the in-memory mesher, 1 vs
 2 workers, and a big volume under a memory cap.
 
-Run:  python benchmarks/bench_blocks.py [--n 256] [--no-weak] [--big]
+Run:  python benchmarks/bench_blocks.py [--n 256] [--no-weak] [--weak] [--big [--compare]]
 
 Every run is a ``swa-imesh mesh`` subprocess, so both paths pay the same: reading the
 labels, meshing, checks, facet groups and writing (``.vtu`` in memory, ``.pvtu`` pieces
@@ -16,9 +16,15 @@ scheduler, nanny and worker processes), sampled every 0.2 s with psutil.
    at block faces).
 2. Weak scaling: 1 worker on ``n^3`` against 2 workers on ``2n x n x n`` (twice the work);
    efficiency ``t1 / t2`` (1 is perfect), with the load average around each run.
+   ``--weak`` runs only this pair and adds what each task measured inside itself
+   (``mesh.blocks._timing``): CPU and busy seconds per worker, the busy fraction of each
+   round (1: no worker waited), worker CPU per voxel against the 1-worker run and the
+   critical path from those CPU times, which do not depend on the machine's load.
 3. ``--big``: a brain-like 400 x 470 x 380 volume in 128^3 chunks, 2 workers at
    ``--memory 4GB``; its peak must stay under 10 GB. Heavy: run it alone, as
-   ``flock /work/wt/heavy.lock python benchmarks/bench_blocks.py --big``.
+   ``flock /work/wt/heavy.lock python benchmarks/bench_blocks.py --big``; ``--compare``
+   also runs the in-memory mesh of the same labels (about 5 GB measured; skipped when
+   fewer than 18 GB are free) and compares the element counts.
 """
 
 from __future__ import annotations
@@ -197,11 +203,61 @@ def throughput(n: int, folder: Path, weak: bool = True) -> None:
               "measures the machine, the critical-path ratio the code")
 
 
-def big(folder: Path) -> None:
+def _task_line(name: str, row: dict) -> str:
+    """Per-worker CPU and busy seconds and the rounds' busy fractions, from the tasks'
+    own timings (``report["tasks"]``, measured inside each task)."""
+    t = row["report"]["tasks"]
+    workers = ", ".join(f"{w['cpu_s']:.1f}/{w['busy_s']:.1f}" for w in t["workers"])
+    rounds = ", ".join(f"{k} {v['busy_fraction']:.2f}" for k, v in t["rounds"].items())
+    return (f"  {name}: {t['n_workers']} worker(s), CPU/busy s per worker [{workers}], "
+            f"busy fraction per round [{rounds}], command's CPU {t['client_cpu_s']:.1f} s")
+
+
+def weak(n: int, folder: Path) -> None:
+    """Weak scaling only: 1 worker on ``n^3`` against 2 workers on ``2n x n x n``, with
+    figures that do not depend on the machine's load (in-task CPU per worker, busy
+    fractions) beside the wall times."""
+    runs = {}
+    for w, shape, seed in ((1, (n, n, n), 0), (2, (2 * n, n, n), 1)):
+        write_zarr(brain_like_shape(shape, seed=seed), folder / f"w{w}.zarr")
+        runs[w] = run_tree(_blocks_cmd(folder / f"w{w}.zarr", folder / f"w{w}.pvtu", w))
+        if runs[w]["rc"]:
+            print(f"{w} worker(s) failed: {runs[w].get('error')}")
+            return
+    one, two = runs[1], runs[2]
+    t1, t2 = one["report"]["tasks"], two["report"]["tasks"]
+    cpu1 = sum(w["cpu_s"] for w in t1["workers"])
+    cpu2 = sum(w["cpu_s"] for w in t2["workers"])
+    busiest = max(w["cpu_s"] for w in t2["workers"])
+    path1 = t1["client_cpu_s"] + cpu1
+    path2 = t2["client_cpu_s"] + busiest
+    print(f"weak scaling, brain-like, Zarr chunks 128^3, --memory 4GB, background excluded:"
+          f" 1 worker on {n}^3, 2 workers on {2 * n}x{n}x{n}")
+    for name, row in (("1 worker", one), ("2 workers", two)):
+        print(f"  {name}: {row['seconds']:.1f} s wall, {row['cpu']:.1f} s CPU of the tree, "
+              f"peak {row['peak'] / 2**30:.2f} GB, {_elements(row)} elements, load "
+              f"{row['load'][0]:.1f}->{row['load'][1]:.1f}")
+        print(_task_line(name, row))
+    print(f"  wall-time efficiency t1/t2 = {one['seconds'] / two['seconds']:.2f} (1 is "
+          "perfect; meaningful on an idle machine)")
+    print(f"  load-independent: worker CPU per voxel {cpu2 / 2 / cpu1:.2f}x the 1-worker "
+          f"run's (1: no extra work), busiest worker {busiest / (cpu2 / 2):.2f}x the mean "
+          f"(1: balanced), mesh-round busy fraction {t2['rounds']['mesh']['busy_fraction']:.2f}"
+          f" (1: workers never wait), critical path (command CPU + busiest worker's CPU) "
+          f"{path1:.1f} s -> {path2:.1f} s: efficiency {path1 / path2:.2f}")
+
+
+def big(folder: Path, compare: bool = False) -> None:
+    """The 400 x 470 x 380 case; with `compare`, also the in-memory mesh of the same
+    labels (``--memory-limit off``; about 7-16 GB: only when the machine has them free)."""
+    import psutil
+
     shape = (400, 470, 380)
     labels = brain_like_shape(shape)
     write_zarr(labels, folder / "big.zarr")
     counts = np.bincount(labels.ravel(), minlength=6)
+    if compare:
+        np.save(folder / "big.npy", labels)
     del labels
     cmd = [sys.executable, "-m", "napari_swa_imesh.cli", "mesh", str(folder / "big.zarr"),
            "-o", str(folder / "big.pvtu"), "--exclude", "0", "--workers", "2", "--memory",
@@ -214,11 +270,30 @@ def big(folder: Path) -> None:
         return
     r = row["report"]
     exact = all(abs(r["volumes"][str(m)] - counts[m]) == 0 for m in range(1, 6))
-    print(f"  {row['seconds']:.0f} s, peak of the process tree {row['peak'] / 2**30:.2f} GB "
+    print(f"  {row['seconds']:.0f} s wall, {row['cpu']:.0f} s CPU (critical path "
+          f"{row['critical']:.0f} s), peak of the process tree {row['peak'] / 2**30:.2f} GB "
           f"(goal <= 10 GB: {'met' if row['peak'] <= 10 * 2**30 else 'NOT met'}), "
           f"{r['pieces']} pieces of {r['block']}^3, {r['n_elements']} elements, worst ratio "
           f"{r['worst_ratio']:.4f} (bound {r['quality_bound']:.4f}), seams conforming, "
           f"per-material volumes equal to the voxel counts: {exact}")
+    if not compare:
+        return
+    free = psutil.virtual_memory().available
+    if free < 18 * 2**30:
+        print(f"  in-memory comparison skipped: {free / 2**30:.1f} GB available, 18 needed")
+        return
+    mem = run_tree([sys.executable, "-m", "napari_swa_imesh.cli", "mesh",
+                    str(folder / "big.npy"), "-o", str(folder / "mem.vtu"), "--exclude", "0",
+                    "--memory-limit", "off", "--json"])
+    if mem["rc"]:
+        print(f"  in-memory run failed: {mem.get('error')}")
+        return
+    n_mem = _elements(mem) or 0
+    diff = (r["n_elements"] - n_mem) / max(1, n_mem)
+    print(f"  in memory (.vtu): {mem['seconds']:.0f} s wall, {mem['cpu']:.0f} s CPU, peak "
+          f"{mem['peak'] / 2**30:.2f} GB, {n_mem} elements; block-wise count "
+          f"{100 * diff:+.3f} % of it (goal within 1 %: "
+          f"{'met' if abs(diff) <= 0.01 else 'NOT met'})")
 
 
 def main() -> None:
@@ -226,10 +301,17 @@ def main() -> None:
     ap.add_argument("--n", type=int, default=256, help="side of the throughput volume")
     ap.add_argument("--big", action="store_true", help="only the 400x470x380 case (heavy)")
     ap.add_argument("--no-weak", action="store_true", help="skip the weak-scaling run")
+    ap.add_argument("--weak", action="store_true",
+                    help="only weak scaling (1 worker n^3, 2 workers 2n x n x n), with "
+                         "per-worker CPU and busy fractions")
+    ap.add_argument("--compare", action="store_true",
+                    help="with --big: also the in-memory mesh (needs ~18 GB free)")
     args = ap.parse_args()
     with tempfile.TemporaryDirectory(dir=".") as tmp:
         if args.big:
-            big(Path(tmp))
+            big(Path(tmp), compare=args.compare)
+        elif args.weak:
+            weak(args.n, Path(tmp))
         else:
             throughput(args.n, Path(tmp), weak=not args.no_weak)
 

@@ -255,9 +255,9 @@ def test_command_line(tmp_path, capsys):
     assert read_mesh(out).n_cells == mesh_labels(lab, exclude=(0,)).n_cells
     # refused before any work, one sentence, nothing written
     code = main(["mesh", str(tmp_path / "l.npy"), "-o", str(tmp_path / "n.pvtu"),
-                 "--refine", "1"])
+                 "--method", "delaunay"])
     err = capsys.readouterr().err
-    assert code == 2 and err.count("\n") == 1 and "--refine is not available" in err
+    assert code == 2 and err.count("\n") == 1 and "--method is not available" in err
     assert main(["mesh", str(tmp_path / "l.npy"), "-o", str(out), "--workers", "0"]) == 2
     assert "already exists" in capsys.readouterr().err
     assert main(["mesh", str(tmp_path / "l.npy"), "-o", str(out), "--workers", "0",

@@ -62,7 +62,7 @@ def test_the_command_line_takes_spacing_and_max_size(tmp_path, capsys):
                                                  max_size=6).n_cells
     capsys.readouterr()
     # still refused, before any work: one sentence naming the option
-    for option in (["--coarsen", "1"], ["--periodic"], ["--order", "2"]):
+    for option in (["--method", "delaunay"], ["--full-check"]):
         code = main(["mesh", str(tmp_path / "l.npy"), "-o", str(tmp_path / "n.pvtu"),
                      "--workers", "0"] + option)
         err = capsys.readouterr().err

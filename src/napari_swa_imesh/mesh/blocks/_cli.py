@@ -37,9 +37,8 @@ def add_commands(subparsers) -> None:
     p.set_defaults(func=run)
 
 #: options of the in-memory path the block path does not take, with their defaults
-_NOT_HERE = {"refine": 0, "coarsen": 0, "periodic": False, "method": "template",
-             "order": "1", "msh_ascii": False, "index_space": False, "full_check": False,
-             "facet_groups": "all"}
+_NOT_HERE = {"method": "template", "msh_ascii": False,
+             "index_space": False, "full_check": False, "facet_groups": "all"}
 
 
 def add_block_arguments(p: argparse.ArgumentParser) -> None:
@@ -74,9 +73,10 @@ def run_blocks(args: argparse.Namespace, names: dict[int, str]) -> int:
     used = [k for k, v in _NOT_HERE.items() if getattr(args, k, v) != v]
     if used:
         raise ValueError(f"--{used[0].replace('_', '-')} is not available for block-wise "
-                         "meshing (first order, template method, no refinement, coarsening "
-                         "or periodic faces); leave it out, or mesh in memory with another "
-                         "output suffix.")
+                         "meshing (template method only); leave it "
+                         "out, or mesh in memory with another output suffix.")
+    if args.order not in ("1", "2"):
+        raise ValueError(f"--order must be 1 or 2, not {args.order!r}.")
     memory = parse_memory_size(args.memory) if args.memory else None
     if args.workers is not None and args.scheduler:
         raise ValueError("give --workers or --scheduler, not both: a scheduler has its own "
@@ -95,6 +95,8 @@ def run_blocks(args: argparse.Namespace, names: dict[int, str]) -> int:
                              exclude=tuple(args.exclude), spacing=args.spacing,
                              material_names=names, subdivide=not args.no_subdivide,
                              max_aspect=args.max_aspect, max_size=args.max_size,
+                             refine=args.refine, order=int(args.order),
+                             periodic=args.periodic, coarsen=args.coarsen,
                              force=args.force, progress=progress)
     if args.json:
         print(json.dumps(report))   # plain ints, floats, strings and lists
@@ -105,7 +107,10 @@ def run_blocks(args: argparse.Namespace, names: dict[int, str]) -> int:
         print(f"wrote {report['output']} ({report['pieces']} pieces in "
               f"{report['pieces_folder']}, blocks of {report['block']}^{len(report['shape'])}"
               f" {unit}): {report['n_elements']} elements, worst radius-to-edge "
-              f"{report['worst_ratio']:.4f} (bound {report['quality_bound']:.4f}); seams "
-              f"conforming; volumes exact ({vols})"
+              f"{report['worst_ratio']:.4f} (bound {report['quality_bound']:.4f})"
+              + ("; 10-node elements" if report["order"] == 2 and len(report["shape"]) == 3
+                 else "; 6-node elements" if report["order"] == 2 else "")
+              + ("; box faces periodic" if report["periodic"] else "")
+              + f"; seams conforming; volumes exact ({vols})"
               + ("" if memory is None else f"; {format_bytes(memory)} per worker"))
     return 0

@@ -41,6 +41,7 @@ from ..formats._common import material_names
 from ..mesher._balance import _any_children, _dilate
 from ..mesher._packed import pack_points
 from ..mesher._templates import template_mesh, template_quality
+from . import _periodic
 from . import _piece as pc
 
 __all__ = [
@@ -73,12 +74,23 @@ class BlockPlan:
     max_level : int, optional
         Largest leaf level (a size cap: every cell above it is split, as
         ``_lattice.lattice_tree``'s ``max_size`` does).
+    periodic : bool
+        Leaves touching the image box are split to one lattice cell (``_periodic``).
+    coarsen : int
+        Voxels are voted in cubes of ``2**coarsen`` first (``_coarsen``).
     """
 
     shape: tuple[int, ...]
     block: int
     factors: tuple[int, ...] = ()
     max_level: int | None = None
+    periodic: bool = False
+    coarsen: int = 0
+
+    @property
+    def rule(self) -> str:
+        """The 3-D face-diagonal rule of the mesh (the in-memory mesher's)."""
+        return _periodic.diagonal_rule(self.shape, self.periodic)
 
     @property
     def top(self) -> int:
@@ -141,8 +153,8 @@ def default_top(shape) -> int:
     return max(0, int(np.floor(np.log2(max(1, min(shape))))))
 
 
-def plan_blocks(shape, block: int | None = None, *, factors=(),
-                max_level: int | None = None) -> BlockPlan:
+def plan_blocks(shape, block: int | None = None, *, factors=(), max_level: int | None = None,
+                periodic: bool = False, coarsen: int = 0) -> BlockPlan:
     """The block plan of a volume: `block` a power of two, at most the default root.
 
     `shape` is the volume's; with `factors` (cells per voxel) the plan is on its lattice,
@@ -157,7 +169,8 @@ def plan_blocks(shape, block: int | None = None, *, factors=(),
     block = int(block)
     if block < 2 or block & (block - 1):
         raise ValueError(f"block must be a power of two of at least 2 voxels; got {block}.")
-    return BlockPlan(shape, min(block, max(2, cap)), factors, max_level)
+    return BlockPlan(shape, min(block, max(2, cap)), factors, max_level, bool(periodic),
+                     int(coarsen))
 
 
 def _window_labels(plan: BlockPlan, index, data: np.ndarray) -> np.ndarray:
@@ -195,6 +208,8 @@ def balance_grids(plan: BlockPlan, mixed_of: dict) -> list[np.ndarray | None]:
         side = plan.block >> k
         for index, mixed in mixed_of.items():
             grid[tuple(slice(i * side, (i + 1) * side) for i in index)] = mixed[k - 1]
+        if plan.periodic:
+            grid |= _periodic.box_cells(plan.shape, grid.shape, k)
         below = split[k - 1]
         if plan.max_level is not None and k > plan.max_level:
             grid[...] = True                                     # the size cap
@@ -358,7 +373,7 @@ def mesh_block(plan: BlockPlan, index, data: np.ndarray, grids: list, *,
     shift, extent = _frame(origin, level, meshed)
     local = RegionTree(origin - shift, level, label, extent, extent, plan.top)
     pts, cells, leaf_of, template_id, _, packed, _ = template_mesh(local, meshed,
-                                                                   rule="parity")
+                                                                   rule=plan.rule)
     points = pts.astype(np.int64) + shift
     del pts
     table = template_quality(d, tuple(spacing) if spacing is not None else (1.0,) * d)

@@ -35,6 +35,7 @@ import numpy as np
 
 from ..formats._registry import PARTITIONED, PVTU, XDMF_INDEX, facets_companion
 from ..formats._vtu import write_vtu
+from ._quadratic import quadratic_arrays
 
 __all__ = [
     "id_dtype",
@@ -71,63 +72,77 @@ def piece_names(output, number: int) -> tuple[str, str, str]:
             piece.with_suffix(PARTITIONED[XDMF_INDEX]).name)
 
 
-def _file_arrays(piece, spacing, ids: np.dtype, mat: np.dtype):
-    """Points (x, y(, z)) and cells in the files' frame; reversing the axes is an odd
-    permutation (2-D and 3-D), so two corners of every cell are swapped to keep it
-    positively oriented."""
+def _file_arrays(piece, spacing, ids: np.dtype, mat: np.dtype, order: int = 1,
+                 shape=None):
+    """Points (x, y(, z)), cells, cell data, point data and the facet groups' facets
+    (name -> nodes) in the files' frame; reversing the axes is an odd permutation (2-D
+    and 3-D), so two corners of every cell (and facet) are swapped to keep it positively
+    oriented. At `order` 2 the mid-edge nodes follow (``_quadratic``; `shape`: the
+    lattice's)."""
     d = piece.points.shape[1]
-    pts = (piece.points * np.asarray(spacing, float))[:, ::-1]
     swap = [1, 0] + list(range(2, d + 1))
-    return pts, piece.cells[:, swap], {
+    flip = [1, 0] + list(range(2, d))
+    names = list(piece.groups)
+    points, gid, cells = piece.points, piece.gid, piece.cells[:, swap]
+    facets = [piece.groups[n][0][:, flip] for n in names]
+    if order == 2:
+        points, gid, cells, facets = quadratic_arrays(points, gid, cells, facets, shape)
+    pts = (points * np.asarray(spacing, float))[:, ::-1]
+    return pts, cells, {
         "material": piece.material.astype(mat), "quality": piece.quality.astype(np.float64),
-        "level": piece.level.astype(np.int8)}, {"global_id": piece.gid.astype(ids)}
+        "level": piece.level.astype(np.int8)}, {"global_id": gid.astype(ids)}, dict(
+            zip(names, facets))
 
 
 def write_piece_vtu(folder: Path, output, number: int, piece, spacing, group_ids: dict,
-                    ids: np.dtype, mat: np.dtype) -> None:
-    """Write piece `number` and its facet companion into `folder`."""
+                    ids: np.dtype, mat: np.dtype, order: int = 1, shape=None) -> int:
+    """Write piece `number` and its facet companion into `folder` (at `order` 2 with
+    mid-edge nodes: `shape` is the lattice's); returns the nodes written."""
     name, facets_name, _ = piece_names(output, number)
-    pts, cells, cell_data, point_data = _file_arrays(piece, spacing, ids, mat)
+    pts, cells, cell_data, point_data, facet_nodes = _file_arrays(
+        piece, spacing, ids, mat, order, shape)
     write_vtu(folder / name, pts, cells, cell_data=cell_data, point_data=point_data)
     d = pts.shape[1]
     names = [n for n in group_ids if n in piece.groups]
-    flip = [1, 0] + list(range(2, d))
-    facets = np.concatenate([np.zeros((0, d), np.intp)]
-                            + [piece.groups[n][0][:, flip] for n in names])
+    width = d if order == 1 else 3 * d - 3
+    facets = np.concatenate([np.zeros((0, width), np.intp)] + [facet_nodes[n] for n in names])
     group = np.concatenate([np.zeros(0, np.int32)]
                            + [np.full(len(piece.groups[n][1]), group_ids[n], np.int32)
                               for n in names])
     owner = np.concatenate([np.zeros(0, np.int64)] + [piece.groups[n][1] for n in names])
     write_vtu(folder / facets_name, pts, facets, cell_data={"group": group, "owner": owner},
               field_data={n: [group_ids[n]] for n in group_ids},
-              cell_type=5 if d == 3 else 3)
+              cell_type={(2, 1): 3, (2, 2): 21, (3, 1): 5, (3, 2): 22}[(d, order)])
+    return len(pts)
 
 
 def write_piece_h5(folder: Path, output, number: int, piece, spacing, group_ids: dict,
-                   ids: np.dtype, mat: np.dtype) -> None:
+                   ids: np.dtype, mat: np.dtype, order: int = 1, shape=None) -> int:
     """Write piece `number` as one HDF5 file: points, cells, cell and point data, and each
-    facet group as ``facets/<name>`` (vertex ids) and ``owners/<name>``."""
+    facet group as ``facets/<name>`` (vertex ids) and ``owners/<name>``; returns the
+    nodes written."""
     from ..._atomic import hdf5_file
 
     _, _, h5_name = piece_names(output, number)
-    pts, cells, cell_data, point_data = _file_arrays(piece, spacing, ids, mat)
+    pts, cells, cell_data, point_data, facet_nodes = _file_arrays(
+        piece, spacing, ids, mat, order, shape)
     d = pts.shape[1]
-    flip = [1, 0] + list(range(2, d))
     with hdf5_file(folder / h5_name) as h5:
         h5["points"] = pts
         h5["cells"] = cells.astype(np.int64)
         for name, values in {**cell_data, **point_data}.items():
             h5[name] = values
-        for name, (f, o) in piece.groups.items():
-            h5[f"facets/{name}"] = f[:, flip].astype(np.int64)
+        for name, (_, o) in piece.groups.items():
+            h5[f"facets/{name}"] = facet_nodes[name].astype(np.int64)
             h5[f"owners/{name}"] = o.astype(np.int64)
             h5[f"facets/{name}"].attrs["group_id"] = group_ids[name]
     # the piece alone as one grid: what meshio (one grid per file) and solvers reading
     # their rank's pieces open
     (folder / Path(h5_name).with_suffix(XDMF_INDEX)).write_text(
         '<?xml version="1.0"?>\n<Xdmf Version="3.0"><Domain>'
-        + _grid_xml("", h5_name, len(pts), len(cells), d, ids, mat)
+        + _grid_xml("", h5_name, len(pts), len(cells), d, ids, mat, cells.shape[1])
         + "</Domain></Xdmf>\n")
+    return len(pts)
 
 
 def _pdata(section: str, arrays: dict) -> str:
@@ -150,9 +165,11 @@ def write_pvtu(path, folder_name: str, sources: list[str], ids: np.dtype, mat: n
 
 
 def _grid_xml(prefix: str, h5: str, n_pts: int, n_cells: int, d: int, ids: np.dtype,
-              mat: np.dtype) -> str:
-    """One XDMF ``<Grid>`` of the piece in `h5` (named ``prefix + h5`` from the file)."""
-    topo = "Tetrahedron" if d == 3 else "Triangle"
+              mat: np.dtype, nodes: int | None = None) -> str:
+    """One XDMF ``<Grid>`` of the piece in `h5` (named ``prefix + h5`` from the file), of
+    `nodes` per cell (default: linear)."""
+    nodes = nodes or d + 1
+    topo = {3: "Triangle", 4: "Tetrahedron", 6: "Triangle_6", 10: "Tetrahedron_10"}[nodes]
     geo = "XYZ" if d == 3 else "XY"
     num = {np.dtype(np.int32): ('Int', 4), np.dtype(np.float64): ('Float', 8),
            np.dtype(np.int8): ('Char', 1)}
@@ -169,7 +186,7 @@ def _grid_xml(prefix: str, h5: str, n_pts: int, n_cells: int, d: int, ids: np.dt
                            ("quality", "Cell", n_cells, np.float64),
                            ("level", "Cell", n_cells, np.int8),
                            ("global_id", "Node", n_pts, ids)))
-    cells_item = (f'<DataItem Dimensions="{n_cells} {d + 1}" NumberType="Int" '
+    cells_item = (f'<DataItem Dimensions="{n_cells} {nodes}" NumberType="Int" '
                   f'Precision="8" Format="HDF">{prefix}{h5}:/cells</DataItem>')
     return (f'<Grid Name="{Path(h5).stem}" GridType="Uniform">'
             f'<Topology TopologyType="{topo}" NumberOfElements="{n_cells}">'
@@ -179,11 +196,12 @@ def _grid_xml(prefix: str, h5: str, n_pts: int, n_cells: int, d: int, ids: np.dt
 
 
 def write_xdmf_index(path, folder_name: str, pieces: list[tuple[str, int, int]], d: int,
-                     ids: np.dtype, mat: np.dtype) -> None:
+                     ids: np.dtype, mat: np.dtype, nodes: int | None = None) -> None:
     """Write the XDMF index: a spatial collection of one grid per (h5 name, n_points,
-    n_cells). VTK's ``vtkXdmfReader`` (ParaView) reads it as a multiblock; meshio reads
-    one grid per file, so each piece also has its own ``.xdmf`` beside its ``.h5``."""
-    grids = [_grid_xml(f"{folder_name}/", h5, n_pts, n_cells, d, ids, mat)
+    n_cells), of `nodes` per cell (default linear). VTK's ``vtkXdmfReader`` (ParaView)
+    reads it as a multiblock; meshio reads one grid per file, so each piece also has its
+    own ``.xdmf`` beside its ``.h5``."""
+    grids = [_grid_xml(f"{folder_name}/", h5, n_pts, n_cells, d, ids, mat, nodes)
              for h5, n_pts, n_cells in pieces]
     Path(path).write_text('<?xml version="1.0"?>\n<Xdmf Version="3.0"><Domain>'
                           '<Grid Name="pieces" GridType="Collection" CollectionType="Spatial">'
@@ -242,7 +260,9 @@ def _read_piece(p: Path):
                                 "whole folder with the index.")
     m = meshio.read(p, file_format="vtu" if p.suffix.lower() != XDMF_INDEX else "xdmf")
     cells = np.concatenate([c.data for c in m.cells])
-    return m, cells
+    # second order: the corners (the mid-edge nodes follow them in every element)
+    corners = {6: 3, 10: 4}.get(cells.shape[1], cells.shape[1])
+    return m, cells[:, :corners]
 
 
 def read_pvtu(path):
@@ -282,12 +302,20 @@ def read_pvtu(path):
     if not gids:
         raise ValueError(f"{path} names no piece; the mesh is empty.")
     gid = np.concatenate(gids)
+    joined = np.concatenate(cells)
+    used = np.zeros(len(gid), bool)
+    used[joined] = True
+    if not used.all():
+        # nodes no element corner uses (second order's mid-edge nodes) are left out
+        gid = np.where(used, gid, -1)
     _, first, inverse = np.unique(gid, return_index=True, return_inverse=True)
+    if gid.size and gid.min() < 0:
+        first, inverse = first[1:], inverse - 1
     points = np.concatenate(pts)[first]
     d = 3 if points.shape[1] == 3 and (np.any(points[:, 2] != 0)
-                                       or np.concatenate(cells).shape[1] == 4) else 2
+                                       or joined.shape[1] == 4) else 2
     points = np.ascontiguousarray(points[:, :d][:, ::-1], dtype=np.float64)
-    cells = orient_positive(points, inverse[np.concatenate(cells)])
+    cells = orient_positive(points, inverse[joined])
     return Mesh(points, cells, np.concatenate(mats).astype(np.int64),
                 cell_data={k: np.concatenate(v) for k, v in data.items()},
                 info={"source": str(path), "has_material": True, "pieces": len(gids)})
@@ -316,16 +344,22 @@ def read_pvtu_groups(path) -> dict[str, np.ndarray]:
         for src in _sources(path):
             with h5py.File(src.with_suffix(PARTITIONED[XDMF_INDEX]), "r") as h5:
                 gid = h5["global_id"][()].astype(np.int64).ravel()
+                d = h5["points"].shape[1]                   # facets: their d corners
                 for name in h5.get("facets", {}):
                     out.setdefault(name, []).append(
-                        np.sort(gid[h5[f"facets/{name}"][()]], axis=1))
+                        np.sort(gid[h5[f"facets/{name}"][()][:, :d]], axis=1))
         return {k: np.concatenate(v) for k, v in out.items()}
     for src in _sources(path):
         comp = facets_companion(src)
+        with open(comp, "rb") as fh:
+            if b'NumberOfCells="0"' in fh.read(1 << 16):   # the text header
+                continue                   # a piece with no group facet (meshio fails)
         m = meshio.read(comp, file_format="vtu")
         gid = np.asarray(meshio.read(src, file_format="vtu").point_data["global_id"]
                          ).astype(np.int64).ravel()
-        facets = np.concatenate([c.data for c in m.cells]) if m.cells else np.zeros((0, 3), int)
+        # second order (line3, triangle6): the corners come first
+        facets = (np.concatenate([c.data[:, :{"line3": 2, "triangle6": 3}.get(c.type, 9)]
+                                  for c in m.cells]) if m.cells else np.zeros((0, 3), int))
         group = np.concatenate(m.cell_data["group"]) if m.cells else np.zeros(0, int)
         names = {int(np.ravel(v)[0]): k for k, v in m.field_data.items()}
         for g in np.unique(group).tolist():

@@ -19,6 +19,7 @@ worker processes is started unless a scheduler address or a client is given.
 from __future__ import annotations
 
 import math
+import time
 import uuid
 from collections.abc import Callable
 from pathlib import Path
@@ -29,6 +30,11 @@ from ..._dask_connect import connect_dask
 from ..formats._registry import PARTITIONED, PVTU, XDMF_INDEX
 from . import _core as bk
 from . import _files as bf
+from . import _periodic
+from ._coarsen import coarsened, read_slices
+from ._quadratic import n_global_ids
+from ._refine import interface_cells
+from ._timing import task_report, timed
 
 __all__ = ["BLOCK_SUFFIXES", "BlockMeshError", "block_memory", "choose_block", "mesh_blocks"]
 
@@ -39,17 +45,21 @@ class BlockMeshError(ValueError):
     """A check of the block-wise mesh failed: nothing was written."""
 
 
-def block_memory(block: int, d: int = 3) -> int:
+def block_memory(block: int, d: int = 3, order: int = 1) -> int:
     """Peak bytes of one meshing task of a cube of `block` voxels (conservative): the
     in-memory mesher's estimate for the block at the worst case, plus the local corner
-    lattice (up to ``4 * block + 1`` points per axis, 10 bytes each)."""
+    lattice (up to ``4 * block + 1`` points per axis, 10 bytes each); at `order` 2 the
+    mid-edge nodes (edge keys, ids and the wider cells: 128 bytes for each of the
+    ``d!`` elements a voxel may hold at worst)."""
     from ..model._memory import estimate_mesh_memory
 
     return int(estimate_mesh_memory((block,) * d, np.int64, check=False)
-               + 10 * (4 * block + 1) ** d)
+               + 10 * (4 * block + 1) ** d
+               + (128 * math.factorial(d) * block ** d if order == 2 else 0))
 
 
-def choose_block(shape, memory: int | None, block: int | None = None) -> int:
+def choose_block(shape, memory: int | None, block: int | None = None,
+                 order: int = 1) -> int:
     """The block side: `block` if given (checked against `memory`), else the largest
     power of two, at most the default root, whose task fits `memory` (default 2 GB).
 
@@ -59,31 +69,41 @@ def choose_block(shape, memory: int | None, block: int | None = None) -> int:
     budget = memory if memory else 2 << 30
     cap = 1 << bk.default_top(shape)
     if block is not None:
-        need = block_memory(int(block), d)
+        need = block_memory(int(block), d, order)
         if memory and need > memory:
             raise ValueError(f"a block of {block} voxels needs about {need / 2**30:.2f} GB "
                              f"per worker, above --memory {memory / 2**30:.2f} GB; give a "
                              "smaller --block or more --memory.")
         return int(block)
     b = max(2, cap)
-    while b > 8 and block_memory(b, d) > budget:
+    while b > 8 and block_memory(b, d, order) > budget:
         b //= 2
-    if block_memory(b, d) > budget:
+    if block_memory(b, d, order) > budget:
         raise ValueError(f"even a block of {b} voxels needs about "
-                         f"{block_memory(b, d) / 2**30:.2f} GB per worker, above the "
+                         f"{block_memory(b, d, order) / 2**30:.2f} GB per worker, above the "
                          f"{budget / 2**30:.2f} GB allowed; give more --memory.")
     return b
 
 
 # ----------------------------------------------------------------------------- tasks
-def _read(source, plan: bk.BlockPlan, index) -> np.ndarray:
+def _read(source, plan: bk.BlockPlan, index, raw: list | None = None) -> np.ndarray:
     """The block's window on the lattice: its voxels from a path (opened here, on the
-    worker) or the array slice the caller handed over, repeated by the plan's factors."""
+    worker) or the array slice the caller handed over (``read_slices``), coarsened when
+    asked (the labels before the vote appended to `raw`), repeated by the plan's
+    factors."""
+    slices, crop = read_slices(plan, index)
     if not isinstance(source, np.ndarray):
         from ..._zarr_io import open_lazy
 
         image, _ = open_lazy(source)
-        source = np.asarray(image[plan.voxel_window(index)[0]].compute(scheduler="sync"))
+        source = np.asarray(image[slices].compute(scheduler="sync"))
+    if crop is not None:
+        _check_labels(source, index)                  # before the vote, which trusts them
+        if source.dtype.kind == "f":
+            source = source.astype(np.int64)          # whole numbers (checked)
+        if raw is not None:
+            raw.append(np.unique(source))
+        source = coarsened(source, plan, crop)
     return plan.to_lattice(source, index)
 
 
@@ -97,14 +117,20 @@ def _check_labels(data: np.ndarray, index) -> None:
         raise ValueError(f"block {tuple(index)} holds negative labels; labels are >= 0.")
 
 
-def coarse_task(source, plan: bk.BlockPlan, index):
-    """Round 1: (mixed grids, (labels, counts) of the block's own voxels)."""
-    data = _read(source, plan, index)
+def coarse_task(source, plan: bk.BlockPlan, index, interfaces=None):
+    """Round 1: (mixed grids, (labels, counts) of the block's own lattice cells); with
+    `interfaces` (the excluded materials, for ``refine``) a cell with an interface face
+    on its boundary counts as mixed (``_refine``)."""
+    raw: list = []
+    data = _read(source, plan, index, raw)
     _check_labels(data, index)
     win = bk._window_labels(plan, index, data)
     core = win[(slice(1, -1),) * win.ndim]
     values, counts = np.unique(core[core >= 0], return_counts=True)
-    return bk.mixed_grids(win, plan.top), (values, counts)
+    mixed = bk.mixed_grids(win, plan.top)
+    if interfaces is not None:
+        mixed = [m | t for m, t in zip(mixed, interface_cells(win, plan.top, interfaces))]
+    return mixed, (values, counts, raw[0] if raw else values)
 
 
 def mesh_task(source, plan: bk.BlockPlan, index, grids, number: int, folder: str,
@@ -119,11 +145,13 @@ def mesh_task(source, plan: bk.BlockPlan, index, grids, number: int, folder: str
                "n_cells": len(piece.cells), "volumes": piece.volumes,
                "worst": float(piece.quality.max(initial=0.0)), "seams": piece.seams,
                "problems": piece.problems,
+               "box": _periodic.box_facets(piece, plan.shape) if plan.periodic else {},
                "groups": {n: len(o) for n, (_, o) in piece.groups.items()}}
     if len(piece.cells):
         write = bf.write_piece_h5 if options["kind"] == XDMF_INDEX else bf.write_piece_vtu
-        write(Path(folder), output, number, piece, options["spacing"], options["group_ids"],
-              np.dtype(options["ids"]), np.dtype(options["mat"]))
+        summary["n_points"] = write(Path(folder), output, number, piece, options["spacing"],
+                                    options["group_ids"], np.dtype(options["ids"]),
+                                    np.dtype(options["mat"]), options["order"], plan.shape)
     return summary
 
 
@@ -195,7 +223,9 @@ def mesh_blocks(labels, output, *, block: int | None = None, memory: int | None 
                 workers: int = 2, scheduler: str | None = None, client=None,
                 exclude=(), spacing=None, material_names: dict | None = None,
                 subdivide: bool = True, max_aspect: float | None = None,
-                max_size: float | None = None, force: bool = False, retries: int = 2,
+                max_size: float | None = None, refine: int = 0, order: int = 1,
+                periodic: bool = False, coarsen: int = 0,
+                force: bool = False, retries: int = 2,
                 progress: Callable[[str, int, int], None] | None = None) -> dict:
     """Mesh a label volume block by block into a partitioned mesh (``.pvtu`` or ``.xdmf``).
 
@@ -230,6 +260,22 @@ def mesh_blocks(labels, output, *, block: int | None = None, memory: int | None 
     max_size : float, optional
         Longest element edge (physical units): leaves are split as the in-memory mesher
         splits them (a cap per level, so local to every block).
+    refine : int
+        Interface refinement ``0 .. 4``, as for
+        :func:`~napari_swa_imesh.mesh.mesh_labels`: the lattice is ``2**refine`` times
+        finer and cells touching an interface are split to one lattice cell
+        (``_refine``; decided per block from its window).
+    coarsen : int
+        ``0 .. 5``: voxels voted in cubes of ``2**coarsen`` (majority label) first, as
+        :func:`~napari_swa_imesh.mesh.mesh_labels` does (``_coarsen``).
+    order : {1, 2}
+        Element order: 2 adds a node at the midpoint of every edge (10-node tetrahedra,
+        6-node triangles; facets of order 2), global ids from the doubled lattice
+        (``_quadratic``), as ``write_mesh(..., order=2)`` writes the in-memory mesh.
+    periodic : bool
+        Opposite faces of the image box carry the same vertices and facets, translated
+        (leaves touching the box split to one lattice cell, as ``mesh_labels`` does);
+        checked across the box before anything is written (``_periodic``).
     force : bool
         Replace existing outputs.
     retries : int
@@ -251,7 +297,7 @@ def mesh_blocks(labels, output, *, block: int | None = None, memory: int | None 
     """
     from ..._atomic import atomic_write, check_writable
     from ..._validation import normalize_spacing
-    from ..mesher._door import resolution_arguments
+    from ..mesher._door import resolution_arguments, warn_lost_materials
     from ..mesher._imesh import _exclude_array
     from ..mesher._templates import template_quality
 
@@ -267,14 +313,16 @@ def mesh_blocks(labels, output, *, block: int | None = None, memory: int | None 
         from ..formats._xdmf import require_h5py
 
         require_h5py("write")
+    if isinstance(order, bool) or order not in (1, 2):
+        raise ValueError(f"order must be 1 (linear) or 2 (mid-edge nodes), not {order!r}.")
     if int(workers) < 0:
         raise ValueError(f"workers must be >= 0; got {workers}.")
     source, shape, file_spacing, _ = _open_source(labels)
     d = len(shape)
     sp = normalize_spacing(spacing if spacing is not None else file_spacing, d)
-    lattice, max_size, _ = resolution_arguments(sp, method="template", refine=0,
-                                                max_size=max_size, subdivide=subdivide,
-                                                coarsen=0, max_aspect=max_aspect)
+    lattice, max_size, coarsen = resolution_arguments(
+        sp, method="template", refine=refine, max_size=max_size, subdivide=subdivide,
+        coarsen=coarsen, max_aspect=max_aspect)
     step = tuple(float(h) for h in lattice.step)
     max_level = None
     if max_size is not None:
@@ -283,14 +331,15 @@ def mesh_blocks(labels, output, *, block: int | None = None, memory: int | None 
         while not (1 << (max_level + 1)) * diagonal > max_size and max_level < 62:
             max_level += 1
     exclude_arr = _exclude_array(exclude)
-    cells = tuple(n * f for n, f in zip(shape, lattice.factors))
-    b = choose_block(cells, memory, block)
-    plan = bk.plan_blocks(shape, b, factors=lattice.factors, max_level=max_level)
+    cells = tuple(n * f for n, f in zip(shape, lattice.cells_per_voxel))
+    b = choose_block(cells, memory, block, order)
+    plan = bk.plan_blocks(shape, b, factors=lattice.cells_per_voxel, max_level=max_level,
+                          periodic=periodic, coarsen=coarsen)
     blocks = plan.blocks()
 
     def src(index):
         if isinstance(source, np.ndarray):
-            return source[plan.voxel_window(index)[0]]
+            return source[read_slices(plan, index)[0]]
         return source
 
     own_client = cluster = None
@@ -304,32 +353,43 @@ def mesh_blocks(labels, output, *, block: int | None = None, memory: int | None 
     else:
         runner = _Local()
     try:
-        coarse = runner.map(coarse_task, [(src(i), plan, i) for i in blocks], retries,
-                            progress, "coarse")
+        client_cpu = time.process_time()
+        n_workers = (1 if isinstance(runner, _Local) else
+                     max(1, len(runner.client.scheduler_info().get("workers", {}))))
+        interfaces = tuple(exclude_arr.tolist()) if lattice.refine else None
+        coarse = runner.map(timed, [(coarse_task, src(i), plan, i, interfaces)
+                                    for i in blocks], retries, progress, "coarse")
+        timings = {"coarse": [t for _, t in coarse]}
+        coarse = [c for c, _ in coarse]
         counts: dict[int, int] = {}
-        for _, (values, n) in coarse:
+        before: set[int] = set()
+        for _, (values, n, raw) in coarse:
             for v, c in zip(values.tolist(), n.tolist()):
                 counts[v] = counts.get(v, 0) + c
+            before.update(raw.tolist())
+        lost = sorted(before - set(counts))           # voted away by the coarsening
+        warn_lost_materials({"level": coarsen, "lost": lost}, material_names)
         present = sorted(m for m in counts if m not in set(exclude_arr.tolist()))
         if not present:
             raise ValueError(f"every voxel is excluded (labels present: {sorted(counts)}, "
                              f"exclude={exclude_arr.tolist()}); nothing is left to mesh.")
         split = bk.balance_grids(plan, {i: c[0] for i, c in zip(blocks, coarse)})
         del coarse
-        n_lattice = math.prod(n + 1 for n in plan.shape)
-        ids = bf.id_dtype(n_lattice)
+        ids = bf.id_dtype(n_global_ids(plan.shape, order))
         mat = np.dtype(np.int32) if max(present) < 2**31 else np.dtype(np.float64)
         group_ids = bk.group_table(d, present, material_names)
         options = {"exclude": exclude_arr, "present": present, "names": material_names or {},
                    "spacing": step, "kind": kind, "group_ids": group_ids, "ids": ids.str,
-                   "mat": mat.str}
+                   "mat": mat.str, "order": order}
         with atomic_write([out, folder], force=force, folders=[folder]) as (tmp_out,
                                                                           tmp_folder):
             tmp_folder.mkdir()
             summaries = runner.map(
-                mesh_task, [(src(i), plan, i, bk.block_slices(plan, split, i), n,
-                             str(tmp_folder), str(out), options)
-                            for n, i in enumerate(blocks)], retries, progress, "mesh")
+                timed, [(mesh_task, src(i), plan, i, bk.block_slices(plan, split, i), n,
+                         str(tmp_folder), str(out), options)
+                        for n, i in enumerate(blocks)], retries, progress, "mesh")
+            timings["mesh"] = [t for _, t in summaries]
+            summaries = [m for m, _ in summaries]
             report = _check_whole(plan, summaries, counts, present, step,
                                   # every element is a template scaled by the lattice
                                   # step: the worst such template is the proven bound
@@ -341,7 +401,9 @@ def mesh_blocks(labels, output, *, block: int | None = None, memory: int | None 
             else:
                 bf.write_xdmf_index(tmp_out, folder.name,
                                     [(bf.piece_names(out, s["number"])[2], s["n_points"],
-                                      s["n_cells"]) for s in written], d, ids, mat)
+                                      s["n_cells"]) for s in written], d, ids, mat,
+                                    (d + 1) * (d + 2) // 2 if order == 2 else d + 1)
+        client_cpu = time.process_time() - client_cpu       # balance, checks, scheduler
     finally:
         if own_client is not None:
             own_client.close()
@@ -351,8 +413,12 @@ def mesh_blocks(labels, output, *, block: int | None = None, memory: int | None 
                    "blocks": plan.n_blocks, "pieces": len(written),
                    "equals_in_memory": plan.block == 1 << bk.default_top(plan.shape),
                    "spacing": list(sp), "shape": list(shape),
-                   "lattice": {"cells_per_voxel": list(lattice.factors), "step": list(step)},
-                   "max_size": max_size})
+                   "lattice": {"cells_per_voxel": list(lattice.cells_per_voxel),
+                               "step": list(step), "refine": lattice.refine},
+                   "max_size": max_size, "order": order, "periodic": bool(periodic),
+                   "coarsen": {"level": coarsen, "lost": lost},
+                   "tasks": {**task_report(timings, n_workers),
+                             "client_cpu_s": client_cpu}})
     return report
 
 
@@ -381,6 +447,9 @@ def _check_whole(plan, summaries, counts, present, spacing, bound) -> dict:
     d = len(plan.shape)
     problems = [f"block {s['index']}: {p}" for s in summaries for p in s["problems"]]
     problems += bk.seam_mismatches(plan, {s["index"]: s["seams"] for s in summaries})
+    if plan.periodic:
+        problems += _periodic.periodic_mismatches(
+            plan, {s["index"]: s["box"] for s in summaries})
     volumes: dict[int, int] = {}
     for s in summaries:
         for m, v in s["volumes"].items():
