@@ -51,13 +51,17 @@ case        gap before (unknowns, steps)  gap after (unknowns, steps)  CPU s bef
 3-D 16^3    7.63 % (81,557, 0)            7.63 % (81,557, 0)           11.6 / 8.7
 2-D 256^2   9.62 % (893,895, 1)           9.62 % (893,895, 1)          21.0 / 22.7
 3-D 32^3    15.05 % (679,669, 0)          15.05 % (679,669, 0)         16.6 / 19.7
+3-D 64^3    (the same path)               25.58 % (1,829,179, 0)       - / 61.7
 =========== ============================ ============================ ==================
 
 Both ends are the refine levels' (2^-4 voxels at most): graded steps reach them with a
 fifth to a third of the unknowns, and more unknowns do not help there (2-D 64^2 graded
 to 760k: 2.40 %). Images whose first P2 mesh is already near the graded budget (16^3 and
 larger in 3-D, 256^2 in 2-D) take the interface refinement as before, within its caps.
-The graded budget is a dial of time against gap: ``GRADED_UNKNOWNS[2] = 1.1M`` takes
+At 32^3 and 64^3 the lower bound is the Crouzeix-Raviart flux alone (the curl's space
+would pass :data:`simulate._curl.CURL_NODES`): what is left there is a lower bound
+without a global solve of that size (patch-wise flux equilibration). The graded budget
+is a dial of time against gap: ``GRADED_UNKNOWNS[2] = 1.1M`` takes
 256^2 to 4.08 % with 1.08M unknowns in 47 s CPU (graded, 3 steps), at 2.2x the CPU.
 
 With P1 in 2-D the stream function on P1 *is* the CR bound (the divergence-free RT0
