@@ -122,11 +122,17 @@ class CurlBound:
     def fluxes(self, part: slice, lam: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """(nq, 3, m) the scaled flux at the points `lam` of the elements `part`, and
         their volumes."""
-        curl, vol = _curls(self.space, part, lam)
+        g, vol = barycentric_gradients(self.space.points, self.space.cells[part])  # (4, 3, m)
+        c = _shape_coefficients(3, 2, lam)                                 # (nq, 10, 4)
         dofs = 3 * self.space.element_dofs[part][:, :, None] + np.arange(3)
-        local = self.potential[dofs.reshape(len(vol), 30)]               # (m, 30)
-        s = np.einsum("qaim,ma->qim", curl, local) + self.base[part].T[None]
-        return self.scale * s, vol
+        local = self.potential[dofs]                                       # (m, 10, 3)
+        # grad A at the points, (nq, j, k, m) = d_j A_k, then curl_i = eps_ijk d_j A_k
+        by_corner = np.einsum("qap,mak->qpkm", c, local)
+        grad = np.einsum("pjm,qpkm->qjkm", g, by_corner)
+        s = np.stack([grad[:, 1, 2] - grad[:, 2, 1], grad[:, 2, 0] - grad[:, 0, 2],
+                      grad[:, 0, 1] - grad[:, 1, 0]], axis=1)
+        s += self.base[part].T[None]
+        return self.scale * s, np.abs(vol)
 
     def hypercircle(self, space: Space, values: np.ndarray, tensors: np.ndarray,
                     cell_material: np.ndarray) -> np.ndarray:
@@ -202,14 +208,18 @@ def _edge_dofs(space: Space, pairs: np.ndarray) -> np.ndarray:
     return n + np.searchsorted(keys, pairs[:, 0].astype(np.int64) * n + pairs[:, 1])
 
 
-def _pcg(matrix: sparse.csr_matrix, rhs: np.ndarray, iterations: int, energy: float,
-         settled: float) -> tuple[np.ndarray, int, float]:
+def _pcg(matrix: sparse.spmatrix, rhs: np.ndarray, iterations: int, energy: float,
+         settled: float, free: np.ndarray | None = None) -> tuple[np.ndarray, int, float]:
     """Diagonal-preconditioned CG for ``matrix x = rhs`` from 0, at most `iterations`
     steps, stopping once the last :data:`WINDOW` steps lowered the complementary energy
     (`energy` at ``x = 0``; each step lowers it by ``alpha r . z``) by less than
-    `settled` of it. No error when it stops early: every iterate is usable.
-    Returns ``(x, steps, relative residual)``."""
+    `settled` of it. No error when it stops early: every iterate is usable. With `free`
+    (a mask), the system restricted to it (`rhs` zero elsewhere): the preconditioner is
+    zero off it, so every search direction, and x, stays there, and the matrix is not
+    copied. Returns ``(x, steps, relative residual)``."""
     diagonal = matrix.diagonal()
+    if free is not None:
+        diagonal = np.where(free, diagonal, 0.0)
     inverse = np.where(diagonal > 0, 1.0 / np.where(diagonal > 0, diagonal, 1.0), 0.0)
     x = np.zeros_like(rhs)
     r = rhs.copy()
@@ -220,6 +230,8 @@ def _pcg(matrix: sparse.csr_matrix, rhs: np.ndarray, iterations: int, energy: fl
     k = 0
     while k < iterations and rz > 0:
         q = matrix @ p
+        if free is not None:
+            q[~free] = 0.0
         pq = _inner(p, q)
         if not pq > 0:
             break
@@ -351,12 +363,8 @@ def curl_bound(mesh: Mesh, space: Space, tensors: np.ndarray, cell_material: np.
     free = ~np.repeat(zero, 3)
     # E(sigma + curl A) = E(sigma) + 2 (a . rhs + a K a / 2); E(sigma) = its flux
     start = float(base.k_lower * np.prod(np.delete(hi - lo, axis)) / (hi[axis] - lo[axis]))
-    matrix = facets.cache["curl matrix"][free]
-    matrix = matrix[:, free]
-    x, k, residual = _pcg(matrix, -rhs[free], iterations, start / 2, settled)
-    del matrix
-    potential = np.zeros(3 * n)
-    potential[free] = x
+    potential, k, residual = _pcg(facets.cache["curl matrix"], np.where(free, -rhs, 0.0),
+                                  iterations, start / 2, settled, free)
     info = SolverInfo(int(free.sum()), k, residual, time.perf_counter() - t0)
     bound = CurlBound(0.0, potential, base.flux, 1.0, space, info, int(free.sum()))
     energy = 0.0

@@ -33,12 +33,15 @@ from ._budget import (
 from ._certify import (
     CERTIFY_UNKNOWNS,
     GAP_TARGET,
-    cannot_refine,
     check_gap,
     check_memory_budget,
     flux_scale,
+    grades,
+    keep_sharper,
     lower_bound,
+    plan_refinement,
     relative_gaps,
+    sharpen_interval,
 )
 from ._conductivity import axis_names, conductivity_tensors
 from ._dual import facet_table
@@ -228,7 +231,7 @@ def simulate_steps(mesh_or_labels, conductivity: Mapping, *, spacing=None,
     interval: dict[str, tuple[float, float]] = {}
     dual_info: dict[str, SolverInfo] = {}
     certify = 0
-    growth_seen = 1.0
+    growth_seen, graded = 1.0, False
     done = 1 + adapt
     interval_wanted, skipped = fit_interval(mesh, order, interval_wanted, memory, skipped)
     check_memory(mesh, order, interval_wanted, memory, asked=True)
@@ -271,6 +274,7 @@ def simulate_steps(mesh_or_labels, conductivity: Mapping, *, spacing=None,
             seconds["solve"] += time.perf_counter() - t0
         dual_space = facets = None
         gap_indicator = np.zeros(mesh.n_cells) if interval_wanted else None
+        sharp = not grades(mesh, mesh_or_labels, may_refine)   # the curl on the last mesh
         for step, name in enumerate(names, start=done + 1):
             yield step, total, f"solving along {name} ({matrix.shape[0]} unknowns)"
             t0 = time.perf_counter()
@@ -303,12 +307,14 @@ def simulate_steps(mesh_or_labels, conductivity: Mapping, *, spacing=None,
                 facets = facet_table(mesh.cells) if facets is None else facets
                 dual = lower_bound(mesh, space, dual_space, tensors, cell_material, axis,
                                    lo, hi, tol=tol, facets=facets, memory=memory,
-                                   upper=value, gap=gap_target)
-                if dual.k_lower > value * (1 + BOUND_SLACK):
-                    raise ValueError(f"along {name} the dual bound {dual.k_lower:.9g} lies "
+                                   upper=value, gap=gap_target,
+                                   sharpen=sharp)
+                kept = keep_sharper(dual.k_lower, interval.get(name))
+                if kept > value * (1 + BOUND_SLACK):
+                    raise ValueError(f"along {name} the dual bound {kept:.9g} lies "
                                      f"above the primal {value:.9g}: one of the solves is "
                                      "wrong; please report this with the input.")
-                interval[name] = (min(dual.k_lower, value), value)
+                interval[name] = (min(kept, value), value)
                 dual_info[name] = dual.info
                 # the gap per element, relative to this axis' flux: axes weigh the same
                 gap_indicator += dual.hypercircle(space, values, tensors, cell_material
@@ -319,37 +325,23 @@ def simulate_steps(mesh_or_labels, conductivity: Mapping, *, spacing=None,
         wide = {a: g for a, g in relative_gaps(interval).items() if g > gap_target}
         if not wide:
             break
-        level = refine + certify + 1
-        why = cannot_refine(mesh, mesh_or_labels, level)   # a mesh input says so first
-        if why is None and not may_refine:
-            why = ("adapt was given, so the mesh is kept as asked (leave adapt to auto to "
-                   "refine for the interval)")
-        # predicted before meshing (a refine-4 mesh of a small 3-D image took minutes to
-        # make): the growth of the last level, at least 2^(d-1) (interfaces are d-1 dim.);
-        # the first level is checked once meshed
-        growth = max(growth_seen, 2.0 ** (mesh.ndim - 1))
-        cap = CERTIFY_UNKNOWNS[mesh.ndim]
-        if why is None and unknowns(mesh, order) * growth > cap:
-            why = (f"the next refinement would take about "
-                   f"{unknowns(mesh, order) * growth:,.0f} unknowns, above the {cap:,} the "
-                   "interval's refinement may take (pass --refine to go further)")
-        if why is None and estimate_memory(mesh, order, interval_wanted) * growth > memory:
-            why = (f"the next refinement would need about "
-                   f"{format_bytes(estimate_memory(mesh, order, interval_wanted) * growth)}"
-                   f", above the memory budget of {format_bytes(memory)} (raise it with "
-                   "--memory)")
+        plan = plan_refinement(mesh, mesh_or_labels, refine + certify + 1, gap_indicator,
+                               order=order, may_refine=may_refine, growth_seen=growth_seen,
+                               memory=memory, interval=interval_wanted, graded=graded)
+        why = plan.why
         if why is None:
             yield done, total + 2 + len(names), (
-                f"interval wider than {100 * gap_target:g} %: meshing the labels again with "
-                f"interface elements of 2^-{level} voxels")
+                f"interval wider than {100 * gap_target:g} %: {plan.message}")
             t0 = time.perf_counter()
-            # one split per adaptive step cannot grade a large flat leaf down to a corner
-            # within the refine levels (a 256^2 checkerboard stayed at a 37 % gap after
-            # three): interface refinement reaches every corner at once (1.7 % there)
-            finer = prepare_mesh(source, spacing=spacing, exclude=exclude,
-                                 material_names=material_names, refine=level,
-                                 max_aspect=max_aspect)
+            if plan.target is None:
+                finer, tree = prepare_mesh(source, spacing=spacing, exclude=exclude,
+                                           material_names=material_names, refine=plan.level,
+                                           max_aspect=max_aspect), None
+            else:                # graded by the gap, from the tree of the last step
+                finer, tree = refine_within(source, mesh, plan.leaf_gap, plan.target, tree)
+            graded = plan.target is not None
             seconds[f"certify {certify + 1}"] = time.perf_counter() - t0
+            cap = CERTIFY_UNKNOWNS[mesh.ndim]
             why = check_memory(finer, order, interval_wanted, memory, asked=False)
             if why is None and unknowns(finer, order) > cap:
                 why = (f"the next refinement would take about {unknowns(finer, order):,} "
@@ -357,13 +349,21 @@ def simulate_steps(mesh_or_labels, conductivity: Mapping, *, spacing=None,
                        "(pass --refine to go further)")
             if why is None:
                 del matrix, space, coarse, parts, periodic, dual_space, facets
-                if certify:       # from one interface level to the next (the first
-                    growth_seen = finer.n_cells / mesh.n_cells   # step leaves adapt's mesh)
-                mesh, tree = finer, None
+                if certify and plan.target is None:   # from one interface level to the
+                    growth_seen = finer.n_cells / mesh.n_cells   # next (not adapt's mesh)
+                mesh = finer
                 materials, cell_material = np.unique(mesh.material, return_inverse=True)
                 certify += 1
                 total += 2 + len(names)
                 continue
+        if not sharp:       # not graded after all: the curl skipped for the next mesh
+            t0 = time.perf_counter()
+            wide = sharpen_interval(interval, dual_info, wide, mesh, space, dual_space,
+                                    tensors, cell_material, image_axes, lo, hi, tol=tol,
+                                    facets=facets, memory=memory, gap=gap_target)
+            seconds["dual"] += time.perf_counter() - t0
+            if not wide:
+                break
         widest = max(wide, key=wide.get)
         lo_k, hi_k = interval[widest]
         notes.append(f"the interval along {widest} is {lo_k:.6g} .. {hi_k:.6g} (gap "
