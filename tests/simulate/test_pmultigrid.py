@@ -120,3 +120,19 @@ def test_simulate_default_equals_the_assembled_path(monkeypatch):
         assert lean.k_eff[axis] == pytest.approx(assembled.k_eff[axis], rel=1e-9)
         np.testing.assert_allclose(lean.potential[axis], assembled.potential[axis],
                                    rtol=0, atol=1e-7)
+
+
+def test_budget_counts_half_storage_for_mixed_p2_only():
+    """The mixed protocol's P2 is estimated at the half-storage rate, the periodic one
+    (assembled in full) and P1 as before."""
+    from napari_swa_imesh.simulate import _budget
+
+    mesh = mesh_labels(blobs((6, 6, 6), seed=2))
+    n2 = _budget.unknowns(mesh, 2)
+    extra = _budget.BYTES_PER_CELL[3] * mesh.n_cells
+    half = _budget.estimate_memory(mesh, 2, False)
+    full = _budget.estimate_memory(mesh, 2, False, periodic=True)
+    assert half == int(_budget.BYTES_PER_UNKNOWN_HALF[3] * n2 + extra)
+    assert full == int(_budget.BYTES_PER_UNKNOWN[(3, 2)] * n2 + extra) > half
+    assert (_budget.estimate_memory(mesh, 1, False)
+            == _budget.estimate_memory(mesh, 1, False, periodic=True))
