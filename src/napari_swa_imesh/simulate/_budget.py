@@ -25,10 +25,12 @@ DEFAULT_MEMORY = 4 * 2 ** 30
 #: The periodic protocol still assembles P2 (it needs the matrix's rows).
 BYTES_PER_UNKNOWN = {(2, 1): 2300.0, (2, 2): 1600.0, (3, 1): 2300.0, (3, 2): 1600.0}
 #: P2 of the mixed protocol, held as half a matrix with a p-multigrid onto P1
-#: (:mod:`._pmultigrid`): the adapted 40^3 default 900 (866k unknowns, 0.80 GB peak
-#: against 1.25 GB assembled), P2 on the 48^3 mesh 1040 (670k, the assembly's batches
-#: are the peak).
-BYTES_PER_UNKNOWN_HALF = {2: 1100.0, 3: 1100.0}
+#: (:mod:`._pmultigrid`), fixed bytes plus bytes per unknown, fitted to the peak RSS: P2
+#: on the 48^3 mesh 0.72 GB (670k unknowns; the assembly's batches are the peak), the
+#: adapted 40^3 default 0.80 GB (866k; 1.25 GB assembled), P2 at 128^3 5.02 GB (7.56M;
+#: killed at 8 GB assembled): 0.30 GB + 624 B per unknown, taken as 256 MB + 750 B.
+BYTES_PER_UNKNOWN_HALF = {2: 750.0, 3: 750.0}
+BYTES_HALF_FIXED = 256 * 2 ** 20
 #: The dual's CR solve, per facet (measured 565 at 40^3: 625k facets, 353 MB with the
 #: primal matrix kept).
 BYTES_PER_FACET = {2: 600.0, 3: 600.0}
@@ -83,9 +85,9 @@ def estimate_memory(mesh: Mesh, order: int, interval: bool, periodic: bool = Fal
     True
     """
     d = mesh.ndim
-    per_unknown = (BYTES_PER_UNKNOWN_HALF[d] if order == 2 and not periodic
-                   else BYTES_PER_UNKNOWN[(d, order)])
-    primal = per_unknown * unknowns(mesh, order)
+    half = order == 2 and not periodic
+    primal = (BYTES_PER_UNKNOWN_HALF[d] * unknowns(mesh, order) + BYTES_HALF_FIXED if half
+              else BYTES_PER_UNKNOWN[(d, order)] * unknowns(mesh, order))
     peak = primal
     if interval:
         facets = (d + 1) * mesh.n_cells / 2
