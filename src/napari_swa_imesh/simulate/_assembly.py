@@ -27,9 +27,9 @@ from scipy import sparse
 from ..mesh import Mesh
 from ._sparse import sum_pairwise, symmetric_from_upper
 
-__all__ = ["Space", "assemble_pairs", "barycentric_gradients", "cell_fluxes",
-           "cell_gradients", "cell_volumes", "dissipation", "fe_space", "p1_embedding",
-           "stiffness_matrix"]
+__all__ = ["Space", "assemble_pairs", "assemble_upper", "barycentric_gradients",
+           "cell_fluxes", "cell_gradients", "cell_volumes", "dissipation", "fe_space",
+           "p1_embedding", "stiffness_matrix", "stiffness_upper"]
 
 CHUNK = 1 << 16          # elements per chunk of arithmetic: temporaries of a few MB
 BATCH = 1 << 23          # entries per sparse conversion: lists of some 100 MB
@@ -257,6 +257,23 @@ def stiffness_matrix(space: Space, tensors: np.ndarray, cell_material: np.ndarra
         Filled with the signed element volumes on the way (saves
         :func:`cell_volumes` its pass over the elements).
     """
+    return symmetric_from_upper(*stiffness_upper(space, tensors, cell_material, volumes))
+
+
+def stiffness_upper(space: Space, tensors: np.ndarray, cell_material: np.ndarray,
+                    volumes: np.ndarray | None = None
+                    ) -> tuple[sparse.csr_matrix, np.ndarray]:
+    """:func:`stiffness_matrix` as its strict upper triangle and its diagonal.
+
+    Half the memory of the symmetric matrix, and what it is made from (no mirror is
+    laid out); arguments as for :func:`stiffness_matrix`.
+
+    Returns
+    -------
+    upper : (n, n) csr_matrix
+        Canonical, entries above the diagonal only.
+    diagonal : (n,) ndarray
+    """
     a, b, table = _pair_table(space.ndim, space.order)
     tensors = np.asarray(tensors, dtype=np.float64)
     p1 = space.order == 1                       # the table is the identity: skip it
@@ -265,12 +282,20 @@ def stiffness_matrix(space: Space, tensors: np.ndarray, cell_material: np.ndarra
         products = _gradient_products(space, part, tensors, cell_material, volumes)
         return products if p1 else table @ products
 
-    return assemble_pairs(space.element_dofs, space.n_dofs, a, b, values)
+    return assemble_upper(space.element_dofs, space.n_dofs, a, b, values)
 
 
 def assemble_pairs(element_dofs: np.ndarray, n: int, a: np.ndarray, b: np.ndarray,
                    values) -> sparse.csr_matrix:
-    """A symmetric CSR matrix from element values of the local pairs ``a <= b``.
+    """A symmetric CSR matrix from element values of the local pairs ``a <= b``
+    (:func:`assemble_upper`, then the mirror and the diagonal placed around each row)."""
+    return symmetric_from_upper(*assemble_upper(element_dofs, n, a, b, values))
+
+
+def assemble_upper(element_dofs: np.ndarray, n: int, a: np.ndarray, b: np.ndarray,
+                   values) -> tuple[sparse.csr_matrix, np.ndarray]:
+    """The strict upper triangle (canonical CSR) and the diagonal of a symmetric matrix
+    from element values of the local pairs ``a <= b``.
 
     Parameters
     ----------
@@ -282,11 +307,16 @@ def assemble_pairs(element_dofs: np.ndarray, n: int, a: np.ndarray, b: np.ndarra
     values : callable
         ``slice -> (K, m)`` the element entries of those pairs for a chunk of elements.
 
+    Returns
+    -------
+    upper : (n, n) csr_matrix
+        Canonical, entries above the diagonal only.
+    diagonal : (n,) ndarray
+
     Only the upper triangle is gathered, in batches (the list of element entries never
     holds more than some 10^7); each batch becomes a canonical CSR matrix (duplicates
-    summed), the batches are added pairwise (a balanced tree: every entry is merged
-    about log2(batches) times, not once per batch), and the mirror image and the diagonal
-    are placed around each row by index arithmetic (:mod:`._sparse`), not added.
+    summed) and the batches are added pairwise (a balanced tree: every entry is merged
+    about log2(batches) times, not once per batch).
     """
     diagonal = np.zeros(n)
     off = a != b
@@ -320,7 +350,7 @@ def assemble_pairs(element_dofs: np.ndarray, n: int, a: np.ndarray, b: np.ndarra
         del rows, cols, data
     upper = sum_pairwise(parts) if parts else sparse.csr_matrix((n, n))
     del parts
-    return symmetric_from_upper(upper, diagonal)
+    return upper, diagonal
 
 
 def _field_gradients(space: Space, values: np.ndarray, part: slice, lam: np.ndarray

@@ -20,9 +20,17 @@ __all__ = ["DEFAULT_MEMORY", "check_memory", "estimate_memory", "fit_interval",
 DEFAULT_MEMORY = 4 * 2 ** 30
 #: Peak bytes per unknown of one solve, measured at 40^3 (three-phase blobs, contrast
 #: 1e4, one axis; peak RSS less the interpreter's 78 MB): P1 2260 (65k vertices, 140 MB),
-#: P2 1550 (451k unknowns, 666 MB; the adapted 20^3 default: 1560 for 433k, issue 26's
-#: 64^3 default 1300); 2-D taken alike (its rows are shorter).
+#: P2 with its matrix assembled 1550 (451k unknowns, 666 MB; the adapted 20^3 default:
+#: 1560 for 433k, issue 26's 64^3 default 1300); 2-D taken alike (its rows are shorter).
+#: The periodic protocol still assembles P2 (it needs the matrix's rows).
 BYTES_PER_UNKNOWN = {(2, 1): 2300.0, (2, 2): 1600.0, (3, 1): 2300.0, (3, 2): 1600.0}
+#: P2 of the mixed protocol, held as half a matrix with a p-multigrid onto P1
+#: (:mod:`._pmultigrid`), fixed bytes plus bytes per unknown, fitted to the peak RSS: P2
+#: on the 48^3 mesh 0.72 GB (670k unknowns; the assembly's batches are the peak), the
+#: adapted 40^3 default 0.80 GB (866k; 1.25 GB assembled), P2 at 128^3 5.02 GB (7.56M;
+#: killed at 8 GB assembled): 0.30 GB + 624 B per unknown, taken as 256 MB + 750 B.
+BYTES_PER_UNKNOWN_HALF = {2: 750.0, 3: 750.0}
+BYTES_HALF_FIXED = 256 * 2 ** 20
 #: The dual's CR solve, per facet (measured 565 at 40^3: 625k facets, 353 MB with the
 #: primal matrix kept).
 BYTES_PER_FACET = {2: 600.0, 3: 600.0}
@@ -55,7 +63,7 @@ def unknowns(mesh: Mesh, order: int) -> int:
     return n if order == 1 else n + n + mesh.n_cells
 
 
-def estimate_memory(mesh: Mesh, order: int, interval: bool) -> int:
+def estimate_memory(mesh: Mesh, order: int, interval: bool, periodic: bool = False) -> int:
     """Estimated peak bytes of a steady run on `mesh`.
 
     Parameters
@@ -65,6 +73,9 @@ def estimate_memory(mesh: Mesh, order: int, interval: bool) -> int:
     interval : bool
         With the dual solve of the certified interval (it runs after the primal one, so
         the larger of the two counts, plus the primal potential kept for the gap).
+    periodic : bool
+        The periodic protocol (P2 assembled in full) instead of the mixed one (P2 in
+        half storage).
 
     Examples
     --------
@@ -74,7 +85,9 @@ def estimate_memory(mesh: Mesh, order: int, interval: bool) -> int:
     True
     """
     d = mesh.ndim
-    primal = BYTES_PER_UNKNOWN[(d, order)] * unknowns(mesh, order)
+    half = order == 2 and not periodic
+    primal = (BYTES_PER_UNKNOWN_HALF[d] * unknowns(mesh, order) + BYTES_HALF_FIXED if half
+              else BYTES_PER_UNKNOWN[(d, order)] * unknowns(mesh, order))
     peak = primal
     if interval:
         facets = (d + 1) * mesh.n_cells / 2
@@ -91,14 +104,15 @@ def format_bytes(n: float) -> str:
 
 
 def check_memory(mesh: Mesh, order: int, interval: bool, memory: float, *,
-                 asked: bool) -> str | None:
+                 asked: bool, periodic: bool = False) -> str | None:
     """None when a run on `mesh` fits `memory` bytes; else why not.
 
     With `asked` (the run the caller asked for) a run that does not fit is refused with a
     ValueError that says what to do; otherwise (a refinement the run would like) the
-    reason is returned as a clause for the warning.
+    reason is returned as a clause for the warning. `periodic` as for
+    :func:`estimate_memory`.
     """
-    need = estimate_memory(mesh, order, interval)
+    need = estimate_memory(mesh, order, interval, periodic=periodic)
     if need <= memory:
         return None
     if asked:

@@ -21,7 +21,7 @@ from ._adapt import (
     refine_within,
     voxel_lattice_vertices,
 )
-from ._assembly import cell_fluxes, fe_space, p1_embedding, stiffness_matrix
+from ._assembly import cell_fluxes, fe_space, p1_embedding
 from ._budget import (
     DEFAULT_MEMORY,
     check_memory,
@@ -49,6 +49,7 @@ from ._fe import vertex_values
 from ._hashin import HashinShtrikman, two_isotropic_phases
 from ._periodic import PeriodicProblem
 from ._periodic_dual import periodic_interval, periodic_upper
+from ._pmultigrid import stiffness_operator
 from ._protocols import BOUND_SLACK, check_within_bounds, mixed_boundary, voigt_reuss
 from ._result import SimulationResult
 from ._solve import DEFAULT_TOLERANCE, SolverInfo, element_parts
@@ -195,16 +196,16 @@ def simulate_steps(mesh_or_labels, conductivity: Mapping, *, spacing=None,
     chosen = order
     order, adapt, growth, choice = auto_settings(mesh, order, adapt, source is not None,
                                                  reference)
-    interval_wanted = bool(interval) and protocol == "mixed"
+    pbc, interval_wanted = protocol == "periodic", bool(interval) and protocol == "mixed"
     periodic_wanted = bool(interval) and protocol == "periodic" and mesh.ndim == 2
     if chosen == AUTO and order == 2 and check_memory(mesh, 2, interval_wanted, memory,
-                                                      asked=False):
+                                                      asked=False, periodic=pbc):
         order, adapt, growth, choice = auto_settings(mesh, 1, 0, source is not None)
         choice = (f"P1 (P2 would need about "
-                  f"{format_bytes(estimate_memory(mesh, 2, interval_wanted))}, above the "
+                  f"{format_bytes(estimate_memory(mesh, 2, interval_wanted, pbc))}, above the "
                   f"memory budget of {format_bytes(memory)})")
     interval_wanted, skipped = fit_interval(mesh, order, interval_wanted, memory)
-    check_memory(mesh, order, interval_wanted, memory, asked=True)   # before any solve
+    check_memory(mesh, order, interval_wanted, memory, asked=True, periodic=pbc)  # before any solve
     start = len(mesh.points)
     seconds["mesh"] = time.perf_counter() - t0
     total = 2 + len(names) + adapt
@@ -234,14 +235,14 @@ def simulate_steps(mesh_or_labels, conductivity: Mapping, *, spacing=None,
     growth_seen, graded = 1.0, False
     done = 1 + adapt
     interval_wanted, skipped = fit_interval(mesh, order, interval_wanted, memory, skipped)
-    check_memory(mesh, order, interval_wanted, memory, asked=True)
+    check_memory(mesh, order, interval_wanted, memory, asked=True, periodic=pbc)
     notes: list[str] = [skipped] if skipped else []
     while True:
         yield done, total, f"assembling P{order} on {mesh.n_cells} elements"
         t0 = time.perf_counter()
         space = fe_space(mesh, order)
         volumes = np.empty(mesh.n_cells)
-        matrix = stiffness_matrix(space, tensors, cell_material, volumes)
+        matrix = stiffness_operator(space, tensors, cell_material, volumes, periodic=pbc)
         doflocs = space.doflocs
         coarse = p1_embedding(space)
         seconds["assemble"] = seconds.get("assemble", 0.0) + time.perf_counter() - t0
@@ -397,7 +398,7 @@ def simulate_steps(mesh_or_labels, conductivity: Mapping, *, spacing=None,
         protocol=protocol, tensor=None if tensor is None else tensor[::-1, ::-1].copy(),
         hashin_shtrikman=hashin, adapt=adapt, choice=choice, interval=interval,
         gap_target=gap_target, certify=certify, dual_solver=dual_info, warnings=notes,
-        memory_estimate=estimate_memory(mesh, order, interval_wanted), memory=float(memory))
+        memory_estimate=estimate_memory(mesh, order, interval_wanted, pbc), memory=float(memory))
 
 
 def simulate(mesh_or_labels, conductivity: Mapping, *, spacing=None,
@@ -492,6 +493,5 @@ def simulate(mesh_or_labels, conductivity: Mapping, *, spacing=None,
     steps = simulate_steps(mesh_or_labels, conductivity, spacing=spacing, order=order,
                            axes=axes, tol=tol, exclude=exclude, material_names=material_names,
                            refine=refine, protocol=protocol, adapt=adapt, labels=labels,
-                           max_aspect=max_aspect, interval=interval, gap=gap,
-                           memory=memory)
+                           max_aspect=max_aspect, interval=interval, gap=gap, memory=memory)
     return run_steps(steps)

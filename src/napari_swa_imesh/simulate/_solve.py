@@ -8,11 +8,14 @@ unknowns) solve in seconds.
 from __future__ import annotations
 
 import time
+from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
 from scipy import sparse
 from scipy.sparse import csgraph
+
+from ._pmultigrid import P2Stiffness, TwoLevelDirichlet
 
 __all__ = ["DirichletSolver", "SPDSolver", "SolverInfo", "check_constrained",
            "connected_parts", "element_parts", "solve_dirichlet", "solve_spd",
@@ -150,6 +153,7 @@ class SPDSolver:
         # in the scaled unknowns y = D^1/2 x a coarse function is D^1/2 times its values
         self.hierarchy = Hierarchy(scaled, None if coarse is None else
                                    sparse.diags(1.0 / self.scale) @ coarse)
+        self.precondition: Callable[[np.ndarray], np.ndarray] = self.hierarchy.precondition
         self.setup_seconds = time.perf_counter() - t0
 
     def solve(self, rhs: np.ndarray, x0: np.ndarray | None = None
@@ -170,7 +174,7 @@ class SPDSolver:
         if norm_b == 0:
             return np.zeros_like(rhs), SolverInfo(rhs.size, 0, 0.0, 0.0)
         y = np.zeros_like(rhs) if x0 is None else x0 / self.scale
-        y, iterations = pcg(self.matrix, rhs, self.hierarchy.precondition, y, tol=self.tol,
+        y, iterations = pcg(self.matrix, rhs, self.precondition, y, tol=self.tol,
                             maxiter=MAX_ITERATIONS)
         residual = float(np.linalg.norm(rhs - self.matrix @ y)) / norm_b
         x = y * self.scale
@@ -182,6 +186,18 @@ class SPDSolver:
                 "conductivities are not extreme (contrast above 1e8) or loosen the "
                 "tolerance.")
         return x, info
+
+
+class _TwoLevelSolver(SPDSolver):
+    """:meth:`SPDSolver.solve` on the reduced system of a
+    :class:`~._pmultigrid.P2Stiffness` (scaled the same way; its own preconditioner)."""
+
+    def __init__(self, matrix: P2Stiffness, free: np.ndarray, *, tol: float):
+        system = TwoLevelDirichlet(matrix, free, tol=tol)
+        self.scale, self.matrix, self.tol = system.scale, system.matrix, tol
+        self.precondition = system.precondition
+        self.system = system
+        self.setup_seconds = system.setup_seconds
 
 
 def solve_spd(matrix: sparse.csr_matrix, rhs: np.ndarray, *, x0: np.ndarray | None = None,
@@ -217,12 +233,25 @@ class DirichletSolver:
     :class:`SPDSolver`), restricted here to the free unknowns and the coarse functions
     that vanish on the fixed ones (columns are coarse dofs numbered as the first
     ``n_coarse`` unknowns, as P1 vertices are among P2 dofs).
+
+    A :class:`~._pmultigrid.P2Stiffness` `matrix` (half storage, its own P1 space) is not
+    split: the reduced system is a view of it, solved with the two-level preconditioner
+    of :mod:`._pmultigrid` (`coarse` is then not used).
     """
 
-    def __init__(self, matrix: sparse.csr_matrix, fixed: np.ndarray, *,
+    def __init__(self, matrix: sparse.csr_matrix | P2Stiffness, fixed: np.ndarray, *,
                  tol: float = DEFAULT_TOLERANCE, coarse: sparse.spmatrix | None = None):
         self.n = matrix.shape[0]
         self.fixed = fixed
+        if isinstance(matrix, P2Stiffness):
+            self.free = np.ones(self.n, dtype=bool)
+            self.free[fixed] = False
+            self.operator: P2Stiffness | None = matrix
+            self.coupling = None
+            self.solver: SPDSolver = _TwoLevelSolver(matrix, self.free, tol=tol)
+            self._setup = self.solver.setup_seconds
+            return
+        self.operator = None
         self.free, reduced, self.coupling = split_fixed(matrix, fixed)
         if coarse is not None:
             coarse = coarse.tocsr()[self.free][:, self.free[:coarse.shape[1]]]
@@ -236,7 +265,8 @@ class DirichletSolver:
         guess for the free entries, `tol` overrides the constructor's."""
         u = np.zeros(self.n)
         u[self.fixed] = values
-        b = -(self.coupling @ u[~self.free])
+        b = (-(self.coupling @ u[~self.free]) if self.operator is None
+             else -(self.operator @ u)[self.free])              # u is zero where free
         if rhs is not None:
             b += rhs[self.free]
         if tol is not None:
