@@ -44,6 +44,7 @@ from ._blocked_cv import BLOCKED_CV_METHOD, blocked_cv_errors
 from ._classifiers import GaussianClassifier
 from ._model_base import SegmentationModel
 from ._mrf import argmax_first, potts_mean_field
+from ._refine_em import refine_fitted
 from ._res import res_statistics_unchecked
 from ._samples import BoxCrops, Material, Samples
 from ._tiles import majority_tiles
@@ -241,6 +242,7 @@ class RecommendedModel(SegmentationModel):
                 self._fit_levels(X, y, names)
                 bias_range = None
                 source.uncorrect()
+        refined = refine_fitted(self, source)       # box means -> interiors' (J = 0)
         # the number a user should believe: folds of whole half-boxes, not of pixels (levels
         # up to J only: the labels come from no coarser one, and 65-px windows on big boxes
         # cost seconds on 256^3); the halves are read from the final crops, so a store
@@ -268,7 +270,7 @@ class RecommendedModel(SegmentationModel):
                                    for c, reg in zip(clf.classes_, clf.regularized_) if reg}),
             "bias_correction": bool(self.bias_correction),
             "bias_variance_reduction": reduction,
-            "bias_range": bias_range,
+            "bias_range": bias_range, "refined_means": refined,
             "notes": notes,
             "top_scale": int(top),     # the largest scale considered, after any box limit
         }
