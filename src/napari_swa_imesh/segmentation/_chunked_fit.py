@@ -9,7 +9,9 @@ the chunks, and estimates the field exactly as the chunked prediction does
 pixel value, else grid-cell sums of a chunked labelling pass); each box is divided by
 the field's linear interpolation on its own voxels. The fit is the in-memory fit's code
 (:meth:`~._recommended.RecommendedModel._fit_on`), so the model is the same to float32
-rounding of the field.
+rounding of the field, except for one step that needs the whole image: a store's fit
+keeps the boxes' means where the in-memory fit moves them to the classified interiors'
+(:mod:`._refine_em`; ``scores["refined_means"]`` says which was done).
 
 Memory: the box crops and their features (:func:`training_bytes`, refused when over the
 budget) and one padded chunk per worker in the bias passes (:func:`~._chunked.plan_chunks`).
@@ -155,7 +157,8 @@ def fit_chunked(model: RecommendedModel, image, samples: Samples, *, spacing=Non
     Returns
     -------
     RecommendedModel
-        `model`, fitted: the in-memory fit's model to float32 rounding of the field.
+        `model`, fitted: the in-memory fit's model to float32 rounding of the field,
+        with the boxes' means (``scores["refined_means"]["applied"]`` is False).
 
     Raises
     ------
