@@ -83,8 +83,8 @@ class StoreImage:
                 for raw, b in zip(self.raw_crops(), self.samples.boxes)]
 
     def correct(self, model) -> list[float]:
-        """The field of the current correction (one chunked pass), median 1 over the
-        union of the boxes, made current; the range of its grid."""
+        """The field of the current correction (one chunked pass), scaled as the
+        estimator scales it (as prediction does), made current; the range of its grid."""
         x, f = self.image, model.finest_scale
         multiple = grid_factor(x.shape) if f > 0 else 1
         if self.chunks is None:
@@ -102,9 +102,6 @@ class StoreImage:
         small = bias_round(model, x, core, self.small, sub=self._sub if f == 0 else None,
                            **compute)
         self.small = small
-        values = np.concatenate([self._field_at(b)[_first_cover(self.samples.boxes, i)]
-                                 for i, b in enumerate(self.samples.boxes)])
-        small /= np.float32(np.median(values))          # self.small, in place
         return [float(small.min()), float(small.max())]
 
     def uncorrect(self) -> None:
@@ -116,7 +113,8 @@ class StoreImage:
 
 
 def _first_cover(boxes, i: int) -> np.ndarray:
-    """Voxels of box i that no earlier box holds (the boxes' union counts each once)."""
+    """Voxels of box i that no earlier box holds (the boxes' union counts each once:
+    statistics over the union of the boxes)."""
     box = boxes[i]
     keep = np.ones(box.shape, bool)
     for other in boxes[:i]:

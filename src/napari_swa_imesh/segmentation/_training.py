@@ -8,7 +8,7 @@
 * ``raw_crops()``: the boxes' pixels as stored; ``crops(model)``: the boxes of the
   standardised image divided by the current bias field;
 * ``correct(model)``: a new field from the labels of the current correction (the finest
-  level's classifier), scaled to median 1 in the boxes, made current; returns its range;
+  level's classifier), scaled as prediction scales it, made current; returns its range;
 * ``release()``: drop what the fit held.
 
 :class:`WholeImage` holds the image in memory; :class:`~._chunked_fit.StoreImage` reads
@@ -47,14 +47,13 @@ class WholeImage:
         return [self.work[b.slices] for b in self.samples.boxes]
 
     def correct(self, model) -> list[float]:
-        """Field of the current correction, median 1 in the boxes (the training boxes
-        keep their intensity scale), made the current correction; its range."""
+        """Field of the current correction, made the current correction; its range.
+
+        The field is scaled as the estimator scales it, the same as in prediction: a
+        field rescaled to median 1 in the boxes trained the classifiers on an intensity
+        scale that the predicted image did not have (measured on the held-out generator,
+        T1 3 %, 40 % field: WM Dice .894 against .937)."""
         field = model._bias_field(self.base, self.work)
-        in_boxes = np.zeros(self.image.shape, bool)
-        for b in self.samples.boxes:
-            in_boxes[b.slices] = True
-        field /= np.float32(np.median(field[in_boxes]))
-        del in_boxes
         bias_range = [float(field.min()), float(field.max())]
         self.work = model._standardised(self.image, field, out=field)   # field is spent
         return bias_range
