@@ -7,10 +7,10 @@ from __future__ import annotations
 import logging
 from collections.abc import Callable
 
-__all__ = ["connect_dask"]
+__all__ = ["connect_dask", "first_line"]
 
 
-def _sentence(error: str) -> str:
+def first_line(error: str) -> str:
     """The first line of an error (dask's KilledWorker and the like run on)."""
     lines = [line for line in str(error).splitlines() if line.strip()]
     return lines[0].strip() if lines else "the task failed without a message"
@@ -74,6 +74,6 @@ def connect_dask(scheduler: str | None, *, workers: int, memory: int | str | Non
             cluster.close()
         raise ValueError(
             f"the local Dask cluster of {workers} worker(s) did not start (a worker process "
-            f"died while starting: {type(exc).__name__}: {_sentence(str(exc))}); check the "
+            f"died while starting: {type(exc).__name__}: {first_line(str(exc))}); check the "
             "memory left (--memory), try fewer --workers, or give --scheduler.") from exc
     return client, cluster

@@ -21,7 +21,7 @@ import uuid
 from collections.abc import Callable, Sequence
 from pathlib import Path
 
-from .._dask_connect import connect_dask
+from .._dask_connect import connect_dask, first_line
 from .._dask_logs import quiet_dask
 
 __all__ = ["expand_inputs", "output_for", "mesh_for", "connect", "run_batch", "segment_one",
@@ -288,12 +288,6 @@ def _mesh_labels_file(image: str, labels_path: str, mesh_path: str, *, exclude,
             "cells": int(len(mesh.cells))}
 
 
-def _sentence(error: str) -> str:
-    """The first line of a task's error (dask's KilledWorker and the like run on)."""
-    lines = [line for line in str(error).splitlines() if line.strip()]
-    return lines[0].strip() if lines else "the task failed without a message"
-
-
 def run_batch(images: Sequence, model_path, outdir, *, client, force: bool = False,
               memory: int | None = None, retries: int = 2, mesh: str | None = None,
               exclude: Sequence[int] = (), conductivity: dict | None = None,
@@ -360,7 +354,7 @@ def run_batch(images: Sequence, model_path, outdir, *, client, force: bool = Fal
             row = {"error": f"{exc}"}
         if "error" in row:
             row = {"image": str(images[i]), "output": str(outputs[i]),
-                   "error": _sentence(row["error"])}
+                   "error": first_line(row["error"])}
         rows[i] = row
         if progress is not None:
             progress(done, len(outputs), row)
