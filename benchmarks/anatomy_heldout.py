@@ -135,7 +135,9 @@ def make_case(crop: str, anatomy_seed: int, noise: float, bias: float, spacing, 
     brain = frac[0] < 0.5
     truth = np.where(brain, np.argmax(frac[1:], axis=0) + 1, 0).astype(np.int32)
     if bias:
-        clean = clean * _poly_field(out, spacing, bias, rng)
+        # the field from a stream of its own, so a case with a field and without it share
+        # the texture and the noise, and differ in the field alone
+        clean = clean * _poly_field(out, spacing, bias, np.random.default_rng([seed, 7]))
     image = clean + noise * MEANS[3] * rng.standard_normal(out)   # sigma: % of T1 WM
     return image.astype(np.float32), truth, brain
 

@@ -45,3 +45,20 @@ def test_heldout_tissue_intensity_depends_on_where_it_lies():
     assert out[20, 20, 35] > out[20, 20, 5] + 0.03
     assert out[20, 20, 11] < out[20, 20, 20] - 0.02
     assert np.all(out[lab == 1] == anatomy_heldout.CONTRASTS["T1"][1])
+
+
+def test_heldout_case_with_a_field_differs_from_its_flat_twin_by_the_field_alone():
+    # the field has a random stream of its own: a case with a field is its flat twin times
+    # a smooth field, with the same noise, so a bias variant is compared with like
+    pytest.importorskip("nilearn")
+    flat, truth, _ = anatomy_heldout.make_case("inf-ant", 7, 0.0, 0.0, (1.0, 1.0, 1.0), 0)
+    biased, _, _ = anatomy_heldout.make_case("inf-ant", 7, 0.0, 0.4, (1.0, 1.0, 1.0), 0)
+    noisy_flat, _, _ = anatomy_heldout.make_case("inf-ant", 7, 0.09, 0.0, (1.0, 1.0, 1.0), 0)
+    noisy_biased, _, _ = anatomy_heldout.make_case("inf-ant", 7, 0.09, 0.4, (1.0, 1.0, 1.0),
+                                                   0)
+    inside = flat > 0.05
+    field = biased[inside] / flat[inside]
+    assert field.max() / field.min() > 1.15                     # there is a field
+    noise_flat = noisy_flat - flat
+    noise_biased = noisy_biased - biased
+    np.testing.assert_allclose(noise_biased, noise_flat, atol=1e-5)
