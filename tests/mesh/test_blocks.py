@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from block_cases import misalign_block
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
@@ -139,16 +140,7 @@ def test_a_block_balanced_alone_fails_the_seam_check():
 
 def test_a_misaligned_block_leaves_nothing(tmp_path, monkeypatch):
     lab = _volume()
-    real = bk.mesh_block
-
-    def shifted(plan, index, *args, **kw):
-        piece = real(plan, index, *args, **kw)
-        if index == (0, 1, 1):
-            piece.gid = piece.gid + 1                  # its vertices one lattice key off
-            piece.seams = {k: v + 1 for k, v in piece.seams.items()}
-        return piece
-
-    monkeypatch.setattr(bk, "mesh_block", shifted)
+    misalign_block(monkeypatch, (0, 1, 1))
     with pytest.raises(BlockMeshError, match="disagree on their shared face"):
         mesh_blocks(lab, tmp_path / "m.pvtu", block=8, workers=0, exclude=(0,))
     assert list(tmp_path.iterdir()) == []

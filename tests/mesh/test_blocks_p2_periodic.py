@@ -8,6 +8,7 @@ import dataclasses
 
 import numpy as np
 import pytest
+from block_cases import boxed, misalign_block
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
@@ -23,13 +24,8 @@ from napari_swa_imesh.mesh.mesher._lattice import split_box_faces
 meshio = pytest.importorskip("meshio")
 
 
-def _volume(shape=(13, 10, 12), seed=2):
-    rng = np.random.default_rng(seed)
-    lab = np.ones(shape, np.int64)
-    lab[tuple(slice(n // 4, n - n // 3) for n in shape)] = 2
-    lab[rng.random(shape) < 0.04] = 3
-    lab[(slice(0, 2),) * len(shape)] = 0
-    return lab
+def _volume(shape=(13, 10, 12)):
+    return boxed(shape, seed=2, p=0.04)
 
 
 def _keys(points, rows):
@@ -92,16 +88,7 @@ def test_random_periodic_volumes_assemble_exactly(seed, block, shape):
 @pytest.mark.filterwarnings("ignore:coarsening by")
 def test_a_misaligned_block_still_fails_the_seam_check(tmp_path, monkeypatch, options):
     lab = _volume()
-    real = bk.mesh_block
-
-    def shifted(plan, index, *args, **kw):
-        piece = real(plan, index, *args, **kw)
-        if index == (1, 1, 1):
-            piece.gid = piece.gid + 1                  # its vertices one lattice key off
-            piece.seams = {k: v + 1 for k, v in piece.seams.items()}
-        return piece
-
-    monkeypatch.setattr(bk, "mesh_block", shifted)
+    misalign_block(monkeypatch, (1, 1, 1))
     with pytest.raises(BlockMeshError, match="disagree on their shared face"):
         mesh_blocks(lab, tmp_path / "m.pvtu", block=4, workers=0, exclude=(0,), **options)
     assert list(tmp_path.iterdir()) == []

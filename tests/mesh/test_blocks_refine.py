@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from block_cases import boxed
 
 from napari_swa_imesh import build_tree
 from napari_swa_imesh.cli import main
@@ -16,13 +17,8 @@ from napari_swa_imesh.mesh.mesher._imesh import _mesh_tree
 from napari_swa_imesh.mesh.mesher._lattice import _InterfaceFaces, split_leaves
 
 
-def _volume(shape, seed=4):
-    rng = np.random.default_rng(seed)
-    lab = np.ones(shape, np.int64)
-    lab[tuple(slice(n // 4, n - n // 3) for n in shape)] = 2
-    lab[rng.random(shape) < 0.03] = 3
-    lab[(slice(0, 2),) * len(shape)] = 0
-    return lab
+def _volume(shape):
+    return boxed(shape, seed=4, p=0.03)
 
 
 def _reference(lab, k, block, exclude):
