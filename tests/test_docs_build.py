@@ -108,3 +108,14 @@ def test_short_references_resolve_and_misspelt_ones_fail(tmp_path):
     # a name that exists nowhere fails the build under -n -W
     bad = _mini_site(tmp_path / "bad", page.replace("REF", ":func:`quality_boundz`"))
     assert bad.returncode != 0 and "quality_boundz" in bad.stderr
+
+
+def test_connect_s_page_holds_the_parameters_it_shares_with_connect_dask(tmp_path):
+    page = "# t\n\n```{eval-rst}\n.. autofunction:: napari_swa_imesh.pipeline.connect\n```\n"
+    run = _mini_site(tmp_path, page)
+    assert run.returncode == 0, run.stderr
+    html = re.sub(r"<[^>]+>", "", (tmp_path / "out" / "index.html").read_text())
+    for text in ("Address of a running scheduler", "Single-threaded worker processes",
+                 "Memory limit of each local worker"):
+        assert text in html, text
+    assert "connect_dask:" not in html

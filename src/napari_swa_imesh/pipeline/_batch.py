@@ -21,7 +21,7 @@ import uuid
 from collections.abc import Callable, Sequence
 from pathlib import Path
 
-from .._dask_connect import connect_dask, first_line
+from .._dask_connect import connect_dask, first_line, with_dask_parameters
 from .._dask_logs import quiet_dask
 
 __all__ = ["expand_inputs", "output_for", "mesh_for", "connect", "run_batch", "segment_one",
@@ -130,23 +130,27 @@ def expand_inputs(items: Sequence) -> list[Path]:
     return list(dict.fromkeys(p.resolve() for p in found))
 
 
-def connect(scheduler: str | None = None, *, workers: int = 2, memory: int | None = None):
+@with_dask_parameters
+def connect(scheduler: str | None = None, *, workers: int = 2,
+            memory: int | str | None = None):
     """A ``distributed.Client``: on `scheduler`, else on a new ``LocalCluster``.
 
     Parameters
     ----------
-    scheduler : str, optional
-        Address of a running scheduler (``tcp://host:8786``).
-    workers : int
-        Single-threaded worker processes of the local cluster.
-    memory : int, optional
-        Memory limit of each local worker, bytes.
+    <connect_dask: scheduler, workers, memory>
+
+    Returns
+    -------
+    distributed.Client
+        On `scheduler`, or on the new local cluster.
 
     Raises
     ------
     ValueError
-        When the scheduler does not answer within :data:`CONNECT_SECONDS`.
+        When the scheduler does not answer within :data:`CONNECT_SECONDS`, or a local
+        worker dies while starting.
     """
+    # the parameters' entries are connect_dask's, filled in on import (one description)
     client, _ = connect_dask(scheduler, workers=workers, memory=memory,
                              timeout=CONNECT_SECONDS, preload=_load_package)
     return client
