@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import csv
 import io
+from collections import Counter
 from pathlib import Path
 
 import numpy as np
@@ -29,7 +30,9 @@ DEFAULT_THRESHOLD = 0.5
 
 def growth_table(result, *, threshold: float = DEFAULT_THRESHOLD) -> dict[str, np.ndarray]:
     """Columns over the saved times: ``time``, ``volume_<m>`` and ``front_<m>`` per
-    material, ``volume``, ``amount``, the balance terms and ``balance_residual``.
+    material label ``m``, ``volume``, ``amount``, the balance terms and
+    ``balance_residual`` (:func:`write_growth`'s CSV names a material's columns by its
+    name where it has one).
 
     Parameters
     ----------
@@ -73,10 +76,23 @@ def growth_outputs(path, *, force: bool = False) -> list[Path]:
     return series + [check_writable(p.with_suffix(s), force=force) for s in (".csv", ".png")]
 
 
-def _csv_text(table: dict[str, np.ndarray]) -> str:
+def _csv_columns(materials, names: dict) -> dict[str, str]:
+    """The CSV header of :func:`growth_table`'s per-material columns: ``volume_<m>`` ->
+    ``volume_<name>`` (likewise ``front_``) for a material with a name, ``<name> (<m>)``
+    where two materials would give the same column, the label where it has no name."""
+    part = {int(m): str(names.get(int(m), "")).strip() or str(int(m)) for m in materials}
+    shared = Counter(part.values())
+    part = {m: p if shared[p] == 1 or p == str(m) else f"{p} ({m})" for m, p in part.items()}
+    if len(set(part.values())) < len(part):          # a name such as "x (3)" beside two x
+        part = {m: str(m) for m in part}
+    return {f"{prefix}_{m}": f"{prefix}_{p}" for m, p in part.items()
+            for prefix in ("volume", "front")}
+
+
+def _csv_text(table: dict[str, np.ndarray], header: dict[str, str]) -> str:
     out = io.StringIO()
     writer = csv.writer(out, lineterminator="\n")
-    writer.writerow(list(table))
+    writer.writerow([header.get(key, key) for key in table])
     for row in zip(*table.values()):
         writer.writerow(["" if not np.isfinite(v) else f"{float(v):.10g}" for v in row])
     return out.getvalue()
@@ -118,7 +134,10 @@ def write_growth(result, path, *, threshold: float = DEFAULT_THRESHOLD,
     result : GrowthResult
     path : str or Path
         The ``.xdmf`` of the series (field ``c``); the ``.h5`` beside it, the table
-        ``<stem>.csv`` (:func:`growth_table`) and the volume curve ``<stem>.png``.
+        ``<stem>.csv`` (:func:`growth_table`'s columns, a material's named by its name
+        where it has one: ``volume_white matter``, else by its label: ``volume_3``; by
+        ``white matter (3)`` where two materials share a name) and the volume curve
+        ``<stem>.png``.
     threshold : float
         As for :func:`growth_table`.
     force : bool
@@ -134,6 +153,8 @@ def write_growth(result, path, *, threshold: float = DEFAULT_THRESHOLD,
     with atomic_write(targets, force=force) as temps:
         # the series' own writer, into the temporary folder (its files keep their names)
         write_series(result, temps[0], force=True, name="c")
-        temps[2].write_text(_csv_text(table), encoding="utf-8")
-        _plot(table, temps[3], dict(result.mesh.material_names), threshold)
+        names = dict(result.mesh.material_names)
+        header = _csv_columns(np.unique(result.mesh.material), names)
+        temps[2].write_text(_csv_text(table, header), encoding="utf-8")
+        _plot(table, temps[3], names, threshold)
     return targets
