@@ -12,12 +12,7 @@ from napari_swa_imesh.cli import main
 from napari_swa_imesh.data import tissue_phantom
 from napari_swa_imesh.pipeline import _batch
 from napari_swa_imesh.segmentation import RecommendedModel, samples_from_truth
-
-
-def run(capsys, *argv):
-    code = main([str(a) for a in argv])
-    out = capsys.readouterr()
-    return code, out.out, out.err
+from swa_cli_helpers import run
 
 
 @pytest.fixture(scope="module")

@@ -7,17 +7,11 @@ import time
 import numpy as np
 import pytest
 
-from napari_swa_imesh.cli import main
 from napari_swa_imesh.data import tissue_phantom
 from napari_swa_imesh.io import write_labels
 from napari_swa_imesh.pipeline._batch import expand_inputs
 from napari_swa_imesh.segmentation import RecommendedModel, samples_from_truth
-
-
-def run(capsys, *argv):
-    code = main([str(a) for a in argv])
-    out = capsys.readouterr()
-    return code, out.out, out.err
+from swa_cli_helpers import run
 
 
 @pytest.fixture(scope="module")

@@ -10,7 +10,6 @@ import pytest
 import zarr
 
 from napari_swa_imesh._zarr_io import open_lazy, open_levels
-from napari_swa_imesh.cli import main
 from napari_swa_imesh.data import tissue_phantom
 from napari_swa_imesh.segmentation import (
     RecommendedModel,
@@ -18,6 +17,7 @@ from napari_swa_imesh.segmentation import (
     samples_from_truth,
     save_samples,
 )
+from swa_cli_helpers import run
 
 
 @pytest.fixture(scope="module")
@@ -31,12 +31,6 @@ def scene(tmp_path_factory):
                           dtype=image.dtype, attributes={"spacing": [2.0, 1.0, 0.5]})
     z[:] = image
     return folder
-
-
-def run(capsys, *argv):
-    code = main([str(a) for a in argv])
-    out = capsys.readouterr()
-    return code, out.out, out.err
 
 
 def run_fresh(*argv):

@@ -12,6 +12,7 @@ import pytest
 from napari_swa_imesh.cli import main
 from napari_swa_imesh.io import write_labels
 from napari_swa_imesh.mesh.formats._export import read_mesh
+from swa_cli_helpers import run
 
 
 def three_materials_2d() -> np.ndarray:
@@ -27,12 +28,6 @@ def blob_3d() -> np.ndarray:
     labels[1:5, 1:4, 2:6] = 2
     labels[rng.random(labels.shape) < 0.05] = 0
     return labels
-
-
-def run(capsys, *argv) -> tuple[int, str, str]:
-    code = main([str(a) for a in argv])
-    captured = capsys.readouterr()
-    return code, captured.out, captured.err
 
 
 def one_json(out: str) -> dict:
@@ -262,7 +257,6 @@ def test_no_check_skips_the_checks(tmp_path, capsys):
 
     import numpy as np
 
-    from napari_swa_imesh.cli import main
 
     lab = np.ones((16, 16), np.int32)
     lab[4:9, 5:12] = 2

@@ -7,15 +7,9 @@ import json
 import numpy as np
 import pytest
 
-from napari_swa_imesh.cli import main
 from napari_swa_imesh.mesh.formats._export import read_mesh
 from napari_swa_imesh.mesh.model._quality import signed_volumes
-
-
-def run(capsys, *argv) -> tuple[int, str, str]:
-    code = main([str(a) for a in argv])
-    captured = capsys.readouterr()
-    return code, captured.out, captured.err
+from swa_cli_helpers import run
 
 
 def blob() -> np.ndarray:

@@ -9,18 +9,12 @@ import meshio
 import numpy as np
 import pytest
 
-from napari_swa_imesh.cli import main
 from napari_swa_imesh.io import read_image, write_labels
 from napari_swa_imesh.mesh import signed_volumes
+from swa_cli_helpers import run
 
 nib = pytest.importorskip("nibabel")
 apply_affine = nib.affines.apply_affine
-
-
-def run(capsys, *argv) -> tuple[int, str, str]:
-    code = main([str(a) for a in argv])
-    captured = capsys.readouterr()
-    return code, captured.out, captured.err
 
 
 def labels_3d() -> np.ndarray:

@@ -3,9 +3,9 @@ import json
 import numpy as np
 import pytest
 
-from napari_swa_imesh.cli import main
 from napari_swa_imesh.io import read_image, write_labels
 from napari_swa_imesh.segmentation import Samples, save_samples
+from swa_cli_helpers import run
 
 
 @pytest.fixture()
@@ -22,12 +22,6 @@ def scene(tmp_path):
         "boxes": [{"label": 1, "start": [0, 0], "stop": [64, 36]},
                   {"label": 2, "start": [0, 44], "stop": [64, 80]}]}), tmp_path / "s.json")
     return tmp_path
-
-
-def run(capsys, *argv):
-    code = main([str(a) for a in argv])
-    out = capsys.readouterr()
-    return code, out.out, out.err
 
 
 def test_res_segment_apply_evaluate(scene, capsys):

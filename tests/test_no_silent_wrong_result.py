@@ -14,10 +14,10 @@ import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from napari_swa_imesh.cli import main
 from napari_swa_imesh.io import atomic_write, read_image, write_labels
 from napari_swa_imesh.segmentation import Samples, load_model, save_samples, segment
 from napari_swa_imesh.segmentation._samples import window_scale
+from swa_cli_helpers import run
 
 
 def three_regions(shape=(48, 72), seed=0):
@@ -41,12 +41,6 @@ def band_samples(truth, order=(1, 2, 3), labels=None, margin=3):
                       "stop": [truth.shape[0], int(cols[-1]) + 1 - margin]})
     return Samples.from_dict({"materials": [{"label": labels[m], "name": f"m{m}"}
                                             for m in order], "boxes": boxes})
-
-
-def run(capsys, *argv):
-    code = main([str(a) for a in argv])
-    out = capsys.readouterr()
-    return code, out.out, out.err
 
 
 def folder_state(folder):

@@ -9,7 +9,7 @@ import json
 import numpy as np
 import pytest
 
-from napari_swa_imesh.cli import main
+from swa_cli_helpers import run as _run
 
 
 @pytest.fixture
@@ -21,12 +21,6 @@ def brain(tmp_path):
     path = tmp_path / "brain.npy"
     np.save(path, labels)
     return path
-
-
-def _run(capsys, *argv):
-    rc = main([str(a) for a in argv])
-    out, err = capsys.readouterr()
-    return rc, out, err
 
 
 def test_fisher_kpp_writes_a_series_meshio_reads_a_table_and_a_plot(brain, capsys):

@@ -7,8 +7,8 @@ import json
 import numpy as np
 import pytest
 
-from napari_swa_imesh.cli import main
 from napari_swa_imesh.simulate import simulate
+from swa_cli_helpers import run as _run
 
 
 @pytest.fixture
@@ -20,12 +20,6 @@ def labels_file(tmp_path):
     path = tmp_path / "labels.npy"
     np.save(path, labels)
     return path, labels
-
-
-def _run(capsys, *argv):
-    rc = main([str(a) for a in argv])
-    out, err = capsys.readouterr()
-    return rc, out, err
 
 
 def test_simulate_labels_prints_k_eff_and_writes_a_field_paraview_reads(labels_file, capsys):

@@ -7,8 +7,8 @@ import json
 import numpy as np
 import pytest
 
-from napari_swa_imesh.cli import main
 from napari_swa_imesh.simulate import stochastic_k_eff
+from swa_cli_helpers import run as _run
 
 
 @pytest.fixture
@@ -20,12 +20,6 @@ def inputs(tmp_path):
         "label,name,tiles,mean_mean,mean_std,variance_mean,variance_std\n"
         "1,grey,20,40.0,5.0,1.0,0.1\n2,white,20,80.0,2.0,1.0,0.1\n")
     return tmp_path, labels
-
-
-def _run(capsys, *argv):
-    rc = main([str(a) for a in argv])
-    out, err = capsys.readouterr()
-    return rc, out, err
 
 
 def test_the_command_gives_the_library_result_and_writes_table_and_histogram(inputs, capsys):

@@ -16,12 +16,7 @@ from napari_swa_imesh.simulate import (
     simulation_report,
     write_report,
 )
-
-
-def _run(capsys, *argv):
-    rc = main([str(a) for a in argv])
-    out, err = capsys.readouterr()
-    return rc, out, err
+from swa_cli_helpers import run as _run
 
 
 def _csv_blocks(path):
