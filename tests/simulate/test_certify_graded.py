@@ -19,7 +19,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 from scipy import sparse
-from simulate_cases import blobs
+from simulate_cases import blobs, checkerboard
 
 from napari_swa_imesh.mesh import mesh_labels
 from napari_swa_imesh.simulate import _certify as certify
@@ -31,11 +31,6 @@ from napari_swa_imesh.simulate._dual import dual_bound
 from napari_swa_imesh.simulate._solve import SolverInfo
 
 K = {1: 1.0, 2: 10.0, 3: 0.1}
-
-
-def checkerboard(n: int, side: int) -> np.ndarray:
-    squares = np.arange(n * side) // side
-    return (np.add.outer(squares, squares) % 2 + 1).astype(np.uint8)
 
 
 def test_the_gap_in_voxel_elements_is_graded_in_flat_leaves_refined_at_interfaces():

@@ -6,6 +6,7 @@ import json
 
 import numpy as np
 import pytest
+from simulate_cases import checkerboard
 
 from napari_swa_imesh.simulate import simulate
 from swa_cli_helpers import run as _run
@@ -217,8 +218,7 @@ def test_the_interval_and_the_memory_budget_on_the_command_line(tmp_path, capsys
                       "--json", "--no-interval")
     assert rc == 0 and "interval" not in json.loads(out)
     # a checkerboard on a coarse mesh kept as asked: the wide interval is said
-    squares = np.arange(8) // 4
-    np.save(tmp_path / "board.npy", (np.add.outer(squares, squares) % 2 + 1).astype(np.uint8))
+    np.save(tmp_path / "board.npy", checkerboard(2, 4))
     rc, out, _ = _run(capsys, "simulate", tmp_path / "board.npy", "-k", "1=1", "2=10",
                       "--axes", "x", "--order", "1", "--adapt", "0")
     assert rc == 0

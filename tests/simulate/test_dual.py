@@ -15,7 +15,7 @@ import numpy as np
 import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
-from simulate_cases import blobs
+from simulate_cases import blobs, checkerboard
 
 from napari_swa_imesh.mesh import mesh_labels
 from napari_swa_imesh.simulate import simulate
@@ -27,11 +27,6 @@ from napari_swa_imesh.simulate._dual import (
     facet_table,
     hypercircle,
 )
-
-
-def checkerboard(n: int, side: int) -> np.ndarray:
-    squares = np.arange(n * side) // side
-    return (np.add.outer(squares, squares) % 2 + 1).astype(np.uint8)
 
 
 def _dual(mesh, conductivity, name):

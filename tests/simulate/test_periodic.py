@@ -13,6 +13,7 @@ import json
 
 import numpy as np
 import pytest
+from simulate_cases import checkerboard
 
 from napari_swa_imesh.cli import main
 from napari_swa_imesh.mesh import mesh_labels
@@ -26,11 +27,6 @@ def layers(d: int, axis: int, n: int = 8) -> np.ndarray:
     index[axis] = slice(n // 2, None)
     lab[tuple(index)] = 2
     return lab
-
-
-def checkerboard(n: int, side: int) -> np.ndarray:
-    squares = np.arange(n * side) // side
-    return (np.add.outer(squares, squares) % 2 + 1).astype(np.uint8)
 
 
 @pytest.mark.parametrize("d", [2, 3])

@@ -11,14 +11,10 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from simulate_cases import checkerboard
 
 from napari_swa_imesh.mesh import mesh_labels
 from napari_swa_imesh.simulate import simulate
-
-
-def checkerboard(n: int, side: int) -> np.ndarray:
-    squares = np.arange(n * side) // side
-    return (np.add.outer(squares, squares) % 2 + 1).astype(np.uint8)
 
 
 def test_refinement_converges_to_the_exact_checkerboard_conductivity():

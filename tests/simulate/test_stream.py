@@ -14,7 +14,7 @@ import numpy as np
 import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
-from simulate_cases import blobs
+from simulate_cases import blobs, checkerboard
 
 from napari_swa_imesh.mesh import mesh_labels
 from napari_swa_imesh.simulate import simulate
@@ -150,8 +150,7 @@ def test_periodic_laminate_interval_is_exact():
 
 
 def test_periodic_checkerboard_holds_dykhne_and_blobs_a_finer_solve():
-    squares = np.arange(12) // 3
-    board = (np.add.outer(squares, squares) % 2 + 1).astype(np.uint8)
+    board = checkerboard(4, 3)
     with pytest.warns(UserWarning, match="periodic interval along"):
         r = _periodic(board, {1: 1.0, 2: 10.0})
     for lo, hi in r.interval.values():
