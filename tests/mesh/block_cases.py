@@ -1,5 +1,5 @@
-"""Seeded volumes and a broken block shared by the block-wise meshing tests (not a test
-module)."""
+"""Seeded volumes, the tasks' grids in memory and a broken block shared by the block-wise
+meshing tests (not a test module)."""
 
 from __future__ import annotations
 
@@ -17,6 +17,18 @@ def boxed(shape, seed: int, p: float) -> np.ndarray:
     lab[rng.random(shape) < p] = 3
     lab[(slice(0, 2),) * len(shape)] = 0
     return lab
+
+
+def balanced_grids(lab, block: int, exclude=(0,), *, periodic: bool = False):
+    """What the tasks compute before meshing, in memory (no files): the plan, each block's
+    mixed grids, the grids balanced across the blocks, and the materials to mesh."""
+    plan = bk.plan_blocks(lab.shape, block, periodic=periodic)
+    mixed = {}
+    for idx in plan.blocks():
+        sl, _ = plan.window(idx)
+        mixed[idx] = bk.mixed_grids(bk._window_labels(plan, idx, lab[sl]), plan.top)
+    present = sorted(set(np.unique(lab).tolist()) - set(exclude))
+    return plan, mixed, bk.balance_grids(plan, mixed), present
 
 
 def misalign_block(monkeypatch, index: tuple[int, ...]) -> None:

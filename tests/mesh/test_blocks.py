@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from block_cases import misalign_block
+from block_cases import balanced_grids, misalign_block
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
@@ -34,13 +34,7 @@ def _pieces(lab, block, exclude=(0,), local_balance_at=None):
     """Every block's piece, in memory (the tasks' functions, no files). With
     `local_balance_at`, that block is meshed from its own region tree only (the coarse
     balance across its faces skipped): a deliberately misaligned block."""
-    plan = bk.plan_blocks(lab.shape, block)
-    mixed = {}
-    for idx in plan.blocks():
-        sl, _ = plan.window(idx)
-        mixed[idx] = bk.mixed_grids(bk._window_labels(plan, idx, lab[sl]), plan.top)
-    split = bk.balance_grids(plan, mixed)
-    present = sorted(set(np.unique(lab).tolist()) - set(exclude))
+    plan, mixed, split, present = balanced_grids(lab, block, exclude)
     pieces = []
     for idx in plan.blocks():
         grids = split

@@ -8,7 +8,7 @@ import dataclasses
 
 import numpy as np
 import pytest
-from block_cases import boxed, misalign_block
+from block_cases import balanced_grids, boxed, misalign_block
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
@@ -40,13 +40,7 @@ def _keys(points, rows):
 def _pieces(lab, block, exclude=(0,), wrong_rule_at=None):
     """Every block's piece (the tasks' functions, no files) of a periodic plan; with
     `wrong_rule_at`, that block cuts its faces by the non-periodic diagonal rule."""
-    plan = bk.plan_blocks(lab.shape, block, periodic=True)
-    mixed = {}
-    for idx in plan.blocks():
-        sl, _ = plan.window(idx)
-        mixed[idx] = bk.mixed_grids(bk._window_labels(plan, idx, lab[sl]), plan.top)
-    split = bk.balance_grids(plan, mixed)
-    present = sorted(set(np.unique(lab).tolist()) - set(exclude))
+    plan, _, split, present = balanced_grids(lab, block, exclude, periodic=True)
     pieces = []
     for idx in plan.blocks():
         sl, _ = plan.window(idx)
