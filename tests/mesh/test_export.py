@@ -11,6 +11,7 @@ import sys
 import meshio
 import numpy as np
 import pytest
+from gmsh_helpers import gmsh_reads
 
 from napari_swa_imesh.mesh.formats._export import MESH_SUFFIXES, read_mesh, to_meshio, write_mesh
 from napari_swa_imesh.mesh.formats._triangle_tetgen import read_node_ele
@@ -338,22 +339,10 @@ def test_vtk_itself_reads_the_files(tmp_path, ndim, suffix):
 
 @pytest.mark.parametrize("ndim", [2, 3])
 def test_gmsh_itself_reads_named_groups_and_positive_elements(tmp_path, ndim):
-    gmsh = pytest.importorskip("gmsh", reason="the gmsh package is optional (pip install gmsh)")
     mesh = sample_mesh(ndim)
     path = write_mesh(mesh, tmp_path / "m.msh")[0]
-    gmsh.initialize(["", "-v", "0"])
-    try:
-        gmsh.open(str(path))
-        groups = {}
-        for dim, tag in gmsh.model.getPhysicalGroups(ndim):
-            entities = gmsh.model.getEntitiesForPhysicalGroup(dim, tag)
-            count = sum(len(gmsh.model.mesh.getElements(dim, e)[1][0]) for e in entities)
-            groups[gmsh.model.getPhysicalName(dim, tag)] = count
-        _, tags, _ = gmsh.model.mesh.getElements(ndim)
-        # signed inverse condition number: negative for an inverted element
-        quality = gmsh.model.mesh.getElementQualities(np.concatenate(tags), "minSICN")
-    finally:
-        gmsh.finalize()
+    tagged, quality = gmsh_reads(path, ndim)
+    groups = {name: count for name, (_, count) in tagged.items()}
     assert groups["bone"] == np.count_nonzero(mesh.material == 1)
     assert groups["soft tissue"] == np.count_nonzero(mesh.material == 2)
     assert sum(groups.values()) == mesh.n_cells

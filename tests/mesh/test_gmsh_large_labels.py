@@ -5,6 +5,7 @@ from __future__ import annotations
 import meshio
 import numpy as np
 import pytest
+from gmsh_helpers import gmsh_reads
 from test_export import grid_mesh
 
 from napari_swa_imesh.cli import main
@@ -12,22 +13,6 @@ from napari_swa_imesh.mesh import read_mesh, write_mesh
 from napari_swa_imesh.mesh.formats._gmsh import gmsh_tags
 
 BIG = 2**40 + 3
-
-
-def _gmsh_groups(path, ndim) -> dict[str, tuple[int, int]]:
-    """Physical name -> (tag, element count), as Gmsh itself reads the file."""
-    gmsh = pytest.importorskip("gmsh", reason="the gmsh package is optional (pip install gmsh)")
-    gmsh.initialize(["", "-v", "0"])
-    try:
-        gmsh.open(str(path))
-        groups = {}
-        for dim, tag in gmsh.model.getPhysicalGroups(ndim):
-            entities = gmsh.model.getEntitiesForPhysicalGroup(dim, tag)
-            count = sum(len(gmsh.model.mesh.getElements(dim, e)[1][0]) for e in entities)
-            groups[gmsh.model.getPhysicalName(dim, tag)] = (tag, count)
-    finally:
-        gmsh.finalize()
-    return groups
 
 
 @pytest.mark.parametrize("binary", [True, False])
@@ -38,7 +23,7 @@ def test_labels_beyond_gmsh_tags_are_ranked_and_named(tmp_path, binary, labels):
     path = write_mesh(mesh, tmp_path / "m.msh", binary=binary)[0]
     expected = {("bone" if m == labels[0] else f"material_{m}"): k + 1
                 for k, m in enumerate(sorted(labels))}
-    groups = _gmsh_groups(path, 3)
+    groups, _ = gmsh_reads(path, 3)
     assert {name: tag for name, (tag, _) in groups.items()} == expected
     for m in labels:
         name = "bone" if m == labels[0] else f"material_{m}"
