@@ -30,11 +30,14 @@ from functools import lru_cache
 import numpy as np
 from scipy import ndimage as ndi
 
-__all__ = ["TISSUES", "MEANS", "VARIANTS", "SPLITS", "cases", "make_case", "samples_for",
-           "brain_dice"]
+__all__ = ["TISSUES", "MEANS", "INVERTED", "VARIANTS", "SPLITS", "cases", "make_case",
+           "samples_for", "brain_dice"]
 
 TISSUES = {1: "CSF", 2: "GM", 3: "WM"}
 MEANS = np.array([0.0, 0.25, 0.55, 0.80], np.float32)      # background, CSF, GM, WM
+# the tissues' order reversed (CSF brightest, as in T2) on the same dark background: the
+# contrast-order checks of the method (tests, --inverted) tune nothing on it
+INVERTED = np.array([0.0, 0.80, 0.55, 0.25], np.float32)
 VARIANTS = [(0.03, 0.0), (0.03, 0.4), (0.09, 0.0), (0.09, 0.4)]    # (noise, bias)
 CROP = (64, 96, 144)            # (z, y, x) voxels of a quadrant
 # quadrant origins in the template's (z, y, x) voxel grid (z up, y anterior)
@@ -97,14 +100,15 @@ def anatomy_crop(crop: str, anatomy: int) -> tuple[np.ndarray, np.ndarray]:
     return prob, br_c >= 0.5
 
 
-def make_case(crop: str, anatomy: int, noise: float, bias: float, seed: int
-              ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """(image float32, truth int32, brain bool) of one case (see the module docstring)."""
+def make_case(crop: str, anatomy: int, noise: float, bias: float, seed: int,
+              means: np.ndarray = MEANS) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(image float32, truth int32, brain bool) of one case (see the module docstring);
+    `means`: background, CSF, GM and WM intensities (:data:`INVERTED`: CSF brightest)."""
     from napari_swa_imesh.data import _smooth_field
 
     prob, brain = anatomy_crop(crop, anatomy)
     truth = np.where(brain, np.argmax(prob[1:], axis=0) + 1, 0).astype(np.int32)
-    clean = np.tensordot(MEANS, prob, axes=1)
+    clean = np.tensordot(np.asarray(means, np.float32), prob, axes=1)
     rng = np.random.default_rng(seed)
     if bias:
         field = _smooth_field(CROP, rng, 0.5)

@@ -2,6 +2,7 @@
 
 Run:  python benchmarks/bench_accuracy.py [--quick] [--skip-cost] [--ants-python PY]
       [--anatomy dev|val|both|none] [--only-anatomy] [--markdown docs/benchmarks/accuracy.md]
+      [--variants TEXT...]
 
 Every method sees the same data and the same sample boxes:
 
@@ -417,10 +418,12 @@ def anatomy_tables(split, ants_python, variants=None):
                            lambda v: f"noise {v[0]:.0%}, bias {v[1]:.0%}")
 
 
-def heldout_tables(ants_python):
+def heldout_tables(ants_python, variants=None):
     """The same table on the independent generator (anatomy_heldout.py): nothing was tuned
     on it."""
     import anatomy_heldout as H
+
+    variants = variants or H.VARIANTS
 
     title = ("Real-anatomy MR phantoms, held-out generator (anatomy_heldout.py: hard labels "
              "+ PSF, T1 and T2 contrasts, intensity by location, texture, Gaussian noise, "
@@ -428,8 +431,8 @@ def heldout_tables(ants_python):
              f"{'x'.join(f'{e:g}' for e in H.CROP_MM)} mm; mean of {len(H.CASES)} cases "
              "per variant)")
     cases = ((var, (name, image, truth, brain))
-             for name, var, image, truth, brain in H.cases())
-    return generator_table(title, cases, H.VARIANTS, ants_python,
+             for name, var, image, truth, brain in H.cases(variants))
+    return generator_table(title, cases, variants, ants_python,
                            _heldout_label)
 
 
@@ -490,6 +493,15 @@ def _heldout_label(v) -> str:
     return f"{v[0]}, noise {v[1]:.0%}, bias {v[2]:.0%}, {'x'.join(f'{s:g}' for s in v[3])} mm"
 
 
+def _chosen(variants, label, patterns):
+    """The variants whose label contains one of `patterns` (all of them without any)."""
+    return [v for v in variants if not patterns or any(p in label(v) for p in patterns)]
+
+
+def _tuning_label(v) -> str:
+    return f"T1, noise {v[0]:.0%}, bias {v[1]:.0%}, 1 mm"
+
+
 def _write_markdown(path: str, text: str) -> None:
     from napari_swa_imesh.io import atomic_write
 
@@ -528,6 +540,9 @@ def main() -> None:
                     help="also write the tuning/held-out table (and the mosaics' mean "
                          "Dice, when run) to this markdown file, e.g. "
                          "docs/benchmarks/accuracy.md")
+    ap.add_argument("--variants", nargs="+", metavar="TEXT",
+                    help="run only the real-anatomy variants whose row label contains one "
+                         "of these texts, e.g. --variants T2 or --variants 'noise 9%%'")
     args = ap.parse_args()
     if args.markdown:
         from napari_swa_imesh.io import check_writable
@@ -546,16 +561,20 @@ def main() -> None:
     names: list[str] = []
     for split in {"both": ["dev", "val"], "none": [], "heldout": []}.get(args.anatomy,
                                                                        [args.anatomy]):
-        out = anatomy_tables(split, args.ants_python)
+        tuning = _chosen(_anatomy_variants(), _tuning_label, args.variants)
+        if not tuning:
+            continue
+        out = anatomy_tables(split, args.ants_python, tuning)
         names = _methods(out)
-        lines += R.generator_rows(f"tuning ({split})", out, _anatomy_variants(), lambda v:
-                                  f"T1, noise {v[0]:.0%}, bias {v[1]:.0%}, 1 mm", names)
+        lines += R.generator_rows(f"tuning ({split})", out, tuning, _tuning_label, names)
     if args.anatomy != "none":
         import anatomy_heldout as H
 
-        out = heldout_tables(args.ants_python)
-        names = _methods(out)
-        lines += R.generator_rows("held-out", out, H.VARIANTS, _heldout_label, names)
+        held = _chosen(H.VARIANTS, _heldout_label, args.variants)
+        if held:
+            out = heldout_tables(args.ants_python, held)
+            names = _methods(out)
+            lines += R.generator_rows("held-out", out, held, _heldout_label, names)
         print("\n## Tuning and held-out side by side (CSF / GM / WM)\n")
         print("\n".join(R.markdown_page(lines, names, [], "").splitlines()[4:]))
     if args.markdown:
