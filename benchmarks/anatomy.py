@@ -35,8 +35,8 @@ __all__ = ["TISSUES", "MEANS", "INVERTED", "VARIANTS", "SPLITS", "cases", "make_
 
 TISSUES = {1: "CSF", 2: "GM", 3: "WM"}
 MEANS = np.array([0.0, 0.25, 0.55, 0.80], np.float32)      # background, CSF, GM, WM
-# the tissues' order reversed (CSF brightest, as in T2) on the same dark background: the
-# contrast-order checks of the method (tests, --inverted) tune nothing on it
+# the tissues' order reversed (CSF brightest, as in T2) on the same dark background, for
+# checking a contrast-order fix on the tuning generator (make_case(..., means=INVERTED))
 INVERTED = np.array([0.0, 0.80, 0.55, 0.25], np.float32)
 VARIANTS = [(0.03, 0.0), (0.03, 0.4), (0.09, 0.0), (0.09, 0.4)]    # (noise, bias)
 CROP = (64, 96, 144)            # (z, y, x) voxels of a quadrant

@@ -559,11 +559,11 @@ def main() -> None:
         summary(rows)
     lines: list[str] = []
     names: list[str] = []
+    tuning = _chosen(_anatomy_variants(), _tuning_label, args.variants)
     for split in {"both": ["dev", "val"], "none": [], "heldout": []}.get(args.anatomy,
                                                                        [args.anatomy]):
-        tuning = _chosen(_anatomy_variants(), _tuning_label, args.variants)
         if not tuning:
-            continue
+            break
         out = anatomy_tables(split, args.ants_python, tuning)
         names = _methods(out)
         lines += R.generator_rows(f"tuning ({split})", out, tuning, _tuning_label, names)
