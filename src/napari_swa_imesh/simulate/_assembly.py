@@ -25,6 +25,7 @@ import numpy as np
 from scipy import sparse
 
 from ..mesh import Mesh
+from ._release import release_memory
 from ._sparse import sum_pairwise, symmetric_from_upper
 
 __all__ = ["Space", "assemble_pairs", "assemble_upper", "barycentric_gradients",
@@ -350,6 +351,7 @@ def assemble_upper(element_dofs: np.ndarray, n: int, a: np.ndarray, b: np.ndarra
         del rows, cols, data
     upper = sum_pairwise(parts) if parts else sparse.csr_matrix((n, n))
     del parts
+    release_memory()             # the batches' pages, before the next phase counts them
     return upper, diagonal
 
 
