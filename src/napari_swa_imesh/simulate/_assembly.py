@@ -26,7 +26,7 @@ from scipy import sparse
 
 from ..mesh import Mesh
 from ._release import release_memory
-from ._sparse import sum_pairwise, symmetric_from_upper
+from ._sparse import PairwiseSum, symmetric_from_upper
 
 __all__ = ["Space", "assemble_pairs", "assemble_upper", "barycentric_gradients",
            "cell_fluxes", "cell_gradients", "cell_volumes", "dissipation", "fe_space",
@@ -317,13 +317,14 @@ def assemble_upper(element_dofs: np.ndarray, n: int, a: np.ndarray, b: np.ndarra
     Only the upper triangle is gathered, in batches (the list of element entries never
     holds more than some 10^7); each batch becomes a canonical CSR matrix (duplicates
     summed) and the batches are added pairwise (a balanced tree: every entry is merged
-    about log2(batches) times, not once per batch).
+    about log2(batches) times, not once per batch) as they come, in row blocks
+    (:class:`~._sparse.PairwiseSum`: the same sums as :func:`~._sparse.sum_pairwise`).
     """
     diagonal = np.zeros(n)
     off = a != b
     k = int(off.sum())
     first, second = a[off], b[off]
-    parts = []
+    total = PairwiseSum((n, n))          # the batches summed as they come (row blocks)
     for batch in _chunks(len(element_dofs), max(CHUNK, BATCH // max(k, 1))):
         m = batch.stop - batch.start
         dofs = np.ascontiguousarray(element_dofs[batch].T, dtype=np.int32)   # (n_local, m)
@@ -346,11 +347,12 @@ def assemble_upper(element_dofs: np.ndarray, n: int, a: np.ndarray, b: np.ndarra
         diagonal += np.bincount(dofs[a[~off]].ravel(), weights=diagonal_values.ravel(),
                                 minlength=n)
         del diagonal_values, dofs
-        parts.append(sparse.csr_matrix((data.ravel(), (rows.ravel(), cols.ravel())),
-                                       shape=(n, n)))
+        total.add(sparse.csr_matrix((data.ravel(), (rows.ravel(), cols.ravel())),
+                                    shape=(n, n)))
         del rows, cols, data
-    upper = sum_pairwise(parts) if parts else sparse.csr_matrix((n, n))
-    del parts
+        total.merge()                   # with this batch's arrays and matrix freed
+    upper = total.result()
+    del total
     release_memory()             # the batches' pages, before the next phase counts them
     return upper, diagonal
 
