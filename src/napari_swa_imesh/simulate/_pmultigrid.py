@@ -34,7 +34,8 @@ from ._assembly import Space, p1_embedding, stiffness_matrix, stiffness_upper
 from ._release import release_memory
 from ._sparse import symmetric_from_upper
 
-__all__ = ["P2Stiffness", "TwoLevelDirichlet", "p2_stiffness", "stiffness_operator"]
+__all__ = ["P2Stiffness", "TwoLevelDirichlet", "coarse_space", "p2_stiffness",
+           "stiffness_operator"]
 
 # Smoothing: degree 1 (a damped Jacobi step, 1 / 0.5625 lambda_max) took as many
 # iterations as degrees 2-4 on the 32^3 blobs (20 against 19) at half the products, and
@@ -152,6 +153,16 @@ def stiffness_operator(space: Space, tensors: np.ndarray, cell_material: np.ndar
     if space.order == 2 and not periodic:
         return p2_stiffness(space, tensors, cell_material, volumes)
     return stiffness_matrix(space, tensors, cell_material, volumes)
+
+
+def coarse_space(matrix: P2Stiffness | sparse.csr_matrix, space: Space
+                 ) -> sparse.csr_matrix | None:
+    """The P1 functions among the dofs of `space` (:func:`~._assembly.p1_embedding`), the
+    one a :class:`P2Stiffness` `matrix` already holds rather than a second copy (P2 at
+    128^3: some 200 MB)."""
+    if isinstance(matrix, P2Stiffness):
+        return matrix.embedding
+    return p1_embedding(space)
 
 
 def fe_space_of(space: Space) -> Space:
