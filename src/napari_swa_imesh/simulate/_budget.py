@@ -25,12 +25,19 @@ DEFAULT_MEMORY = 4 * 2 ** 30
 #: The periodic protocol still assembles P2 (it needs the matrix's rows).
 BYTES_PER_UNKNOWN = {(2, 1): 2300.0, (2, 2): 1600.0, (3, 1): 2300.0, (3, 2): 1600.0}
 #: P2 of the mixed protocol, held as half a matrix with a p-multigrid onto P1
-#: (:mod:`._pmultigrid`), fixed bytes plus bytes per unknown, fitted to the peak RSS: P2
-#: on the 48^3 mesh 0.72 GB (670k unknowns; the assembly's batches are the peak), the
-#: adapted 40^3 default 0.80 GB (866k; 1.25 GB assembled), P2 at 128^3 5.02 GB (7.56M;
-#: killed at 8 GB assembled): 0.30 GB + 624 B per unknown, taken as 256 MB + 750 B.
-BYTES_PER_UNKNOWN_HALF = {2: 750.0, 3: 750.0}
-BYTES_HALF_FIXED = 256 * 2 ** 20
+#: (:mod:`._pmultigrid`), fixed bytes plus bytes per unknown, fitted to the peak RSS of
+#: ``swa-imesh simulate --order 2 --adapt 0 --no-interval`` on bench_scaling's blobs
+#: (`MEASURED_HALF`; the batches summed as they come, the solve's vectors made once):
+#: 32^3 0.41 GiB, 48^3 0.64, 64^3 0.97 (1.38M unknowns), 128^3 4.43 GiB (7.52M; 5.03
+#: before, with the assembly's batches the peak): a line through 32^3 and 128^3 raised by
+#: 5 %, so 320 MiB + 548 B per unknown, 5-14 % above each (earlier 256 MB + 750 B: 6.0 GB
+#: printed at 128^3).
+BYTES_PER_UNKNOWN_HALF = {2: 548.0, 3: 548.0}
+BYTES_HALF_FIXED = 320 * 2 ** 20
+#: The peaks the half-storage constants are fitted to: (unknowns as :func:`unknowns`
+#: counts them, elements, peak bytes).
+MEASURED_HALF = ((220_877, 155_413, 438_206_464), (659_676, 469_220, 684_453_888),
+                 (1_383_626, 989_328, 1_043_529_728), (7_520_597, 5_415_021, 4_751_519_744))
 #: The dual's CR solve, per facet (measured 565 at 40^3: 625k facets, 353 MB with the
 #: primal matrix kept).
 BYTES_PER_FACET = {2: 600.0, 3: 600.0}
