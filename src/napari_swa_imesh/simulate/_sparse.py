@@ -112,8 +112,8 @@ class PairwiseSum:
         nnz = sum(int(b.nnz) for b in blocks)
         dtype = _index(max(nnz, *self.shape) + 1)
         data = np.empty(nnz, dtype=np.result_type(*[b.dtype for b in blocks]))
-        indices = np.empty(nnz, dtype=dtype)
-        indptr = np.empty(self.shape[0] + 1, dtype=dtype)
+        indices: np.ndarray = np.empty(nnz, dtype=dtype)
+        indptr: np.ndarray = np.empty(self.shape[0] + 1, dtype=dtype)
         indptr[0] = at = 0
         for k, start in enumerate(self._rows[:-1]):
             block, blocks[k] = blocks[k], None           # each block freed once copied
