@@ -176,22 +176,30 @@ def _dot(u: np.ndarray, v: np.ndarray) -> float:
 
 def _largest_eigenvalue(apply, n: int) -> float:
     """Lanczos estimate of the largest eigenvalue of a symmetric operator (from below;
-    the caller adds a margin). Seeded: the same operator gives the same estimate."""
+    the caller adds a margin). Seeded: the same operator gives the same estimate.
+
+    `apply(x, out)` writes the product into `out`; the four vectors are made once and
+    the steps done in place (the values of new vectors per step, bit for bit).
+    """
     v = np.random.default_rng(0).standard_normal(n)
     v /= np.sqrt(_dot(v, v))
     previous = np.zeros(n)
+    w, scratch = np.empty(n), np.empty(n)
     alphas, betas = [], []
     beta = 0.0
     for _ in range(min(LANCZOS_STEPS, n)):
-        w = apply(v) - beta * previous
+        w = apply(v, w)
+        w -= np.multiply(beta, previous, out=scratch)     # A v - beta * previous
         alpha = _dot(w, v)
-        w -= alpha * v
+        w -= np.multiply(alpha, v, out=scratch)
         alphas.append(alpha)
         beta = np.sqrt(_dot(w, w))
         if beta <= 1e-12 * abs(alpha):
             break
         betas.append(beta)
-        previous, v = v, w / beta
+        # previous, v = v, w / beta, in the buffer the old previous leaves free
+        following = np.divide(w, beta, out=previous)
+        previous, v = v, following
     return float(eigvalsh_tridiagonal(np.array(alphas), np.array(betas[:len(alphas) - 1]),
                                       ).max())
 
@@ -247,13 +255,15 @@ class TwoLevelDirichlet:
         coarse_scale = 1.0 / np.sqrt(p1.diagonal())
         p1 = sparse.diags(coarse_scale) @ p1 @ sparse.diags(coarse_scale)
         self.hierarchy = Hierarchy(p1.tocsr())
+        del p1                              # kept by the hierarchy in float32
         # the coarse functions in the scaled unknowns, each scaled to the coarse unit
         # diagonal: Q = D_ff^1/2 P_ff E (its Galerkin matrix is the scaled P1 matrix)
         q = operator.embedding[free][:, free_vertices]
         q = (sparse.diags(1.0 / self.scale) @ q @ sparse.diags(coarse_scale)).tocsr()
         self.prolongator = q.astype(np.float32)
+        del q                               # not through the eigenvalue's products
         self.restrictor = self.prolongator.T.tocsr()
-        top = LANCZOS_MARGIN * _largest_eigenvalue(self.matrix.__matmul__,
+        top = LANCZOS_MARGIN * _largest_eigenvalue(self.matrix.matvec,
                                                    self.matrix.shape[0])
         self.interval = (top / CHEBYSHEV_RATIO, top)
         # the cycle's vectors, made once: the result (overwritten by the next cycle), a

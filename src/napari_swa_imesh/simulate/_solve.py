@@ -283,9 +283,14 @@ class DirichletSolver:
             b += rhs[self.free]
         if tol is not None:
             self.solver.tol = tol
-        u[self.free], info = self.solver.solve(b, None if x0 is None else x0[self.free],
-                                               overwrite_rhs=True)
+        del u                                   # made again below, not held by the solve
+        free, info = self.solver.solve(b, None if x0 is None else x0[self.free],
+                                       overwrite_rhs=True)
         del b
+        u = np.zeros(self.n)
+        u[self.fixed] = values
+        u[self.free] = free
+        del free
         info = SolverInfo(info.unknowns, info.iterations, info.residual,
                           info.seconds + self._setup, self._setup)
         self._setup = 0.0
