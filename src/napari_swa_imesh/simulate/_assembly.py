@@ -93,8 +93,17 @@ def fe_space(mesh: Mesh, order: int = 1) -> Space:
     lo = np.minimum(cells[:, pairs[0]], cells[:, pairs[1]]).astype(np.int64)
     hi = np.maximum(cells[:, pairs[0]], cells[:, pairs[1]]).astype(np.int64)
     keys, inverse = np.unique(lo * n + hi, return_inverse=True)
-    edges = np.stack([keys // n, keys % n], axis=1)
-    element_dofs = np.concatenate([cells, n + inverse.reshape(lo.shape)], axis=1)
+    del lo, hi
+    # int32 tables while every dof (times 3, the curl's vector dofs) fits: half the bytes
+    # of the largest arrays a P2 solve holds besides its matrix (~250 MB at 128^3)
+    index = np.int32 if 4 * (n + len(keys)) < 2 ** 31 else np.int64
+    edges = np.stack([keys // n, keys % n], axis=1).astype(index)
+    del keys
+    k = cells.shape[1]
+    element_dofs = np.empty((len(cells), k + pairs.shape[1]), dtype=index)
+    element_dofs[:, :k] = cells
+    element_dofs[:, k:] = inverse.reshape(len(cells), pairs.shape[1])
+    element_dofs[:, k:] += n
     return Space(points, cells, 2, element_dofs, edges)
 
 
