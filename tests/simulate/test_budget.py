@@ -73,6 +73,15 @@ def test_the_half_storage_estimate_is_above_every_measured_peak():
 
 # the child's own peak: Linux keeps ru_maxrss across fork and exec (a child of a grown
 # pytest reports pytest's size), its VmHWM is the new image's alone; elsewhere ru_maxrss
+def test_the_interval_estimate_is_above_the_measured_peaks_with_the_dual():
+    """3-D P2 with the interval (the dual's facets dominate): above each measured peak."""
+    for cells, unknowns, peak in _budget.MEASURED_DUAL:
+        facets = 4 * cells / 2
+        dual = _budget.BYTES_PER_FACET[3] * facets + 8 * unknowns
+        primal = _budget.BYTES_HALF_FIXED + _budget.BYTES_PER_UNKNOWN_HALF[3] * unknowns
+        assert max(primal, dual) + _budget.BYTES_PER_CELL[3] * cells >= peak
+
+
 CHILD = (
     "import json, os, resource, sys\n"
     "from napari_swa_imesh.cli import main\n"

@@ -39,8 +39,15 @@ BYTES_HALF_FIXED = 320 * 2 ** 20
 MEASURED_HALF = ((220_877, 155_413, 438_206_464), (659_676, 469_220, 684_453_888),
                  (1_383_626, 989_328, 1_043_529_728), (7_520_597, 5_415_021, 4_751_519_744))
 #: The dual's CR solve, per facet (measured 565 at 40^3: 625k facets, 353 MB with the
-#: primal matrix kept).
-BYTES_PER_FACET = {2: 600.0, 3: 600.0}
+#: primal matrix kept). 3-D refitted: ``--order 2 --adapt 0`` with the interval on 64^3
+#: three-phase blobs of sigma 3 (bench_simulate's) peaks in the dual's multigrid set-up
+#: at 1.59 GiB (2.24M facets, 1.58M P2 unknowns; 1.73 GiB before the solve's changes),
+#: 706 B per facet with the rest of the estimate: 750 (600 put it at 1.37 GiB, below);
+#: 128^3 of those blobs peaked at 11.8 GiB (18.0M facets; 600 said 11.0, 750 says 13.5).
+BYTES_PER_FACET = {2: 600.0, 3: 750.0}
+#: The peaks with the interval those are checked against: (elements, P2 unknowns as
+#: :func:`unknowns` counts them, peak bytes); the 128^3 one is of the code before.
+MEASURED_DUAL = ((1_121_940, 1_568_626, 1_708_126_208), (8_973_782, 12_485_338, 12_718_411_776))
 #: Bytes per element the result keeps (cells, material, a flux per axis).
 BYTES_PER_CELL = {2: 60.0, 3: 100.0}
 #: Reading a size: K, M, G, T (powers of 1024).
