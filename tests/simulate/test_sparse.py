@@ -114,3 +114,33 @@ def test_element_parts_are_the_matrix_parts(shape, order):
     # the same partition: each label of one maps to exactly one label of the other
     pairs = np.unique(np.stack([parts, expected]), axis=1)
     assert pairs.shape[1] == np.unique(parts).size == np.unique(expected).size
+
+
+@pytest.mark.parametrize("count", [1, 2, 3, 5, 7, 12, 29])
+@pytest.mark.parametrize("blocks", [1, 3, 16])
+def test_pairwise_sum_in_row_blocks_is_sum_pairwise_bit_for_bit(count, blocks):
+    """Batches summed as they come, in row blocks, give sum_pairwise's matrix exactly:
+    the same tree of additions (so the same floating-point sums), entries that cancel
+    dropped, canonical."""
+    from napari_swa_imesh.simulate._sparse import PairwiseSum
+
+    rng = np.random.default_rng(count * 100 + blocks)
+    n = 150
+    parts = []
+    for _ in range(count):
+        r, c = rng.integers(0, n, 400), rng.integers(0, n, 400)
+        v = rng.standard_normal(400)
+        v[:4] = 0.0
+        parts.append(sparse.csr_matrix((v, (r, c)), shape=(n, n)))
+    parts.append(-parts[0])                               # cancels the first exactly
+    total = PairwiseSum((n, n), blocks)
+    for p in parts:
+        total.add(p.copy())
+        total.merge()
+    got = total.result()
+    want = sum_pairwise([p.copy() for p in parts])
+    assert got.has_canonical_format and got.shape == want.shape
+    np.testing.assert_array_equal(got.indptr, want.indptr)
+    np.testing.assert_array_equal(got.indices, want.indices)
+    np.testing.assert_array_equal(got.data.view(np.int64), want.data.view(np.int64))
+    assert not np.any(got.data == 0)

@@ -19,7 +19,7 @@ from collections.abc import Callable
 import numpy as np
 from scipy import sparse
 
-__all__ = ["Hierarchy", "pcg"]
+__all__ = ["Hierarchy", "matvec", "pcg"]
 
 MAX_COARSE = 500           # unknowns solved directly at the bottom of the V-cycle
 MAX_DENSE = 2000           # above this a stalled bottom level is factorised sparsely
@@ -127,6 +127,26 @@ def _dot(u: np.ndarray, v: np.ndarray) -> float:
     return float(np.einsum("i,i->", u, v))      # einsum's own loop, not a BLAS thread
 
 
+def matvec(matrix, x: np.ndarray, out: np.ndarray) -> np.ndarray:
+    """``matrix @ x`` written into `out` (float64, len rows) and returned: an operator
+    with its own ``matvec`` (:mod:`._pmultigrid`) uses it, a CSR matrix scipy's own kernel
+    into the zeroed `out` (what ``@`` does into a new vector: the same sums, bit for bit),
+    anything else ``@`` copied in."""
+    own = getattr(matrix, "matvec", None)
+    if own is not None:
+        return own(x, out)
+    if (sparse.issparse(matrix) and matrix.format == "csr" and x.ndim == 1
+            and matrix.dtype == np.float64 and x.dtype == np.float64):
+        from scipy.sparse import _sparsetools
+
+        out.fill(0.0)
+        m, n = matrix.shape
+        _sparsetools.csr_matvec(m, n, matrix.indptr, matrix.indices, matrix.data, x, out)
+        return out
+    out[...] = matrix @ x
+    return out
+
+
 def pcg(matrix: sparse.csr_matrix, rhs: np.ndarray,
         precondition: Callable[[np.ndarray], np.ndarray], x: np.ndarray, *, tol: float,
         maxiter: int) -> tuple[np.ndarray, int]:
@@ -134,28 +154,34 @@ def pcg(matrix: sparse.csr_matrix, rhs: np.ndarray,
 
     `x` (the initial guess) is updated in place and returned with the iteration count.
     Stops early, unconverged, if the search direction degenerates (the caller checks the
-    residual).
+    residual). The vectors are made once and updated in place (``out=``): the same
+    operations in the same order as with new vectors per step, so the same iterates bit
+    for bit, without a few full-length temporaries per step at the peak of a P2 solve.
+    `precondition` may return a buffer of its own that its next call overwrites.
     """
     norm_b = np.sqrt(_dot(rhs, rhs))
-    r = rhs - matrix @ x
+    q = np.empty_like(rhs)
+    r = np.subtract(rhs, matvec(matrix, x, q))
     goal = tol * norm_b
     if np.sqrt(_dot(r, r)) <= goal:
         return x, 0
     z = precondition(r)
     p = z.copy()
+    r_old = np.empty_like(r)
+    step = np.empty_like(r)
     rz = _dot(r, z)
     for it in range(1, maxiter + 1):
-        q = matrix @ p
+        matvec(matrix, p, q)
         curvature = _dot(p, q)
         if not curvature > 0:
             return x, it
         alpha = rz / curvature
-        x += alpha * p
-        r_old = r.copy()
+        x += np.multiply(alpha, p, out=step)
+        np.copyto(r_old, r)
         if it % RECOMPUTE == 0:          # the updated residual drifts from the true one
-            r = rhs - matrix @ x
+            np.subtract(rhs, matvec(matrix, x, q), out=r)
         else:
-            r -= alpha * q
+            r -= np.multiply(alpha, q, out=step)
         if np.sqrt(_dot(r, r)) <= goal:
             return x, it
         z = precondition(r)

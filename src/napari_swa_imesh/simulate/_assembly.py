@@ -25,7 +25,8 @@ import numpy as np
 from scipy import sparse
 
 from ..mesh import Mesh
-from ._sparse import sum_pairwise, symmetric_from_upper
+from ._release import release_memory
+from ._sparse import PairwiseSum, symmetric_from_upper
 
 __all__ = ["Space", "assemble_pairs", "assemble_upper", "barycentric_gradients",
            "cell_fluxes", "cell_gradients", "cell_volumes", "dissipation", "fe_space",
@@ -92,8 +93,17 @@ def fe_space(mesh: Mesh, order: int = 1) -> Space:
     lo = np.minimum(cells[:, pairs[0]], cells[:, pairs[1]]).astype(np.int64)
     hi = np.maximum(cells[:, pairs[0]], cells[:, pairs[1]]).astype(np.int64)
     keys, inverse = np.unique(lo * n + hi, return_inverse=True)
-    edges = np.stack([keys // n, keys % n], axis=1)
-    element_dofs = np.concatenate([cells, n + inverse.reshape(lo.shape)], axis=1)
+    del lo, hi
+    # int32 tables while every dof (times 3, the curl's vector dofs) fits: half the bytes
+    # of the largest arrays a P2 solve holds besides its matrix (~250 MB at 128^3)
+    index = np.int32 if 4 * (n + len(keys)) < 2 ** 31 else np.int64
+    edges = np.stack([keys // n, keys % n], axis=1).astype(index)
+    del keys
+    k = cells.shape[1]
+    element_dofs = np.empty((len(cells), k + pairs.shape[1]), dtype=index)
+    element_dofs[:, :k] = cells
+    element_dofs[:, k:] = inverse.reshape(len(cells), pairs.shape[1])
+    element_dofs[:, k:] += n
     return Space(points, cells, 2, element_dofs, edges)
 
 
@@ -316,13 +326,14 @@ def assemble_upper(element_dofs: np.ndarray, n: int, a: np.ndarray, b: np.ndarra
     Only the upper triangle is gathered, in batches (the list of element entries never
     holds more than some 10^7); each batch becomes a canonical CSR matrix (duplicates
     summed) and the batches are added pairwise (a balanced tree: every entry is merged
-    about log2(batches) times, not once per batch).
+    about log2(batches) times, not once per batch) as they come, in row blocks
+    (:class:`~._sparse.PairwiseSum`: the same sums as :func:`~._sparse.sum_pairwise`).
     """
     diagonal = np.zeros(n)
     off = a != b
     k = int(off.sum())
     first, second = a[off], b[off]
-    parts = []
+    total = PairwiseSum((n, n))          # the batches summed as they come (row blocks)
     for batch in _chunks(len(element_dofs), max(CHUNK, BATCH // max(k, 1))):
         m = batch.stop - batch.start
         dofs = np.ascontiguousarray(element_dofs[batch].T, dtype=np.int32)   # (n_local, m)
@@ -345,11 +356,13 @@ def assemble_upper(element_dofs: np.ndarray, n: int, a: np.ndarray, b: np.ndarra
         diagonal += np.bincount(dofs[a[~off]].ravel(), weights=diagonal_values.ravel(),
                                 minlength=n)
         del diagonal_values, dofs
-        parts.append(sparse.csr_matrix((data.ravel(), (rows.ravel(), cols.ravel())),
-                                       shape=(n, n)))
+        total.add(sparse.csr_matrix((data.ravel(), (rows.ravel(), cols.ravel())),
+                                    shape=(n, n)))
         del rows, cols, data
-    upper = sum_pairwise(parts) if parts else sparse.csr_matrix((n, n))
-    del parts
+        total.merge()                   # with this batch's arrays and matrix freed
+    upper = total.result()
+    del total
+    release_memory()             # the batches' pages, before the next phase counts them
     return upper, diagonal
 
 

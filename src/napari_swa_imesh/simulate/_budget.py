@@ -25,15 +25,31 @@ DEFAULT_MEMORY = 4 * 2 ** 30
 #: The periodic protocol still assembles P2 (it needs the matrix's rows).
 BYTES_PER_UNKNOWN = {(2, 1): 2300.0, (2, 2): 1600.0, (3, 1): 2300.0, (3, 2): 1600.0}
 #: P2 of the mixed protocol, held as half a matrix with a p-multigrid onto P1
-#: (:mod:`._pmultigrid`), fixed bytes plus bytes per unknown, fitted to the peak RSS: P2
-#: on the 48^3 mesh 0.72 GB (670k unknowns; the assembly's batches are the peak), the
-#: adapted 40^3 default 0.80 GB (866k; 1.25 GB assembled), P2 at 128^3 5.02 GB (7.56M;
-#: killed at 8 GB assembled): 0.30 GB + 624 B per unknown, taken as 256 MB + 750 B.
-BYTES_PER_UNKNOWN_HALF = {2: 750.0, 3: 750.0}
-BYTES_HALF_FIXED = 256 * 2 ** 20
+#: (:mod:`._pmultigrid`), fixed bytes plus bytes per unknown, fitted to the peak RSS of
+#: ``swa-imesh simulate --order 2 --adapt 0 --no-interval`` on bench_scaling's blobs
+#: (`MEASURED_HALF`; the batches summed as they come, the solve's vectors made once):
+#: 32^3 0.41 GiB, 48^3 0.64, 64^3 0.97 (1.38M unknowns), 128^3 4.43 GiB (7.52M; 5.03
+#: before, with the assembly's batches the peak): a line through 32^3 and 128^3 raised by
+#: 5 %, so 320 MiB + 548 B per unknown, 5-14 % above each (earlier 256 MB + 750 B: 6.0 GB
+#: printed at 128^3).
+BYTES_PER_UNKNOWN_HALF = {2: 548.0, 3: 548.0}
+BYTES_HALF_FIXED = 320 * 2 ** 20
+#: The peaks the half-storage constants are fitted to: (unknowns as :func:`unknowns`
+#: counts them, elements, peak bytes); then 96^3 with the int32 tables and the Lanczos
+#: and Dirichlet steps in place, 2.12 GiB for an estimate of 2.50.
+MEASURED_HALF = ((220_877, 155_413, 438_206_464), (659_676, 469_220, 684_453_888),
+                 (1_383_626, 989_328, 1_043_529_728), (7_520_597, 5_415_021, 4_751_519_744),
+                 (3_788_123, 2_721_553, 2_274_037_760))
 #: The dual's CR solve, per facet (measured 565 at 40^3: 625k facets, 353 MB with the
-#: primal matrix kept).
-BYTES_PER_FACET = {2: 600.0, 3: 600.0}
+#: primal matrix kept). 3-D refitted: ``--order 2 --adapt 0`` with the interval on 64^3
+#: three-phase blobs of sigma 3 (bench_simulate's) peaks in the dual's multigrid set-up
+#: at 1.59 GiB (2.24M facets, 1.58M P2 unknowns; 1.73 GiB before the solve's changes),
+#: 706 B per facet with the rest of the estimate: 750 (600 put it at 1.37 GiB, below);
+#: 128^3 of those blobs peaked at 11.8 GiB (18.0M facets; 600 said 11.0, 750 says 13.5).
+BYTES_PER_FACET = {2: 600.0, 3: 750.0}
+#: The peaks with the interval those are checked against: (elements, P2 unknowns as
+#: :func:`unknowns` counts them, peak bytes); the 128^3 one is of the code before.
+MEASURED_DUAL = ((1_121_940, 1_568_626, 1_708_126_208), (8_973_782, 12_485_338, 12_718_411_776))
 #: Bytes per element the result keeps (cells, material, a flux per axis).
 BYTES_PER_CELL = {2: 60.0, 3: 100.0}
 #: Reading a size: K, M, G, T (powers of 1024).

@@ -31,9 +31,11 @@ from scipy import sparse
 from scipy.linalg import eigvalsh_tridiagonal
 
 from ._assembly import Space, p1_embedding, stiffness_matrix, stiffness_upper
+from ._release import release_memory
 from ._sparse import symmetric_from_upper
 
-__all__ = ["P2Stiffness", "TwoLevelDirichlet", "p2_stiffness", "stiffness_operator"]
+__all__ = ["P2Stiffness", "TwoLevelDirichlet", "coarse_space", "p2_stiffness",
+           "stiffness_operator"]
 
 # Smoothing: degree 1 (a damped Jacobi step, 1 / 0.5625 lambda_max) took as many
 # iterations as degrees 2-4 on the 32^3 blobs (20 against 19) at half the products, and
@@ -69,6 +71,7 @@ class P2Stiffness:
         self.p1 = p1
         self.shape = upper.shape
         self.dtype = np.dtype(np.float64)
+        self._work: np.ndarray | None = None      # :meth:`matvec`'s one temporary
 
     @property
     def nnz(self) -> int:
@@ -92,6 +95,26 @@ class P2Stiffness:
         y += (self._diagonal if x.ndim == 1 else self._diagonal[:, None]) * x
         return y
 
+    def matvec(self, x: np.ndarray, out: np.ndarray) -> np.ndarray:
+        """``self @ x`` for a vector, written into `out` (returned): the same products
+        and sums as ``@`` (scipy's kernels into zeroed vectors), bit for bit, with one
+        temporary kept between calls instead of three new full-length vectors a call."""
+        from scipy.sparse import _sparsetools
+
+        n = self.shape[0]
+        if self._work is None:
+            self._work = np.empty(n)
+        work = self._work
+        out.fill(0.0)
+        _sparsetools.csr_matvec(n, n, self.upper.indptr, self.upper.indices,
+                                self.upper.data, x, out)
+        work.fill(0.0)
+        _sparsetools.csc_matvec(n, n, self._lower.indptr, self._lower.indices,
+                                self._lower.data, x, work)
+        out += work
+        out += np.multiply(self._diagonal, x, out=work)
+        return out
+
     def tocsr(self) -> sparse.csr_matrix:
         """The symmetric CSR matrix (for a caller that needs rows: the periodic protocol)."""
         return symmetric_from_upper(self.upper, self._diagonal)
@@ -112,6 +135,7 @@ def p2_stiffness(space: Space, tensors: np.ndarray, cell_material: np.ndarray,
         raise ValueError(f"p2_stiffness takes a P2 space, not P{space.order}.")
     upper, diagonal = stiffness_upper(space, tensors, cell_material, volumes)
     p1 = stiffness_matrix(fe_space_of(space), tensors, cell_material)
+    release_memory()
     return P2Stiffness(upper, diagonal, p1_embedding(space), p1)
 
 
@@ -131,6 +155,16 @@ def stiffness_operator(space: Space, tensors: np.ndarray, cell_material: np.ndar
     return stiffness_matrix(space, tensors, cell_material, volumes)
 
 
+def coarse_space(matrix: P2Stiffness | sparse.csr_matrix, space: Space
+                 ) -> sparse.csr_matrix | None:
+    """The P1 functions among the dofs of `space` (:func:`~._assembly.p1_embedding`), the
+    one a :class:`P2Stiffness` `matrix` already holds rather than a second copy (P2 at
+    128^3: some 200 MB)."""
+    if isinstance(matrix, P2Stiffness):
+        return matrix.embedding
+    return p1_embedding(space)
+
+
 def fe_space_of(space: Space) -> Space:
     """The P1 space on the mesh of `space`."""
     return Space(space.points, space.cells, 1, space.cells)
@@ -142,22 +176,30 @@ def _dot(u: np.ndarray, v: np.ndarray) -> float:
 
 def _largest_eigenvalue(apply, n: int) -> float:
     """Lanczos estimate of the largest eigenvalue of a symmetric operator (from below;
-    the caller adds a margin). Seeded: the same operator gives the same estimate."""
+    the caller adds a margin). Seeded: the same operator gives the same estimate.
+
+    `apply(x, out)` writes the product into `out`; the four vectors are made once and
+    the steps done in place (the values of new vectors per step, bit for bit).
+    """
     v = np.random.default_rng(0).standard_normal(n)
     v /= np.sqrt(_dot(v, v))
     previous = np.zeros(n)
+    w, scratch = np.empty(n), np.empty(n)
     alphas, betas = [], []
     beta = 0.0
     for _ in range(min(LANCZOS_STEPS, n)):
-        w = apply(v) - beta * previous
+        w = apply(v, w)
+        w -= np.multiply(beta, previous, out=scratch)     # A v - beta * previous
         alpha = _dot(w, v)
-        w -= alpha * v
+        w -= np.multiply(alpha, v, out=scratch)
         alphas.append(alpha)
         beta = np.sqrt(_dot(w, w))
         if beta <= 1e-12 * abs(alpha):
             break
         betas.append(beta)
-        previous, v = v, w / beta
+        # previous, v = v, w / beta, in the buffer the old previous leaves free
+        following = np.divide(w, beta, out=previous)
+        previous, v = v, following
     return float(eigvalsh_tridiagonal(np.array(alphas), np.array(betas[:len(alphas) - 1]),
                                       ).max())
 
@@ -169,10 +211,17 @@ class _Scaled:
         self.operator, self.free, self.scale = operator, free, scale
         self.shape = (int(free.sum()),) * 2
         self._full = np.zeros(operator.shape[0])
+        self._product = np.empty(operator.shape[0])
 
     def __matmul__(self, y: np.ndarray) -> np.ndarray:
-        self._full[self.free] = self.scale * y
-        return self.scale * (self.operator @ self._full)[self.free]
+        return self.matvec(y, np.empty(self.shape[0]))
+
+    def matvec(self, y: np.ndarray, out: np.ndarray) -> np.ndarray:
+        """``self @ y`` into `out` (not `y`), through two kept full-length vectors."""
+        self._full[self.free] = np.multiply(self.scale, y, out=out)
+        product = self.operator.matvec(self._full, self._product)
+        np.compress(self.free, product, out=out)
+        return np.multiply(self.scale, out, out=out)
 
 
 class TwoLevelDirichlet:
@@ -206,27 +255,37 @@ class TwoLevelDirichlet:
         coarse_scale = 1.0 / np.sqrt(p1.diagonal())
         p1 = sparse.diags(coarse_scale) @ p1 @ sparse.diags(coarse_scale)
         self.hierarchy = Hierarchy(p1.tocsr())
+        del p1                              # kept by the hierarchy in float32
         # the coarse functions in the scaled unknowns, each scaled to the coarse unit
         # diagonal: Q = D_ff^1/2 P_ff E (its Galerkin matrix is the scaled P1 matrix)
         q = operator.embedding[free][:, free_vertices]
         q = (sparse.diags(1.0 / self.scale) @ q @ sparse.diags(coarse_scale)).tocsr()
         self.prolongator = q.astype(np.float32)
+        del q                               # not through the eigenvalue's products
         self.restrictor = self.prolongator.T.tocsr()
-        top = LANCZOS_MARGIN * _largest_eigenvalue(self.matrix.__matmul__,
+        top = LANCZOS_MARGIN * _largest_eigenvalue(self.matrix.matvec,
                                                    self.matrix.shape[0])
         self.interval = (top / CHEBYSHEV_RATIO, top)
+        # the cycle's vectors, made once: the result (overwritten by the next cycle), a
+        # residual and its float32 copy for the coarse level
+        n_free = self.matrix.shape[0]
+        self._z, self._work = np.empty(n_free), np.empty(n_free)
+        self._single = np.empty(n_free, dtype=np.float32)
+        release_memory()                          # the set-up's products and copies
         self.setup_seconds = time.perf_counter() - t0
 
-    def _smooth(self, b: np.ndarray) -> np.ndarray:
+    def _smooth(self, b: np.ndarray, out: np.ndarray | None = None) -> np.ndarray:
         """Chebyshev polynomial of degree `CHEBYSHEV_DEGREE` in the scaled A times `b`
-        (the iteration from zero for ``A x = b`` on the smoothed interval): symmetric."""
+        (the iteration from zero for ``A x = b`` on the smoothed interval): symmetric.
+        Written into `out` when given (which may be `b`)."""
         low, high = self.interval
         theta, delta = 0.5 * (high + low), 0.5 * (high - low)
         sigma = theta / delta
         rho = 1.0 / sigma
-        step = b / theta
-        x = step.copy()
-        r = b.copy()
+        if CHEBYSHEV_DEGREE > 1:
+            step = b / theta
+            r = b.copy()
+        x = np.divide(b, theta, out=out)          # the first step, b / theta
         for _ in range(CHEBYSHEV_DEGREE - 1):
             r -= self.matrix @ step
             rho_next = 1.0 / (2.0 * sigma - rho)
@@ -237,10 +296,25 @@ class TwoLevelDirichlet:
         return x
 
     def precondition(self, r: np.ndarray) -> np.ndarray:
-        """One two-level cycle for ``A z = r`` from zero: smooth, P1 correction, smooth."""
-        x = self._smooth(r)
-        residual = r - self.matrix @ x
-        coarse = self.hierarchy.precondition(self.restrictor @ residual.astype(np.float32))
-        x += self.prolongator @ coarse.astype(np.float32)
-        x += self._smooth(r - self.matrix @ x)
+        """One two-level cycle for ``A z = r`` from zero: smooth, P1 correction, smooth.
+
+        The result is a vector of the cycle's own that the next call overwrites (the
+        conjugate gradients use it before they ask again); the steps are those of new
+        vectors per call, in place, so the same values bit for bit.
+        """
+        from scipy.sparse import _sparsetools
+
+        work, single = self._work, self._single
+        x = self._smooth(r, self._z)
+        residual = np.subtract(r, self.matrix.matvec(x, work), out=work)
+        single[...] = residual                                 # astype(float32)
+        coarse = self.hierarchy.precondition(self.restrictor @ single)
+        coarse = coarse.astype(np.float32)
+        single.fill(0.0)                                       # prolongator @ coarse
+        p = self.prolongator
+        _sparsetools.csr_matvec(p.shape[0], p.shape[1], p.indptr, p.indices, p.data,
+                                coarse, single)
+        x += single
+        residual = np.subtract(r, self.matrix.matvec(x, work), out=work)
+        x += self._smooth(residual, residual)
         return x

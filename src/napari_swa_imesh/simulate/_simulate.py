@@ -21,7 +21,7 @@ from ._adapt import (
     refine_within,
     voxel_lattice_vertices,
 )
-from ._assembly import cell_fluxes, fe_space, p1_embedding
+from ._assembly import cell_fluxes, fe_space
 from ._budget import (
     DEFAULT_MEMORY,
     check_memory,
@@ -49,7 +49,7 @@ from ._fe import vertex_values
 from ._hashin import HashinShtrikman, two_isotropic_phases
 from ._periodic import PeriodicProblem
 from ._periodic_dual import periodic_interval, periodic_upper
-from ._pmultigrid import stiffness_operator
+from ._pmultigrid import coarse_space, stiffness_operator
 from ._protocols import BOUND_SLACK, check_within_bounds, mixed_boundary, voigt_reuss
 from ._result import SimulationResult
 from ._solve import DEFAULT_TOLERANCE, SolverInfo, element_parts
@@ -244,7 +244,7 @@ def simulate_steps(mesh_or_labels, conductivity: Mapping, *, spacing=None,
         volumes = np.empty(mesh.n_cells)
         matrix = stiffness_operator(space, tensors, cell_material, volumes, periodic=pbc)
         doflocs = space.doflocs
-        coarse = p1_embedding(space)
+        coarse = coarse_space(matrix, space)
         seconds["assemble"] = seconds.get("assemble", 0.0) + time.perf_counter() - t0
         lo, hi = mesh.image_box()
         per_material = np.bincount(cell_material, weights=volumes, minlength=materials.size)

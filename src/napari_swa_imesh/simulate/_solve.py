@@ -16,6 +16,7 @@ from scipy import sparse
 from scipy.sparse import csgraph
 
 from ._pmultigrid import P2Stiffness, TwoLevelDirichlet
+from ._release import release_memory
 
 __all__ = ["DirichletSolver", "SPDSolver", "SolverInfo", "check_constrained",
            "connected_parts", "element_parts", "solve_dirichlet", "solve_spd",
@@ -154,11 +155,13 @@ class SPDSolver:
         self.hierarchy = Hierarchy(scaled, None if coarse is None else
                                    sparse.diags(1.0 / self.scale) @ coarse)
         self.precondition: Callable[[np.ndarray], np.ndarray] = self.hierarchy.precondition
+        release_memory()                          # the set-up's products and copies
         self.setup_seconds = time.perf_counter() - t0
 
-    def solve(self, rhs: np.ndarray, x0: np.ndarray | None = None
-              ) -> tuple[np.ndarray, SolverInfo]:
-        """Solve for one right-hand side, from the initial guess `x0` (default 0).
+    def solve(self, rhs: np.ndarray, x0: np.ndarray | None = None, *,
+              overwrite_rhs: bool = False) -> tuple[np.ndarray, SolverInfo]:
+        """Solve for one right-hand side, from the initial guess `x0` (default 0);
+        `overwrite_rhs` scales `rhs` in place (a vector the caller drops) instead of a copy.
 
         Raises
         ------
@@ -166,18 +169,22 @@ class SPDSolver:
             When the residual does not reach the tolerance (a result that would be wrong
             is not returned).
         """
-        from ._amg import pcg
+        from ._amg import matvec, pcg
 
         t0 = time.perf_counter()
-        rhs = rhs * self.scale
+        rhs = np.multiply(rhs, self.scale, out=rhs if overwrite_rhs else None)
         norm_b = float(np.linalg.norm(rhs))
         if norm_b == 0:
             return np.zeros_like(rhs), SolverInfo(rhs.size, 0, 0.0, 0.0)
         y = np.zeros_like(rhs) if x0 is None else x0 / self.scale
         y, iterations = pcg(self.matrix, rhs, self.precondition, y, tol=self.tol,
                             maxiter=MAX_ITERATIONS)
-        residual = float(np.linalg.norm(rhs - self.matrix @ y)) / norm_b
-        x = y * self.scale
+        # the true residual and the unscaled solution in place of new vectors
+        check = matvec(self.matrix, y, np.empty_like(rhs))
+        residual = float(np.linalg.norm(np.subtract(rhs, check, out=check))) / norm_b
+        del check
+        x = np.multiply(y, self.scale, out=y)
+        release_memory()
         info = SolverInfo(int(rhs.size), iterations, residual, time.perf_counter() - t0)
         if not np.isfinite(residual) or residual > 10 * self.tol:
             raise ValueError(
@@ -265,13 +272,25 @@ class DirichletSolver:
         guess for the free entries, `tol` overrides the constructor's."""
         u = np.zeros(self.n)
         u[self.fixed] = values
-        b = (-(self.coupling @ u[~self.free]) if self.operator is None
-             else -(self.operator @ u)[self.free])              # u is zero where free
+        if self.operator is None:
+            b = -(self.coupling @ u[~self.free])
+        else:                       # u is zero where free: -(A u)[free], in place
+            product = self.operator.matvec(u, np.empty(self.n))
+            b = np.compress(self.free, product)
+            np.negative(b, out=b)
+            del product
         if rhs is not None:
             b += rhs[self.free]
         if tol is not None:
             self.solver.tol = tol
-        u[self.free], info = self.solver.solve(b, None if x0 is None else x0[self.free])
+        del u                                   # made again below, not held by the solve
+        free, info = self.solver.solve(b, None if x0 is None else x0[self.free],
+                                       overwrite_rhs=True)
+        del b
+        u = np.zeros(self.n)
+        u[self.fixed] = values
+        u[self.free] = free
+        del free
         info = SolverInfo(info.unknowns, info.iterations, info.residual,
                           info.seconds + self._setup, self._setup)
         self._setup = 0.0

@@ -14,7 +14,7 @@ from __future__ import annotations
 import numpy as np
 from scipy import sparse
 
-__all__ = ["sum_pairwise", "symmetric_from_upper"]
+__all__ = ["PairwiseSum", "sum_pairwise", "symmetric_from_upper"]
 
 
 def _index(n: int) -> type:
@@ -51,6 +51,81 @@ def sum_pairwise(parts: list[sparse.csr_matrix]) -> sparse.csr_matrix:
     out.sum_duplicates()
     out.eliminate_zeros()              # as an addition drops the entries that cancel
     return out
+
+
+class PairwiseSum:
+    """:func:`sum_pairwise` of matrices given one at a time, held in row blocks.
+
+    The same sum, entry for entry and bit for bit: the tree of :func:`sum_pairwise`
+    (pairs from the left, level by level) is the binary counter's, each matrix merged as
+    soon as one of its size waits, and the last ones folded from the right. Rows are
+    added independently, so each matrix is kept as `blocks` CSR row blocks and a merge
+    frees its operands' blocks as it goes: the peak is what is held (the counter's few
+    partial sums) and one block, not every batch at once and then two levels of sums
+    (P2 at 128^3: 29 batches, each with a full-length row pointer). :meth:`result`
+    copies the blocks into one matrix the same way.
+
+    Parameters
+    ----------
+    shape : (int, int)
+    blocks : int
+        Row blocks per matrix.
+    """
+
+    def __init__(self, shape: tuple[int, int], blocks: int = 16):
+        self.shape = (int(shape[0]), int(shape[1]))
+        edges = np.linspace(0, self.shape[0], max(1, min(blocks, self.shape[0])) + 1)
+        self._rows = np.unique(edges.astype(np.int64))
+        self._stack: list[tuple[int, list]] = []        # (matrices summed, row blocks)
+
+    def add(self, matrix: sparse.csr_matrix) -> None:
+        """Take `matrix`, its rows copied into blocks; :meth:`merge` sums it in (called
+        after the caller has dropped `matrix` and what it was made from)."""
+        rows = self._rows
+        self._stack.append((1, [matrix[a:b] for a, b in zip(rows[:-1], rows[1:])]))
+
+    def merge(self) -> None:
+        """The sums that are due: while the two last partial sums are of one size."""
+        while len(self._stack) > 1 and self._stack[-1][0] == self._stack[-2][0]:
+            self._merge()
+
+    def _merge(self) -> None:
+        right_count, right = self._stack.pop()
+        left_count, left = self._stack.pop()
+        out = []
+        for k in range(len(left)):
+            out.append(left[k] + right[k])
+            left[k] = right[k] = None                    # freed as the sum goes
+        self._stack.append((left_count + right_count, out))
+
+    def result(self) -> sparse.csr_matrix:
+        """The sum (canonical, exact zeros dropped, as :func:`sum_pairwise`); empties it."""
+        if not self._stack:
+            return sparse.csr_matrix(self.shape)
+        self.merge()
+        while len(self._stack) > 1:
+            self._merge()
+        blocks = self._stack.pop()[1]
+        for block in blocks:
+            block.sum_duplicates()
+            block.eliminate_zeros()
+        nnz = sum(int(b.nnz) for b in blocks)
+        dtype = _index(max(nnz, *self.shape) + 1)
+        data = np.empty(nnz, dtype=np.result_type(*[b.dtype for b in blocks]))
+        indices: np.ndarray = np.empty(nnz, dtype=dtype)
+        indptr: np.ndarray = np.empty(self.shape[0] + 1, dtype=dtype)
+        indptr[0] = at = 0
+        for k, start in enumerate(self._rows[:-1]):
+            block, blocks[k] = blocks[k], None           # each block freed once copied
+            end = at + int(block.nnz)
+            data[at:end], indices[at:end] = block.data, block.indices
+            indptr[start + 1:start + 1 + block.shape[0]] = block.indptr[1:] + at
+            at = end
+            del block
+        out = sparse.csr_matrix((data, indices, indptr), shape=self.shape)
+        out.has_sorted_indices = True
+        out.has_canonical_format = True
+        return out
 
 
 def symmetric_from_upper(upper: sparse.csr_matrix, diagonal: np.ndarray
