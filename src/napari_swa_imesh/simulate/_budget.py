@@ -36,10 +36,12 @@ BYTES_PER_UNKNOWN_HALF = {2: 548.0, 3: 548.0}
 BYTES_HALF_FIXED = 320 * 2 ** 20
 #: The peaks the half-storage constants are fitted to: (unknowns as :func:`unknowns`
 #: counts them, elements, peak bytes); then 96^3 with the int32 tables and the Lanczos
-#: and Dirichlet steps in place, 2.12 GiB for an estimate of 2.50.
+#: and Dirichlet steps in place, 2.12 GiB for an estimate of 2.50, and 128^3 again with
+#: them, 4.00 GiB for 4.65.
 MEASURED_HALF = ((220_877, 155_413, 438_206_464), (659_676, 469_220, 684_453_888),
                  (1_383_626, 989_328, 1_043_529_728), (7_520_597, 5_415_021, 4_751_519_744),
-                 (3_788_123, 2_721_553, 2_274_037_760))
+                 (3_788_123, 2_721_553, 2_274_037_760),
+                 (7_520_597, 5_415_021, 4_293_361_664))
 #: The dual's CR solve, per facet (measured 565 at 40^3: 625k facets, 353 MB with the
 #: primal matrix kept). 3-D refitted: ``--order 2 --adapt 0`` with the interval on 64^3
 #: three-phase blobs of sigma 3 (bench_simulate's) peaks in the dual's multigrid set-up
