@@ -31,19 +31,12 @@ from pathlib import Path
 
 import numpy as np
 
+from _peak import PEAK_SOURCE
+
 SPACINGS = {"isotropic": (1.0, 1.0, 1.0), "0.9375x0.9375x1.5": (0.9375, 0.9375, 1.5),
             "0.9x1.1x2.0": (0.9, 1.1, 2.0)}
 
-# VmHWM, not ru_maxrss: Linux carries the parent's resident peak at fork into a child's
-# ru_maxrss across exec, and this process holds the brain maps
-PEAK = """
-def peak():
-    for line in open("/proc/self/status"):
-        if line.startswith("VmHWM:"):
-            return int(line.split()[1]) * 1024
-"""
-
-MESH_CHILD = PEAK + """
+MESH_CHILD = PEAK_SOURCE + """
 import json, sys, time
 import numpy as np
 from napari_swa_imesh.mesh import mesh_labels
@@ -61,10 +54,10 @@ print(json.dumps({"elements": int(mesh.n_cells), "factors": lattice["factors"],
                   "residual_aspect": lattice["residual_aspect"], "bound": lattice["bounds"],
                   "worst_ratio": float(ratio.max()), "min_dihedral": float(lo.min()),
                   "max_dihedral": float(hi.max()), "seconds": seconds,
-                  "peak": peak()}))
+                  "peak": peak_bytes()}))
 """
 
-CLI_CHILD = PEAK + """
+CLI_CHILD = PEAK_SOURCE + """
 import json, sys, time, contextlib, io
 from napari_swa_imesh.cli import main
 t = time.perf_counter()
@@ -72,7 +65,7 @@ out = io.StringIO()
 with contextlib.redirect_stdout(out):
     rc = main(sys.argv[1:])
 print(json.dumps({"rc": rc, "seconds": time.perf_counter() - t, "out": out.getvalue(),
-                  "peak": peak()}))
+                  "peak": peak_bytes()}))
 """
 
 

@@ -18,14 +18,14 @@ from pathlib import Path
 
 import numpy as np
 
+from _peak import PEAK_SOURCE
 from bench_mesh import brain_like
 
-CHILD = (
-    "import json, resource, sys\n"
+CHILD = PEAK_SOURCE + (
+    "import json, sys\n"
     "from napari_swa_imesh.cli import main\n"
     "rc = main(sys.argv[1:])\n"
-    "print(json.dumps({'rc': rc, 'peak': resource.getrusage(resource.RUSAGE_SELF).ru_maxrss"
-    " * 1024}), file=sys.stderr)\n"
+    "print(json.dumps({'rc': rc, 'peak': peak_bytes()}), file=sys.stderr)\n"
 )
 
 

@@ -32,13 +32,14 @@ from pathlib import Path
 
 import numpy as np
 
-CHILD = (
-    "import json, resource, sys\n"
+from _peak import PEAK_SOURCE
+
+CHILD = PEAK_SOURCE + (
+    "import json, sys\n"
     "from napari_swa_imesh.cli import main\n"
     "rc = main(sys.argv[1:])\n"
     "sys.stdout.flush()\n"
-    "print('PEAK ' + json.dumps({'rc': rc, 'peak': resource.getrusage("
-    "resource.RUSAGE_SELF).ru_maxrss * 1024}), file=sys.stderr)\n"
+    "print('PEAK ' + json.dumps({'rc': rc, 'peak': peak_bytes()}), file=sys.stderr)\n"
 )
 MMAP = re.compile(r"mmap\(NULL, (\d+), PROT_READ\|PROT_WRITE, MAP_PRIVATE\|MAP_ANONYMOUS")
 

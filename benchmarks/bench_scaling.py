@@ -32,10 +32,12 @@ from pathlib import Path
 import numpy as np
 from scipy import ndimage
 
+from _peak import PEAK_SOURCE
+
 K3D = {1: 1.0, 2: 10.0, 3: 0.1}
 METHODS = ("default", "P1", "voxel FV", "voxel Q1", "voxel P1")
 
-CHILD = r"""
+CHILD = PEAK_SOURCE + r"""
 import json, resource, sys, time
 sys.path.insert(0, {bench!r})
 import numpy as np
@@ -63,7 +65,7 @@ else:
     out = {{"k": k, "dofs": n}}
 out["seconds"] = time.perf_counter() - t0
 out["cpu"] = sum(resource.getrusage(resource.RUSAGE_SELF)[:2]) - cpu0
-out["peak"] = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss * 1024
+out["peak"] = peak_bytes()
 print("RESULT " + json.dumps(out))
 """
 
