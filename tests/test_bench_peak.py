@@ -6,7 +6,6 @@ import sys
 
 import numpy as np
 import pytest
-
 from benchmarks._peak import PEAK_SOURCE
 
 
