@@ -19,6 +19,8 @@ from collections.abc import Callable
 import numpy as np
 from scipy import sparse
 
+from ._sparse import matvec_into
+
 __all__ = ["Hierarchy", "matvec", "pcg"]
 
 MAX_COARSE = 500           # unknowns solved directly at the bottom of the V-cycle
@@ -137,12 +139,7 @@ def matvec(matrix, x: np.ndarray, out: np.ndarray) -> np.ndarray:
         return own(x, out)
     if (sparse.issparse(matrix) and matrix.format == "csr" and x.ndim == 1
             and matrix.dtype == np.float64 and x.dtype == np.float64):
-        from scipy.sparse import _sparsetools
-
-        out.fill(0.0)
-        m, n = matrix.shape
-        _sparsetools.csr_matvec(m, n, matrix.indptr, matrix.indices, matrix.data, x, out)
-        return out
+        return matvec_into(matrix, x, out)
     out[...] = matrix @ x
     return out
 

@@ -94,8 +94,8 @@ def fe_space(mesh: Mesh, order: int = 1) -> Space:
     hi = np.maximum(cells[:, pairs[0]], cells[:, pairs[1]]).astype(np.int64)
     keys, inverse = np.unique(lo * n + hi, return_inverse=True)
     del lo, hi
-    # int32 tables while every dof (times 3, the curl's vector dofs) fits: half the bytes
-    # of the largest arrays a P2 solve holds besides its matrix (~250 MB at 128^3)
+    # int32 tables while every dof times 4 (room for the curl's 3 per node) fits: half the
+    # bytes of the largest arrays a P2 solve holds besides its matrix (~250 MB at 128^3)
     index = np.int32 if 4 * (n + len(keys)) < 2 ** 31 else np.int64
     edges = np.stack([keys // n, keys % n], axis=1).astype(index)
     del keys

@@ -32,7 +32,7 @@ from scipy.linalg import eigvalsh_tridiagonal
 
 from ._assembly import Space, p1_embedding, stiffness_matrix, stiffness_upper
 from ._release import release_memory
-from ._sparse import symmetric_from_upper
+from ._sparse import matvec_into, symmetric_from_upper
 
 __all__ = ["P2Stiffness", "TwoLevelDirichlet", "coarse_space", "p2_stiffness",
            "stiffness_operator"]
@@ -99,19 +99,11 @@ class P2Stiffness:
         """``self @ x`` for a vector, written into `out` (returned): the same products
         and sums as ``@`` (scipy's kernels into zeroed vectors), bit for bit, with one
         temporary kept between calls instead of three new full-length vectors a call."""
-        from scipy.sparse import _sparsetools
-
-        n = self.shape[0]
         if self._work is None:
-            self._work = np.empty(n)
+            self._work = np.empty(self.shape[0])
         work = self._work
-        out.fill(0.0)
-        _sparsetools.csr_matvec(n, n, self.upper.indptr, self.upper.indices,
-                                self.upper.data, x, out)
-        work.fill(0.0)
-        _sparsetools.csc_matvec(n, n, self._lower.indptr, self._lower.indices,
-                                self._lower.data, x, work)
-        out += work
+        matvec_into(self.upper, x, out)
+        out += matvec_into(self._lower, x, work)
         out += np.multiply(self._diagonal, x, out=work)
         return out
 
@@ -302,19 +294,12 @@ class TwoLevelDirichlet:
         conjugate gradients use it before they ask again); the steps are those of new
         vectors per call, in place, so the same values bit for bit.
         """
-        from scipy.sparse import _sparsetools
-
         work, single = self._work, self._single
         x = self._smooth(r, self._z)
         residual = np.subtract(r, self.matrix.matvec(x, work), out=work)
         single[...] = residual                                 # astype(float32)
         coarse = self.hierarchy.precondition(self.restrictor @ single)
-        coarse = coarse.astype(np.float32)
-        single.fill(0.0)                                       # prolongator @ coarse
-        p = self.prolongator
-        _sparsetools.csr_matvec(p.shape[0], p.shape[1], p.indptr, p.indices, p.data,
-                                coarse, single)
-        x += single
+        x += matvec_into(self.prolongator, coarse.astype(np.float32), single)
         residual = np.subtract(r, self.matrix.matvec(x, work), out=work)
         x += self._smooth(residual, residual)
         return x

@@ -14,11 +14,29 @@ from __future__ import annotations
 import numpy as np
 from scipy import sparse
 
-__all__ = ["PairwiseSum", "sum_pairwise", "symmetric_from_upper"]
+__all__ = ["PairwiseSum", "matvec_into", "sum_pairwise", "symmetric_from_upper"]
 
 
 def _index(n: int) -> type:
     return np.int32 if n < 2 ** 31 - 1 else np.int64
+
+
+def matvec_into(matrix: sparse.csr_matrix | sparse.csc_matrix, x: np.ndarray,
+                out: np.ndarray) -> np.ndarray:
+    """``matrix @ x`` for a vector, written into `out` (returned) instead of a new vector.
+
+    scipy's own CSR/CSC kernel adds into the zeroed `out`, which is what ``@`` does into
+    a vector it makes: the same sums in the same order, bit for bit. The one place the
+    solve reaches into scipy's private kernels; `x`, `out` and the matrix's data share
+    one dtype.
+    """
+    from scipy.sparse import _sparsetools
+
+    kernel = _sparsetools.csr_matvec if matrix.format == "csr" else _sparsetools.csc_matvec
+    out.fill(0.0)
+    kernel(matrix.shape[0], matrix.shape[1], matrix.indptr, matrix.indices, matrix.data,
+           x, out)
+    return out
 
 
 def sum_pairwise(parts: list[sparse.csr_matrix]) -> sparse.csr_matrix:
