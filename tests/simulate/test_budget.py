@@ -1,7 +1,7 @@
 """The byte budget (issue 26): the estimate against measured peaks, the heap released
 between phases, and the refusal of a run that does not fit.
 
-No timing is asserted; the one measured peak is a subprocess's own ``ru_maxrss``.
+No timing is asserted; the one measured peak is a subprocess's own (``VmHWM``).
 """
 
 from __future__ import annotations
@@ -12,6 +12,7 @@ import sys
 
 import numpy as np
 import pytest
+from benchmarks._peak import PEAK_SOURCE
 from simulate_cases import blobs
 
 from napari_swa_imesh.mesh import mesh_labels
@@ -71,8 +72,6 @@ def test_the_half_storage_estimate_is_above_every_measured_peak():
     assert estimate <= 1.15 * peak
 
 
-# the child's own peak: Linux keeps ru_maxrss across fork and exec (a child of a grown
-# pytest reports pytest's size), its VmHWM is the new image's alone; elsewhere ru_maxrss
 def test_the_interval_estimate_is_above_the_measured_peaks_with_the_dual():
     """3-D P2 with the interval (the dual's facets dominate): above each measured peak."""
     for cells, unknowns, peak in _budget.MEASURED_DUAL:
@@ -82,18 +81,13 @@ def test_the_interval_estimate_is_above_the_measured_peaks_with_the_dual():
         assert max(primal, dual) + _budget.BYTES_PER_CELL[3] * cells >= peak
 
 
-CHILD = (
-    "import json, os, resource, sys\n"
+# the child's own peak (benchmarks/_peak.py: VmHWM, not the ru_maxrss it inherits)
+CHILD = PEAK_SOURCE + (
+    "import json, sys\n"
     "from napari_swa_imesh.cli import main\n"
     "rc = main(sys.argv[1:])\n"
     "sys.stdout.flush()\n"
-    "peak = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss\n"
-    "peak *= 1 if sys.platform == 'darwin' else 1024\n"
-    "if os.path.exists('/proc/self/status'):\n"
-    "    for line in open('/proc/self/status'):\n"
-    "        if line.startswith('VmHWM:'):\n"
-    "            peak = int(line.split()[1]) * 1024\n"
-    "print('PEAK ' + json.dumps(peak), file=sys.stderr)\n"
+    "print('PEAK ' + json.dumps(peak_bytes()), file=sys.stderr)\n"
 )
 
 
